@@ -1,0 +1,61 @@
+/* Detector physics of the H4RG SCA: parameters and the closed-form effects.
+ * Values default to SPEC §2 (GalSim galsim.roman, romanisim for the cosmic rays).
+ * Every effect has a switch; a switched-off effect is skipped, not computed as identity. */
+#ifndef WF_DETECTOR_H
+#define WF_DETECTOR_H
+
+#include <stddef.h>
+
+typedef struct wf_detector {
+    struct {              /* switches (1 on, 0 off) */
+        int photon_noise, reciprocity, dark, nonlinearity, ipc, read_noise, quantize,
+            saturation, cosmic_rays;
+    } on;
+    double dark_current;   /* e-/pixel/s [0.015] */
+    double read_noise_e;   /* e- rms: per read in ramp mode, per exposure in single mode [8.5] */
+    double gain;           /* e-/ADU [1.0] */
+    double nl_beta;        /* q_meas = q + beta q^2 [-6.0e-7] */
+    double recip_alpha;    /* [0.0065] */
+    double recip_f0;       /* e-/s [1.0] */
+    double ipc[3][3];      /* kernel, normalised to sum 1; ipc[a][b] weighs in[y+a-1][x+b-1] */
+    double full_well;      /* e- [1e5] */
+    double adc_max;        /* ADU [65535] */
+    /* cosmic rays (romanisim cr.py defaults; hit rate at L2) */
+    double cr_rate;        /* hits / cm^2 / s [8] */
+    double pixel_um;       /* pixel pitch [10] */
+    double depth_um;       /* sensitive depth [5] */
+    double cr_lmin_um, cr_lmax_um, cr_slope; /* path-length power law [10, 2000, -4.33] */
+    double cr_dedx_loc, cr_dedx_scale;       /* Moyal, eV/um [120, 50] */
+    double cr_ev_per_e;    /* eV per electron-hole pair [3.65] */
+} wf_detector;
+
+/* SPEC §2 values, every effect on. */
+void wf_detector_defaults(wf_detector *det);
+
+/* The raw GalSim IPC kernel (SPEC §2), normalised to sum 1 into out. */
+void wf_detector_ipc_default(double out[3][3]);
+
+/* q + beta q^2 (GalSim NLfunc). */
+static inline double wf_det_nonlinearity(double q, double beta) { return q + beta * q * q; }
+
+/* Charge after reciprocity failure, GalSim addReciprocityFailure:
+ * q (q / (t f0))^(alpha / ln 10); q <= 0 is left unchanged (GalSim would give NaN). */
+double wf_det_reciprocity(double q, double exptime, double alpha, double f0);
+
+/* The same law on a rate: r (r / f0)^(alpha / ln 10), so q = r t obeys it at every t. */
+double wf_det_reciprocity_rate(double rate, double alpha, double f0);
+
+/* One output row of IPC: out[x] = sum_ab K[a][b] in_{a}[x+b-1], in_0 = row above (y-1),
+ * in_1 = this row, in_2 = row below (y+1); a NULL row and columns outside [0, ncols) are
+ * zero (GalSim's zero padding: a flat image loses charge at the edges). */
+void wf_det_ipc_row(const double *above, const double *row, const double *below, int ncols,
+                    const double k[3][3], double *out);
+
+/* Round half to even (the ADC's rounding, GalSim quantize). */
+double wf_det_quantize(double adu);
+
+/* Smallest ADU value the ramp fitter treats as saturated: the lower of the ADC ceiling and
+ * the full well after nonlinearity and gain. */
+double wf_det_saturation_adu(const wf_detector *det);
+
+#endif

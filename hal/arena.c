@@ -1,0 +1,64 @@
+#include "hal/arena.h"
+
+#include <stdint.h>
+#include <string.h>
+
+#define ARENA_ALIGN 64u
+
+wf_status wf_arena_init(wf_arena *arena, void *memory, size_t capacity, const char *name)
+{
+    if (!arena || (!memory && capacity))
+        return wf_error(WF_ERR_INTERNAL, "arena: no memory given");
+    arena->base = memory;
+    arena->capacity = capacity;
+    arena->used = 0;
+    arena->high_water = 0;
+    arena->name = name ? name : "arena";
+    /* Align the start so that every offset we hand out is aligned in absolute terms. */
+    uintptr_t start = (uintptr_t)memory;
+    size_t pad = (size_t)((ARENA_ALIGN - start % ARENA_ALIGN) % ARENA_ALIGN);
+    arena->used = pad > capacity ? capacity : pad;
+    arena->high_water = arena->used;
+    return WF_OK;
+}
+
+size_t wf_arena_cost(size_t size)
+{
+    return (size + ARENA_ALIGN - 1) / ARENA_ALIGN * ARENA_ALIGN;
+}
+
+wf_status wf_arena_alloc(wf_arena *arena, size_t size, const char *what, void **out)
+{
+    *out = NULL;
+    size_t need = wf_arena_cost(size);
+    if (need < size || need > arena->capacity - arena->used)
+        return wf_error(WF_ERR_NOMEM,
+                        "%s: cannot reserve %zu bytes for %s (%zu of %zu bytes in use); "
+                        "raise the memory budget or lower the tile height",
+                        arena->name, size, what ? what : "a buffer", arena->used, arena->capacity);
+    void *p = arena->base + arena->used;
+    arena->used += need;
+    if (arena->used > arena->high_water)
+        arena->high_water = arena->used;
+    memset(p, 0, size);
+    *out = p;
+    return WF_OK;
+}
+
+wf_status wf_arena_calloc(wf_arena *arena, size_t count, size_t elem, const char *what, void **out)
+{
+    if (elem && count > SIZE_MAX / elem) {
+        *out = NULL;
+        return wf_error(WF_ERR_NOMEM, "%s: size of %s overflows (%zu x %zu)", arena->name,
+                        what ? what : "a buffer", count, elem);
+    }
+    return wf_arena_alloc(arena, count * elem, what, out);
+}
+
+size_t wf_arena_mark(const wf_arena *arena) { return arena->used; }
+
+void wf_arena_release(wf_arena *arena, size_t mark)
+{
+    if (mark <= arena->used)
+        arena->used = mark;
+}

@@ -1,0 +1,35 @@
+/* Memory arena: the firmware's only source of memory.
+ * The host hands over one block at start; every firmware buffer is carved from it. A request
+ * past the budget fails with WF_ERR_NOMEM and a message naming what asked; there is no
+ * fallback to malloc. Marks let a caller release scratch space in LIFO order. */
+#ifndef WF_ARENA_H
+#define WF_ARENA_H
+
+#include <stddef.h>
+#include "hal/status.h"
+
+typedef struct wf_arena {
+    unsigned char *base;
+    size_t capacity;
+    size_t used;
+    size_t high_water; /* most ever used: what the budget really needed */
+    const char *name;
+} wf_arena;
+
+/* Wraps memory the host reserved; the arena never frees it. */
+wf_status wf_arena_init(wf_arena *arena, void *memory, size_t capacity, const char *name);
+
+/* Reserves `size` bytes aligned to 64 (cache line, SIMD), zero-filled, for `what`. */
+wf_status wf_arena_alloc(wf_arena *arena, size_t size, const char *what, void **out);
+
+/* Typed convenience: count * elem bytes, with overflow check. */
+wf_status wf_arena_calloc(wf_arena *arena, size_t count, size_t elem, const char *what, void **out);
+
+size_t wf_arena_mark(const wf_arena *arena);
+void wf_arena_release(wf_arena *arena, size_t mark);
+
+/* Bytes an allocation of `size` consumes, alignment included: lets a module report its need
+ * before anything is reserved. */
+size_t wf_arena_cost(size_t size);
+
+#endif

@@ -1,0 +1,213 @@
+#include "hal/packet.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+static void put16(unsigned char *p, uint16_t v) { p[0] = (unsigned char)v; p[1] = (unsigned char)(v >> 8); }
+static void put32(unsigned char *p, uint32_t v)
+{
+    for (int i = 0; i < 4; i++) p[i] = (unsigned char)(v >> (8 * i));
+}
+static uint16_t get16(const unsigned char *p) { return (uint16_t)(p[0] | (p[1] << 8)); }
+static uint32_t get32(const unsigned char *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+void wf_packet_header_write(const wf_packet_header *h, unsigned char o[WF_PACKET_HEADER_SIZE])
+{
+    put32(o + 0, WF_PACKET_MAGIC);
+    put16(o + 4, h->version);
+    put16(o + 6, h->kind);
+    put32(o + 8, h->exposure);
+    put16(o + 12, h->sca);
+    put16(o + 14, h->flags);
+    put32(o + 16, h->first_row);
+    put32(o + 20, h->row_count);
+    put32(o + 24, h->ncols);
+    put32(o + 28, h->nplanes);
+    put32(o + 32, h->payload_len);
+    put32(o + 36, h->raw_len);
+    put32(o + 40, h->payload_crc);
+    put32(o + 44, (uint32_t)crc32(0L, o, 44));
+}
+
+wf_status wf_packet_header_read(const unsigned char in[WF_PACKET_HEADER_SIZE], wf_packet_header *h)
+{
+    if (get32(in) != WF_PACKET_MAGIC)
+        return wf_error(WF_ERR_CORRUPT, "bad magic 0x%08x (not a wfisim packet)", get32(in));
+    if (get32(in + 44) != (uint32_t)crc32(0L, in, 44))
+        return wf_error(WF_ERR_CORRUPT, "header CRC mismatch");
+    h->version = get16(in + 4);
+    h->kind = get16(in + 6);
+    h->exposure = get32(in + 8);
+    h->sca = get16(in + 12);
+    h->flags = get16(in + 14);
+    h->first_row = get32(in + 16);
+    h->row_count = get32(in + 20);
+    h->ncols = get32(in + 24);
+    h->nplanes = get32(in + 28);
+    h->payload_len = get32(in + 32);
+    h->raw_len = get32(in + 36);
+    h->payload_crc = get32(in + 40);
+    if (h->version != WF_PACKET_VERSION)
+        return wf_error(WF_ERR_CORRUPT, "packet version %u, this build reads %d", h->version,
+                        WF_PACKET_VERSION);
+    if (h->kind < WF_PK_META || h->kind > WF_PK_END)
+        return wf_error(WF_ERR_CORRUPT, "unknown packet kind %u", h->kind);
+    return WF_OK;
+}
+
+/* zlib asks for memory through these: deflate state lives in the arena, allocated once at
+ * wf_packer_init (deflateReset reuses it), so nothing is freed until the arena is dropped. */
+static voidpf arena_zalloc(voidpf opaque, uInt items, uInt size)
+{
+    void *p = NULL;
+    if (wf_arena_calloc(opaque, items, size, "deflate state", &p) != WF_OK)
+        return Z_NULL;
+    return p;
+}
+static void arena_zfree(voidpf opaque, voidpf p) { (void)opaque; (void)p; }
+
+/* deflateInit2(level 1, windowBits 15, memLevel 8) reserves about 268 KiB plus our margin. */
+#define DEFLATE_STATE_BYTES (300u * 1024u)
+
+size_t wf_packer_arena_need(size_t max_raw, int compress)
+{
+    size_t wire = max_raw + max_raw / 1000 + 64; /* covers deflateBound for stored blocks */
+    return wf_arena_cost(WF_PACKET_HEADER_SIZE + wire) + (compress ? DEFLATE_STATE_BYTES : 0);
+}
+
+wf_status wf_packer_init(wf_packer *pk, wf_arena *arena, size_t max_raw, int compress)
+{
+    memset(pk, 0, sizeof *pk);
+    pk->compress = compress;
+    size_t wire = max_raw + max_raw / 1000 + 64;
+    if (compress) {
+        pk->z.zalloc = arena_zalloc;
+        pk->z.zfree = arena_zfree;
+        pk->z.opaque = arena;
+        if (deflateInit2(&pk->z, 1, Z_DEFLATED, 15, 8, Z_DEFAULT_STRATEGY) != Z_OK)
+            return wf_error(WF_ERR_NOMEM, "packer: deflate state does not fit the arena");
+        pk->z_ready = 1;
+        size_t bound = deflateBound(&pk->z, (uLong)max_raw);
+        if (bound > wire) wire = bound;
+    }
+    pk->cap = WF_PACKET_HEADER_SIZE + wire;
+    void *buf;
+    wf_status st = wf_arena_alloc(arena, pk->cap, "packet buffer", &buf);
+    pk->buf = buf;
+    return st;
+}
+
+void wf_packer_close(wf_packer *pk)
+{
+    if (pk->z_ready)
+        deflateEnd(&pk->z);
+    pk->z_ready = 0;
+}
+
+wf_status wf_packer_send(wf_packer *pk, const wf_link *link, wf_packet_header *h,
+                         const void *raw, size_t raw_len)
+{
+    unsigned char *payload = pk->buf + WF_PACKET_HEADER_SIZE;
+    size_t room = pk->cap - WF_PACKET_HEADER_SIZE;
+    size_t wire_len = raw_len;
+    h->version = WF_PACKET_VERSION;
+    h->flags = 0;
+    if (raw_len > UINT32_MAX)
+        return wf_error(WF_ERR_INTERNAL, "packet payload of %zu bytes too large", raw_len);
+    if (pk->compress && raw_len > 0) {
+        deflateReset(&pk->z);
+        pk->z.next_in = (Bytef *)(uintptr_t)raw;
+        pk->z.avail_in = (uInt)raw_len;
+        pk->z.next_out = payload;
+        pk->z.avail_out = (uInt)room;
+        if (deflate(&pk->z, Z_FINISH) != Z_STREAM_END)
+            return wf_error(WF_ERR_INTERNAL, "deflate did not finish in %zu bytes", room);
+        wire_len = room - pk->z.avail_out;
+        h->flags |= WF_PACKET_FLAG_DEFLATE;
+    } else {
+        if (raw_len > room)
+            return wf_error(WF_ERR_INTERNAL, "packet payload of %zu bytes exceeds buffer of %zu",
+                            raw_len, room);
+        if (raw_len) memcpy(payload, raw, raw_len);
+    }
+    h->payload_len = (uint32_t)wire_len;
+    h->raw_len = (uint32_t)raw_len;
+    h->payload_crc = (uint32_t)crc32(0L, payload, (uInt)wire_len);
+    wf_packet_header_write(h, pk->buf);
+    return wf_link_send(link, pk->buf, WF_PACKET_HEADER_SIZE + wire_len);
+}
+
+void wf_packet_reader_open(wf_packet_reader *r, FILE *file, const char *name)
+{
+    memset(r, 0, sizeof *r);
+    r->file = file;
+    r->name = name;
+}
+
+void wf_packet_reader_close(wf_packet_reader *r)
+{
+    free(r->wire);
+    free(r->raw);
+    r->wire = r->raw = NULL;
+}
+
+static wf_status grow(unsigned char **buf, size_t *cap, size_t need)
+{
+    if (need <= *cap) return WF_OK;
+    unsigned char *p = realloc(*buf, need);
+    if (!p) return wf_error(WF_ERR_NOMEM, "cannot allocate %zu bytes for a packet", need);
+    *buf = p;
+    *cap = need;
+    return WF_OK;
+}
+
+wf_status wf_packet_reader_next(wf_packet_reader *r, wf_packet_header *h, const void **payload,
+                                int *eof)
+{
+    unsigned char hb[WF_PACKET_HEADER_SIZE];
+    *eof = 0;
+    *payload = NULL;
+    size_t got = fread(hb, 1, sizeof hb, r->file);
+    if (got == 0 && feof(r->file)) {
+        *eof = 1;
+        return WF_OK;
+    }
+    if (got != sizeof hb)
+        return wf_error(WF_ERR_CORRUPT, "%s: truncated stream: %zu of %d header bytes at offset %llu",
+                        r->name, got, WF_PACKET_HEADER_SIZE, (unsigned long long)r->offset);
+    wf_status st = wf_packet_header_read(hb, h);
+    if (st != WF_OK) {
+        char why[256];
+        snprintf(why, sizeof why, "%s", wf_error_message());
+        return wf_error(st, "%s: packet %ld at offset %llu: %s", r->name, r->count + 1,
+                        (unsigned long long)r->offset, why);
+    }
+    if ((st = grow(&r->wire, &r->wire_cap, h->payload_len + 1u)) != WF_OK) return st;
+    if (fread(r->wire, 1, h->payload_len, r->file) != h->payload_len)
+        return wf_error(WF_ERR_CORRUPT, "%s: truncated stream: packet %ld (rows %u-%u) at offset %llu ends early",
+                        r->name, r->count + 1, h->first_row, h->first_row + h->row_count,
+                        (unsigned long long)r->offset);
+    if ((uint32_t)crc32(0L, r->wire, h->payload_len) != h->payload_crc)
+        return wf_error(WF_ERR_CORRUPT, "%s: bad CRC in packet %ld (kind %u, rows %u-%u) at offset %llu",
+                        r->name, r->count + 1, h->kind, h->first_row, h->first_row + h->row_count,
+                        (unsigned long long)r->offset);
+    if (h->flags & WF_PACKET_FLAG_DEFLATE) {
+        if ((st = grow(&r->raw, &r->raw_cap, h->raw_len + 1u)) != WF_OK) return st;
+        uLongf out_len = h->raw_len;
+        if (uncompress(r->raw, &out_len, r->wire, h->payload_len) != Z_OK || out_len != h->raw_len)
+            return wf_error(WF_ERR_CORRUPT, "%s: packet %ld (rows %u-%u) does not inflate to %u bytes",
+                            r->name, r->count + 1, h->first_row, h->first_row + h->row_count, h->raw_len);
+        *payload = r->raw;
+    } else {
+        if (h->raw_len != h->payload_len)
+            return wf_error(WF_ERR_CORRUPT, "%s: packet %ld: raw length %u != payload length %u",
+                            r->name, r->count + 1, h->raw_len, h->payload_len);
+        *payload = r->wire;
+    }
+    r->offset += WF_PACKET_HEADER_SIZE + h->payload_len;
+    r->count++;
+    return WF_OK;
+}

@@ -1,0 +1,31 @@
+#include "hal/status.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+
+static _Thread_local char error_detail[1024];
+
+wf_status wf_error(wf_status code, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(error_detail, sizeof error_detail, fmt, ap);
+    va_end(ap);
+    return code;
+}
+
+const char *wf_error_message(void) { return error_detail; }
+
+const char *wf_status_name(wf_status code)
+{
+    switch (code) {
+    case WF_OK: return "ok";
+    case WF_ERR_NOMEM: return "out of memory";
+    case WF_ERR_INPUT: return "bad input";
+    case WF_ERR_RANGE: return "value out of range";
+    case WF_ERR_IO: return "input/output error";
+    case WF_ERR_CORRUPT: return "corrupt stream";
+    case WF_ERR_INTERNAL: return "internal error";
+    default: return "unknown error";
+    }
+}

@@ -1,0 +1,25 @@
+#!/bin/sh
+# Runs every Check test program given, then prints one closing line:
+#   tests: N passed, N failed, N skipped
+# A test that printed "SKIP:" (its data were absent) counts as skipped, not passed.
+set -u
+passed=0; failed=0; skipped=0; status=0
+tmp=$(mktemp -d); export TMPDIR="$tmp"
+for t in "$@"; do
+  out="$tmp/$(basename "$t").log"
+  "$t" >"$out" 2>&1; rc=$?
+  cat "$out"
+  line=$(grep -E '^[0-9]+%: Checks: ' "$out" | tail -n 1)
+  n=$(echo "$line" | sed -n 's/.*Checks: \([0-9]*\).*/\1/p')
+  f=$(echo "$line" | sed -n 's/.*Failures: \([0-9]*\).*/\1/p')
+  e=$(echo "$line" | sed -n 's/.*Errors: \([0-9]*\).*/\1/p')
+  s=$(grep -c '^SKIP:' "$out")
+  if [ -z "$n" ]; then
+    echo "$t: no Check summary (exit $rc)"; failed=$((failed + 1)); status=1; continue
+  fi
+  passed=$((passed + n - f - e - s)); failed=$((failed + f + e)); skipped=$((skipped + s))
+  [ "$rc" -ne 0 ] && status=1
+done
+rm -rf "$tmp"
+echo "tests: $passed passed, $failed failed, $skipped skipped"
+exit $status

@@ -1,0 +1,33 @@
+/* Shared helpers for the Check suites. Each tests/test_*.c is one program whose main() calls
+ * wf_test_main(suite). Tests that need ../shared data call WF_SKIP_UNLESS(dir) and are
+ * reported as skipped (never silently passed) by tests/run-all.sh when it is absent. */
+#ifndef WF_TESTUTIL_H
+#define WF_TESTUTIL_H
+
+#include <check.h>
+#include <stdio.h>
+
+/* $WFISIM_REFERENCE/galsim or ../shared/reference/galsim, NULL when absent. */
+const char *wf_test_reference_dir(void);
+/* $WFISIM_DATA or ../shared/data, NULL when absent. */
+const char *wf_test_data_dir(void);
+/* The wfisim program built beside the tests ($WFISIM_BIN), NULL when unknown. */
+const char *wf_test_program(void);
+/* A fresh empty directory under $TMPDIR for this test (removed by the runner's tmp). */
+const char *wf_test_tmpdir(void);
+
+#define WF_SKIP(reason)                                                        \
+    do {                                                                       \
+        printf("SKIP: %s: %s\n", __func__, (reason));                          \
+        fflush(stdout);                                                        \
+        return;                                                                \
+    } while (0)
+
+#define WF_SKIP_UNLESS(ptr, what)                                              \
+    do {                                                                       \
+        if (!(ptr)) WF_SKIP(what " not found (set WFISIM_REFERENCE / WFISIM_DATA)"); \
+    } while (0)
+
+int wf_test_main(Suite *suite);
+
+#endif

@@ -1,0 +1,24 @@
+/* Host-side assembly: a packet stream in, one FITS file per exposure and SCA out.
+ * HDUs: primary (exposure keywords, MA table, detector values), SCI (rate, e-/s, float32),
+ * ERR (e-/s, float32), DQ (uint32, WF_DQ_*), and in up-the-ramp mode RESULTANTS (uint16 ADU
+ * cube [resultant][y][x]); CHECKSUM/DATASUM on every HDU. Tiles are fitted and written as
+ * they arrive (memory bounded by a tile, not the SCA). Written to "<name>.tmp" and renamed
+ * only when every row arrived exactly once, so a damaged stream leaves no FITS behind. */
+#ifndef WF_ASSEMBLE_H
+#define WF_ASSEMBLE_H
+
+#include <stdio.h>
+#include "hal/status.h"
+
+typedef struct wf_assemble_options {
+    const char *out_dir;   /* where FITS files go */
+    int quiet;
+} wf_assemble_options;
+
+/* Reads the whole stream; writes out_dir/wfisim_e<exposure>_sca<NN>.fits per exposure.
+ * `name` is used in messages ("-" for stdin). Paths written are reported on stderr unless
+ * quiet, and the last one is copied to last_path (may be NULL). */
+wf_status wf_assemble_stream(FILE *in, const char *name, const wf_assemble_options *opt,
+                             char *last_path, size_t last_path_len);
+
+#endif

@@ -1,0 +1,49 @@
+/* Run configuration: YAML files (libyaml) in the spirit of GalSim's configs, plus
+ * `--set key=value` overrides. One table of keys (tools/config.c) drives parsing, range
+ * checks, --set and the generated docs/CONFIG.md, so the three cannot disagree.
+ * Keys are dotted paths into nested mappings ("detector.gain" is `detector: {gain: 1.0}`).
+ * An unknown key, a wrong type or an out-of-range value is an error naming the file, line
+ * and key (or "--set" for command-line overrides). */
+#ifndef WF_CONFIG_H
+#define WF_CONFIG_H
+
+#include <stdio.h>
+#include "firmware/readout.h"
+#include "hal/clock.h"
+
+#define WF_PATH_MAX 1024
+
+typedef struct wf_config {
+    uint64_t seed;                 /* seed [1] */
+    wf_readout_config ro;          /* readout.*, detector.*, exposure.id/sca/mode/sampling/exptime */
+    double frame_time;             /* readout.frame_time [3.16247] */
+    char ma_table[WF_PATH_MAX];    /* readout.ma_table: "4", "6", "11" or a file [6] */
+    int threads;                   /* run.threads [1] */
+    int quiet;                     /* run.quiet [false] */
+    char out_dir[WF_PATH_MAX];     /* run.out ["out"] */
+    char filter[16];               /* exposure.filter [Y106] */
+    /* Built-in grid scene (scene.*) until the renderer lands. */
+    double sky_rate;               /* scene.sky_rate, e-/pixel/s */
+    double grid_flux;              /* scene.grid.flux, e-/s per source */
+    double grid_sigma;             /* scene.grid.sigma, pixels */
+    int grid_spacing;              /* scene.grid.spacing, pixels */
+    char data_dir[WF_PATH_MAX];    /* paths.data [$WFISIM_DATA or ""] */
+    char reference_dir[WF_PATH_MAX]; /* paths.reference [$WFISIM_REFERENCE or ""] */
+} wf_config;
+
+/* Every key at its documented default (SPEC values). */
+void wf_config_defaults(wf_config *cfg);
+
+/* Applies a YAML file on top of cfg. */
+wf_status wf_config_load(wf_config *cfg, const char *path);
+
+/* Applies one "key=value" override; origin names where it came from in messages. */
+wf_status wf_config_set(wf_config *cfg, const char *assignment, const char *origin);
+
+/* Resolves derived values: the MA table into clock, checks cross-key constraints. */
+wf_status wf_config_finish(wf_config *cfg, wf_clock *clock);
+
+/* Writes the Markdown reference of every key (docs/CONFIG.md is this output). */
+void wf_config_write_doc(FILE *out);
+
+#endif

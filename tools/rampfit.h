@@ -1,0 +1,49 @@
+/* Ramp fitting on the ground side: slope per pixel from unevenly spaced, averaged resultants.
+ * Weighted least squares in the resultants' mean times t-bar with Casertano et al. (2022)
+ * S/N-dependent power-law weights (as stcal's ols_cas22), read and Poisson variance of that
+ * estimator in closed form, jump detection on resultant differences with the stcal threshold
+ * 5.5 - log10(slope)/3 (slope clipped to [1, 1e4] e-/s), refitting around each jump
+ * (segments combined by inverse variance), and fits only of unsaturated resultants.
+ * Rates are e-/s; resultants are given in electrons (ADU x gain). */
+#ifndef WF_RAMPFIT_H
+#define WF_RAMPFIT_H
+
+#include <stdint.h>
+#include "hal/clock.h"
+#include "hal/status.h"
+
+/* Data-quality bits, as Roman's pixel DQ (romancal / roman_datamodels dqflags). */
+#define WF_DQ_DO_NOT_USE 0x1u
+#define WF_DQ_SATURATED 0x2u
+#define WF_DQ_JUMP_DET 0x4u
+
+typedef struct wf_rampfit_setup {
+    int nres;
+    int nreads[WF_MA_MAX_RESULTANTS];
+    double tbar[WF_MA_MAX_RESULTANTS]; /* mean read time of each resultant, s */
+    double tau[WF_MA_MAX_RESULTANTS];  /* Poisson variance time: Var(R_i) = rate * tau_i */
+    double read_noise;                 /* e- per read */
+    int detect_jumps;                  /* [1] */
+    double jump_threshold;             /* <= 0: stcal's slope-dependent threshold [0] */
+} wf_rampfit_setup;
+
+typedef struct wf_rampfit_result {
+    double rate;        /* e-/s */
+    double var_read;    /* (e-/s)^2 */
+    double var_poisson; /* (e-/s)^2, at the fitted rate (clipped at 0) */
+    uint32_t dq;        /* WF_DQ_* */
+    int njumps;
+} wf_rampfit_result;
+
+wf_status wf_rampfit_setup_init(const wf_clock *clock, double read_noise_e,
+                                wf_rampfit_setup *out);
+
+/* Fits one pixel. resultants[nres] in electrons; first_saturated = index of the first
+ * resultant holding a saturated read (nres or more: none).
+ * Defined results for short ramps: 2+ usable resultants -> fit with intercept; exactly 1 ->
+ * rate = R0 / tbar0 (the reset level is zero in simulation); 0 usable (saturated in the
+ * first resultant) -> rate = R0 / tbar0 as a lower bound, DQ SATURATED | DO_NOT_USE. */
+wf_status wf_rampfit_pixel(const wf_rampfit_setup *setup, const double *resultants,
+                           int first_saturated, wf_rampfit_result *out);
+
+#endif
