@@ -40,7 +40,7 @@ void wf_detector_defaults(wf_detector *det)
     det->cr_slope = -4.33;
     det->cr_dedx_loc = 120.0;
     det->cr_dedx_scale = 50.0;
-    det->cr_ev_per_e = 3.65;
+    det->cr_ev_per_e = 3.8; /* romanisim cr.py "gain" of 3.8 eV per count */
 }
 
 double wf_det_reciprocity(double q, double exptime, double alpha, double f0)

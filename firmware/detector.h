@@ -26,7 +26,7 @@ typedef struct wf_detector {
     double depth_um;       /* sensitive depth [5] */
     double cr_lmin_um, cr_lmax_um, cr_slope; /* path-length power law [10, 2000, -4.33] */
     double cr_dedx_loc, cr_dedx_scale;       /* Moyal, eV/um [120, 50] */
-    double cr_ev_per_e;    /* eV per electron-hole pair [3.65] */
+    double cr_ev_per_e;    /* eV per electron [3.8, romanisim] */
 } wf_detector;
 
 /* SPEC §2 values, every effect on. */

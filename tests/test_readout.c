@@ -1,0 +1,483 @@
+/* The streaming readout: determinism across tile heights and threads, fixed memory, flux
+ * conservation, direct vs per-read sampling, saturation, single-frame order, cosmic rays,
+ * replay. Streams are decoded here with the packet reader, independent of the assembler. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "firmware/cosmic.h"
+#include "firmware/readout.h"
+#include "hal/packet.h"
+#include "tests/testutil.h"
+#include "tools/expose.h"
+
+typedef struct decoded {
+    int ncols, nrows, nres;
+    uint16_t *res;    /* [nres][nrows][ncols] */
+    float *single;    /* [nrows][ncols] */
+    uint8_t *sat;     /* [nrows][ncols] */
+    wf_cosmic_record *cr;
+    int ncr;
+    int rows_seen;
+} decoded;
+
+static void small_config(wf_readout_config *cfg, wf_clock *clock, int ncols, int nrows)
+{
+    memset(cfg, 0, sizeof *cfg);
+    cfg->ncols = ncols;
+    cfg->nrows = nrows;
+    cfg->tile_rows = 16;
+    cfg->mode = WF_MODE_RAMP;
+    cfg->exposure = 3;
+    cfg->sca = 7;
+    cfg->seed = 12345;
+    cfg->compress = 1;
+    wf_detector_defaults(&cfg->det);
+    clock->frame_time = WF_FRAME_TIME_DEFAULT;
+    ck_assert_int_eq(wf_ma_builtin("4", &clock->ma), WF_OK);
+}
+
+static unsigned char *run_stream(const wf_readout_config *cfg, const wf_clock *clock,
+                                 const wf_scene_source *scene, int threads, size_t *len)
+{
+    wf_link_memory mem;
+    wf_link link;
+    wf_link_memory_open(&mem, &link);
+    wf_scene_source scenes[4] = {*scene, *scene, *scene, *scene};
+    wf_expose_job job = {0};
+    job.ro = *cfg;
+    job.clock = *clock;
+    job.noise = (wf_noise){WF_NOISE_PHILOX, cfg->seed, cfg->exposure, cfg->sca};
+    job.scenes = scenes;
+    job.threads = threads;
+    job.link = &link;
+    wf_status st = wf_expose_run(&job);
+    ck_assert_msg(st == WF_OK, "expose: %s", wf_error_message());
+    unsigned char *out = malloc(mem.len);
+    memcpy(out, mem.data, mem.len);
+    *len = mem.len;
+    wf_link_memory_close(&mem);
+    return out;
+}
+
+static int by_id(const void *a, const void *b)
+{
+    const wf_cosmic_record *p = a, *q = b;
+    return p->id < q->id ? -1 : p->id > q->id;
+}
+
+static void decode(const unsigned char *buf, size_t len, decoded *d)
+{
+    memset(d, 0, sizeof *d);
+    FILE *f = fmemopen((void *)buf, len, "rb");
+    wf_packet_reader rd;
+    wf_packet_reader_open(&rd, f, "test stream");
+    int eof = 0, ended = 0;
+    while (!eof) {
+        wf_packet_header h;
+        const void *p;
+        wf_status st = wf_packet_reader_next(&rd, &h, &p, &eof);
+        ck_assert_msg(st == WF_OK, "%s", wf_error_message());
+        if (eof) break;
+        if (h.kind == WF_PK_META) {
+            const char *t = p;
+            ck_assert_ptr_nonnull(strstr(t, "ncols = "));
+            sscanf(strstr(t, "ncols = "), "ncols = %d", &d->ncols);
+            sscanf(strstr(t, "nrows = "), "nrows = %d", &d->nrows);
+            size_t n = (size_t)d->ncols * d->nrows;
+            d->res = calloc(n * WF_MA_MAX_RESULTANTS, sizeof *d->res);
+            d->single = calloc(n, sizeof *d->single);
+            d->sat = calloc(n, 1);
+            d->cr = calloc(100000, sizeof *d->cr);
+        } else if (h.kind == WF_PK_RESULTANTS) {
+            d->nres = (int)h.nplanes;
+            const uint16_t *v = p;
+            for (uint32_t r = 0; r < h.nplanes; r++)
+                for (uint32_t y = 0; y < h.row_count; y++)
+                    memcpy(d->res + ((size_t)r * d->nrows + h.first_row + y) * d->ncols,
+                           v + ((size_t)r * h.row_count + y) * h.ncols, h.ncols * 2);
+            d->rows_seen += (int)h.row_count;
+        } else if (h.kind == WF_PK_SINGLE) {
+            memcpy(d->single + (size_t)h.first_row * d->ncols, p, (size_t)h.row_count * h.ncols * 4);
+            d->rows_seen += (int)h.row_count;
+        } else if (h.kind == WF_PK_SATURATION) {
+            memcpy(d->sat + (size_t)h.first_row * d->ncols, p, (size_t)h.row_count * h.ncols);
+        } else if (h.kind == WF_PK_COSMIC) {
+            memcpy(d->cr + d->ncr, p, h.nplanes * sizeof *d->cr);
+            d->ncr += (int)h.nplanes;
+        } else if (h.kind == WF_PK_END) {
+            ended = 1;
+        }
+    }
+    ck_assert(ended);
+    qsort(d->cr, (size_t)d->ncr, sizeof *d->cr, by_id);
+    wf_packet_reader_close(&rd);
+    fclose(f);
+}
+
+static void free_decoded(decoded *d)
+{
+    free(d->res);
+    free(d->single);
+    free(d->sat);
+    free(d->cr);
+}
+
+static void assert_same(const decoded *a, const decoded *b, const char *what)
+{
+    size_t n = (size_t)a->ncols * a->nrows;
+    ck_assert_int_eq(a->rows_seen, a->nrows);
+    ck_assert_int_eq(b->rows_seen, b->nrows);
+    ck_assert_msg(a->nres == b->nres, "%s: resultant count", what);
+    ck_assert_msg(!memcmp(a->res, b->res, n * (size_t)a->nres * 2), "%s: resultants differ", what);
+    ck_assert_msg(!memcmp(a->single, b->single, n * 4), "%s: single-frame image differs", what);
+    ck_assert_msg(!memcmp(a->sat, b->sat, n), "%s: saturation maps differ", what);
+    ck_assert_msg(a->ncr == b->ncr, "%s: %d vs %d cosmic rays", what, a->ncr, b->ncr);
+    ck_assert_msg(!memcmp(a->cr, b->cr, (size_t)a->ncr * sizeof *a->cr), "%s: cosmic truth differs", what);
+}
+
+static wf_scene_grid test_grid(int ncols, int nrows)
+{
+    return (wf_scene_grid){ncols, nrows, 0.4, 3.0e5, 1.2, 24}; /* bright: some pixels saturate */
+}
+
+static void check_determinism(wf_mode mode, wf_sampling sampling)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 72, 80);
+    cfg.mode = mode;
+    cfg.sampling = sampling;
+    cfg.exptime = 300.0;
+    cfg.det.cr_rate = 2000.0; /* enough hits on a small SCA to cross tile boundaries */
+    wf_scene_grid g = test_grid(cfg.ncols, cfg.nrows);
+    wf_scene_source src;
+    ck_assert_int_eq(wf_scene_grid_source(&g, &src), WF_OK);
+    const int heights[] = {1, 7, 64, 80};
+    decoded ref = {0};
+    size_t len;
+    unsigned char *buf;
+    for (int i = 0; i < 4; i++) {
+        cfg.tile_rows = heights[i];
+        for (int threads = 1; threads <= 2; threads++) {
+            if (heights[i] == 80 && threads == 2) continue;
+            buf = run_stream(&cfg, &clock, &src, threads, &len);
+            decoded d;
+            decode(buf, len, &d);
+            free(buf);
+            if (i == 0 && threads == 1) {
+                ref = d;
+                if (mode == WF_MODE_RAMP) ck_assert_msg(ref.ncr > 10, "only %d cosmic rays", ref.ncr);
+                continue;
+            }
+            char what[64];
+            snprintf(what, sizeof what, "tile height %d, %d threads", heights[i], threads);
+            assert_same(&ref, &d, what);
+            free_decoded(&d);
+        }
+    }
+    free_decoded(&ref);
+}
+
+START_TEST(determinism_ramp_per_read) { check_determinism(WF_MODE_RAMP, WF_SAMPLE_PER_READ); }
+END_TEST
+START_TEST(determinism_ramp_direct) { check_determinism(WF_MODE_RAMP, WF_SAMPLE_DIRECT); }
+END_TEST
+START_TEST(determinism_single) { check_determinism(WF_MODE_SINGLE, WF_SAMPLE_PER_READ); }
+END_TEST
+
+START_TEST(memory_fixed_by_tile_not_image)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 4088, 256);
+    cfg.tile_rows = 64;
+    ck_assert_int_eq(wf_ma_builtin("6", &clock.ma), WF_OK);
+    size_t a, b, c;
+    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &a), WF_OK);
+    cfg.nrows = 4088;
+    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &b), WF_OK);
+    ck_assert_msg(a == b, "arena need grew with image height: %zu -> %zu", a, b);
+    ck_assert_msg(b <= 64u << 20, "full-SCA readout at 64-row tiles needs %zu bytes > 64 MiB", b);
+    cfg.tile_rows = 128;
+    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &c), WF_OK);
+    ck_assert_msg(c > b, "arena need must grow with tile height");
+}
+END_TEST
+
+START_TEST(arena_refuses_past_budget)
+{
+    static unsigned char block[4096];
+    wf_arena arena;
+    wf_arena_init(&arena, block, sizeof block, "test arena");
+    void *p;
+    ck_assert_int_eq(wf_arena_alloc(&arena, 1000, "first", &p), WF_OK);
+    ck_assert_int_eq(wf_arena_alloc(&arena, 4000, "too big", &p), WF_ERR_NOMEM);
+    ck_assert_ptr_null(p);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "too big"));
+    size_t mark = wf_arena_mark(&arena);
+    ck_assert_int_eq(wf_arena_alloc(&arena, 1000, "second", &p), WF_OK);
+    wf_arena_release(&arena, mark);
+    ck_assert_int_eq(wf_arena_mark(&arena), mark);
+
+    /* a readout given less than it asked for fails cleanly */
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 64, 64);
+    size_t need;
+    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_OK);
+    void *mem = malloc(need);
+    wf_arena_init(&arena, mem, need / 2, "half arena");
+    wf_scene_grid g = test_grid(64, 64);
+    wf_scene_source src;
+    wf_scene_grid_source(&g, &src);
+    wf_noise noise = {WF_NOISE_PHILOX, 1, 1, 1};
+    wf_link_memory lm;
+    wf_link link;
+    wf_link_memory_open(&lm, &link);
+    wf_readout *ro;
+    ck_assert_int_eq(wf_readout_create(&cfg, &clock, &src, &noise, &link, &arena, &ro), WF_ERR_NOMEM);
+    /* and with its full budget it runs and stays within it */
+    wf_arena_init(&arena, mem, need, "full arena");
+    ck_assert_int_eq(wf_readout_create(&cfg, &clock, &src, &noise, &link, &arena, &ro), WF_OK);
+    for (int t = 0; t < wf_readout_tile_count(ro); t++) ck_assert_int_eq(wf_readout_run_tile(ro, t), WF_OK);
+    ck_assert(arena.high_water <= need);
+    wf_readout_destroy(ro);
+    wf_link_memory_close(&lm);
+    free(mem);
+}
+END_TEST
+
+/* With every noise and non-linear effect off, resultant r of every pixel is rate x tbar_r,
+ * so the image sums to the scene's closed-form total. */
+START_TEST(noiseless_flux_conserved)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 96, 96);
+    wf_detector *d = &cfg.det;
+    memset(&d->on, 0, sizeof d->on);
+    wf_scene_grid g = {96, 96, 0.4, 2000.0, 1.5, 32};
+    wf_scene_source src;
+    wf_scene_grid_source(&g, &src);
+    for (int s = 0; s < 2; s++) {
+        cfg.sampling = s ? WF_SAMPLE_DIRECT : WF_SAMPLE_PER_READ;
+        size_t len;
+        unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
+        decoded dd;
+        decode(buf, len, &dd);
+        free(buf);
+        double total = wf_scene_grid_total(&g);
+        for (int r = 0; r < dd.nres; r++) {
+            double sum = 0.0;
+            for (size_t i = 0; i < (size_t)96 * 96; i++) sum += dd.res[(size_t)r * 96 * 96 + i];
+            double expect = total * wf_clock_resultant_time(&clock, r);
+            /* each pixel is rounded to an integer ADU: at most 0.5 each */
+            ck_assert_msg(fabs(sum - expect) <= 0.5 * 96 * 96 + 1e-4 * expect,
+                          "resultant %d: sum %.1f, expected %.1f", r, sum, expect);
+        }
+        free_decoded(&dd);
+    }
+}
+END_TEST
+
+/* Direct-resultant sampling draws the same distribution as read-by-read sampling for a
+ * linear pixel: per-resultant means and variances over many pixels agree within 4 sigma. */
+START_TEST(direct_matches_per_read)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 128, 128);
+    ck_assert_int_eq(wf_ma_builtin("6", &clock.ma), WF_OK);
+    wf_detector *d = &cfg.det;
+    memset(&d->on, 0, sizeof d->on);
+    d->on.photon_noise = 1;
+    wf_scene_grid g = {128, 128, 3.0, 0.0, 1.0, 64}; /* flat 3 e-/s: photon noise only */
+    wf_scene_source src;
+    wf_scene_grid_source(&g, &src);
+    decoded dd[2];
+    for (int s = 0; s < 2; s++) {
+        cfg.sampling = s ? WF_SAMPLE_DIRECT : WF_SAMPLE_PER_READ;
+        size_t len;
+        unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
+        decode(buf, len, &dd[s]);
+        free(buf);
+    }
+    size_t n = 128 * 128;
+    for (int r = 0; r < dd[0].nres; r++) {
+        double m[2], v[2];
+        for (int s = 0; s < 2; s++) {
+            double a = 0, b = 0;
+            for (size_t i = 0; i < n; i++) {
+                double x = dd[s].res[(size_t)r * n + i];
+                a += x;
+                b += x * x;
+            }
+            m[s] = a / n;
+            v[s] = b / n - m[s] * m[s];
+        }
+        double tb = wf_clock_resultant_time(&clock, r);
+        ck_assert_msg(fabs(m[0] - m[1]) < 4.0 * sqrt((v[0] + v[1]) / n),
+                      "resultant %d: means %.4f vs %.4f", r, m[0], m[1]);
+        ck_assert_msg(fabs(m[0] - 3.0 * tb) < 4.0 * sqrt(v[0] / n) + 0.5, "resultant %d mean %.3f vs %.3f", r, m[0], 3.0 * tb);
+        /* variance of a sample variance ~ 2 v^2 / n (near-Gaussian counts), plus rounding */
+        double tol = 4.0 * sqrt(2.0 / n) * (v[0] + v[1]) / 2 + 1.0 / 6.0;
+        ck_assert_msg(fabs(v[0] - v[1]) < tol, "resultant %d: variances %.4f vs %.4f", r, v[0], v[1]);
+    }
+    free_decoded(&dd[0]);
+    free_decoded(&dd[1]);
+}
+END_TEST
+
+/* A pixel that saturates within the ramp: resultants never decrease, never exceed the
+ * saturation level, and the saturation map names the first resultant whose reads reached it
+ * (here the 16-bit ADC, at 65535 ADU, comes before the full well). */
+START_TEST(saturation_defined)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 16, 16);
+    cfg.det.on.cosmic_rays = 0;
+    cfg.det.on.ipc = 0; /* IPC would move charge between the flat pixels' neighbours only */
+    wf_scene_grid g = {16, 16, 500.0, 0.0, 1.0, 64}; /* flat 500 e-/s: the ADC clips after ~134 s */
+    wf_scene_source src;
+    wf_scene_grid_source(&g, &src);
+    size_t len;
+    unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
+    decoded dd;
+    decode(buf, len, &dd);
+    free(buf);
+    double rate = wf_det_reciprocity_rate(500.0, cfg.det.recip_alpha, cfg.det.recip_f0) + cfg.det.dark_current;
+    double sat_adu = wf_det_saturation_adu(&cfg.det);
+    /* charge at which the measured signal reaches the saturation level: invert q + beta q^2 */
+    double beta = cfg.det.nl_beta, level = sat_adu * cfg.det.gain;
+    double q_sat = (-1.0 + sqrt(1.0 + 4.0 * beta * level)) / (2.0 * beta);
+    double tol = 5.0 * sqrt(q_sat) + 5.0 * cfg.det.read_noise_e;
+    size_t n = 16 * 16;
+    int saturated = 0;
+    for (size_t i = 0; i < n; i++) {
+        for (int r = 0; r < dd.nres; r++) {
+            ck_assert(dd.res[(size_t)r * n + i] <= sat_adu + 0.5);
+            if (r) ck_assert_msg(dd.res[(size_t)r * n + i] + 40 >= dd.res[(size_t)(r - 1) * n + i], "decreasing ramp");
+        }
+        if (dd.sat[i] != 255) {
+            saturated++;
+            /* first read whose expected charge passes the full well, within Poisson spread */
+            int r = dd.sat[i];
+            const wf_ma_table *ma = &clock.ma;
+            double t_last = wf_clock_read_time(&clock, ma->read[ma->first[r + 1] - 1]);
+            double t_prev = r ? wf_clock_read_time(&clock, ma->read[ma->first[r] - 1]) : 0.0;
+            ck_assert_msg(rate * t_last >= q_sat - tol,
+                          "flagged at resultant %d before the signal could saturate", r);
+            ck_assert_msg(rate * t_prev <= q_sat + tol, "flag at resultant %d too late", r);
+        }
+    }
+    ck_assert_int_eq(saturated, (int)n);
+    free_decoded(&dd);
+}
+END_TEST
+
+/* Single-frame order without noise: ADU = round(IPC(NL(recip(r t) + dark t)) / gain), which
+ * here is checked on a flat interior pixel, where IPC sums to one. */
+START_TEST(single_frame_closed_form)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 20, 20);
+    cfg.mode = WF_MODE_SINGLE;
+    cfg.exptime = 139.8;
+    cfg.det.on.photon_noise = cfg.det.on.read_noise = 0;
+    wf_scene_grid g = {20, 20, 123.0, 0.0, 1.0, 64};
+    wf_scene_source src;
+    wf_scene_grid_source(&g, &src);
+    size_t len;
+    unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
+    decoded dd;
+    decode(buf, len, &dd);
+    free(buf);
+    double q = wf_det_reciprocity(123.0 * 139.8, 139.8, 0.0065, 1.0) + 0.015 * 139.8;
+    double expect = nearbyint(wf_det_nonlinearity(q, -6e-7));
+    ck_assert_msg(fabs(dd.single[10 * 20 + 10] - expect) < 1e-9, "single frame %.3f vs %.3f",
+                  dd.single[10 * 20 + 10], expect);
+    /* a corner keeps only the kernel weights that fall inside (zero padding) */
+    const double (*k)[3] = cfg.det.ipc;
+    double corner = k[1][1] + k[1][2] + k[2][1] + k[2][2];
+    ck_assert_msg(fabs(dd.single[0] - nearbyint(wf_det_nonlinearity(q, -6e-7) * corner)) < 1e-9,
+                  "corner pixel %.3f", dd.single[0]);
+    free_decoded(&dd);
+}
+END_TEST
+
+/* The number of cosmic-ray hits matches rate x area x time (Poisson, 5 sigma). */
+START_TEST(cosmic_ray_count)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 256, 256);
+    ck_assert_int_eq(wf_ma_builtin("6", &clock.ma), WF_OK);
+    cfg.det.cr_rate = 100.0;
+    wf_scene_grid g = {256, 256, 0.4, 0.0, 1.0, 64};
+    wf_scene_source src;
+    wf_scene_grid_source(&g, &src);
+    size_t len;
+    unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
+    decoded dd;
+    decode(buf, len, &dd);
+    free(buf);
+    double expect = wf_cosmic_expected_hits(&cfg.det, 256, 256, wf_clock_exposure_time(&clock));
+    ck_assert_msg(fabs(dd.ncr - expect) < 5.0 * sqrt(expect), "%d hits, expected %.1f", dd.ncr, expect);
+    for (int i = 1; i < dd.ncr; i++) ck_assert(dd.cr[i].id != dd.cr[i - 1].id);
+    for (int i = 0; i < dd.ncr; i++) {
+        ck_assert(dd.cr[i].read < 93);
+        ck_assert(dd.cr[i].electrons >= 0.0f);
+    }
+    free_decoded(&dd);
+}
+END_TEST
+
+START_TEST(replay_equals_source)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 40, 33);
+    wf_scene_grid g = test_grid(40, 33);
+    wf_scene_source src, rep;
+    wf_scene_grid_source(&g, &src);
+    char path[4200];
+    snprintf(path, sizeof path, "%s/rates.bin", wf_test_tmpdir());
+    float scratch[40 * 5];
+    ck_assert_int_eq(wf_scene_record(&src, 40, 33, 5, scratch, path), WF_OK);
+    wf_scene_replay rp;
+    ck_assert_int_eq(wf_scene_replay_open(&rp, path, &rep), WF_OK);
+    size_t la, lb;
+    unsigned char *a = run_stream(&cfg, &clock, &src, 1, &la);
+    unsigned char *b = run_stream(&cfg, &clock, &rep, 1, &lb);
+    ck_assert_msg(la == lb && !memcmp(a, b, la), "replayed stream differs from the live scene");
+    free(a);
+    free(b);
+    wf_scene_replay_close(&rp);
+    ck_assert_int_eq(wf_scene_replay_open(&rp, "/nonexistent/rates.bin", &rep), WF_ERR_IO);
+}
+END_TEST
+
+static Suite *suite(void)
+{
+    Suite *s = suite_create("readout");
+    TCase *tc = tcase_create("readout");
+    tcase_set_timeout(tc, 300);
+    tcase_add_test(tc, determinism_ramp_per_read);
+    tcase_add_test(tc, determinism_ramp_direct);
+    tcase_add_test(tc, determinism_single);
+    tcase_add_test(tc, memory_fixed_by_tile_not_image);
+    tcase_add_test(tc, arena_refuses_past_budget);
+    tcase_add_test(tc, noiseless_flux_conserved);
+    tcase_add_test(tc, direct_matches_per_read);
+    tcase_add_test(tc, saturation_defined);
+    tcase_add_test(tc, single_frame_closed_form);
+    tcase_add_test(tc, cosmic_ray_count);
+    tcase_add_test(tc, replay_equals_source);
+    suite_add_tcase(s, tc);
+    return s;
+}
+
+int main(void) { return wf_test_main(suite()); }

@@ -1,0 +1,300 @@
+/* wfisim: one program, subcommands. The host side: parses options and configs, wires the
+ * HAL implementations to the firmware and the assembler, and reports errors. */
+#include <errno.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "hal/link.h"
+#include "hal/scene.h"
+#include "tools/assemble.h"
+#include "tools/config.h"
+#include "tools/expose.h"
+
+#define WFISIM_VERSION "0.1.0"
+
+static const char *usage_text =
+    "usage: wfisim <command> [options]\n"
+    "\n"
+    "commands:\n"
+    "  demo                 one full SCA exposure of the built-in scene, up the ramp, to FITS\n"
+    "  expose               one exposure of the configured scene (--stream FILE|- for packets)\n"
+    "  assemble FILE|-      packet stream -> FITS (SCI, ERR, DQ, RESULTANTS)\n"
+    "  record --rates FILE  write the scene's rate rows to a replay file\n"
+    "  config doc           print the reference of every configuration key (docs/CONFIG.md)\n"
+    "  config check FILE    load a configuration file and report the first problem\n"
+    "\n"
+    "options of the rendering commands:\n"
+    "  --out DIR            output directory [out]           --seed N     noise seed [1]\n"
+    "  --tile-rows N        rows per tile [64]               --threads N  readout threads [1]\n"
+    "  --mode ramp|single   up the ramp or GalSim single frame [ramp]\n"
+    "  --sampling per-read|direct   how resultants are drawn [per-read]\n"
+    "  --config FILE        YAML configuration (see docs/CONFIG.md)\n"
+    "  --set KEY=VALUE      override one configuration key (repeatable)\n"
+    "  --stream FILE|-      write the packet stream instead of FITS\n"
+    "  --replay FILE        take the scene from a rate recording\n"
+    "  --quiet              no progress output\n";
+
+static int fail(const char *what, wf_status st)
+{
+    fprintf(stderr, "wfisim: %s: %s\n", what, wf_error_message()[0] ? wf_error_message() : wf_status_name(st));
+    return st == WF_ERR_INPUT || st == WF_ERR_RANGE ? 2 : 1;
+}
+
+typedef struct cli {
+    wf_config cfg;
+    wf_clock clock;
+    const char *stream;
+    const char *replay;
+    const char *rates;
+    const char *positional;
+} cli;
+
+/* Options that are shorthands for configuration keys. */
+static const struct { const char *flag, *key; } shorthands[] = {
+    {"--out", "run.out"},           {"--seed", "seed"},         {"--tile-rows", "readout.tile_rows"},
+    {"--threads", "run.threads"},   {"--mode", "exposure.mode"}, {"--sampling", "exposure.sampling"},
+    {"--exposure", "exposure.id"},  {"--sca", "exposure.sca"},  {"--ma-table", "readout.ma_table"},
+    {"--filter", "exposure.filter"},
+};
+
+static int parse(int argc, char **argv, cli *c)
+{
+    memset(c, 0, sizeof *c);
+    wf_config_defaults(&c->cfg);
+    wf_status st;
+    /* the config file first, wherever it stands, so that flags override it */
+    for (int i = 0; i < argc; i++)
+        if (!strcmp(argv[i], "--config")) {
+            if (i + 1 >= argc) { fprintf(stderr, "wfisim: --config needs a file\n"); return 2; }
+            if ((st = wf_config_load(&c->cfg, argv[i + 1]))) return fail("config", st);
+        }
+    for (int i = 0; i < argc; i++) {
+        const char *a = argv[i];
+        const char *val = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--config")) { i++; continue; }
+        if (!strcmp(a, "--quiet")) { c->cfg.quiet = 1; continue; }
+        if (!strcmp(a, "--help") || !strcmp(a, "-h")) { fputs(usage_text, stdout); exit(0); }
+        int done = 0;
+        for (size_t k = 0; k < sizeof shorthands / sizeof *shorthands; k++)
+            if (!strcmp(a, shorthands[k].flag)) {
+                if (!val) { fprintf(stderr, "wfisim: %s needs a value\n", a); return 2; }
+                char buf[2 * WF_PATH_MAX];
+                snprintf(buf, sizeof buf, "%s=%s", shorthands[k].key, val);
+                if ((st = wf_config_set(&c->cfg, buf, a))) return fail("option", st);
+                i++;
+                done = 1;
+                break;
+            }
+        if (done) continue;
+        if (!strcmp(a, "--set")) {
+            if (!val) { fprintf(stderr, "wfisim: --set needs KEY=VALUE\n"); return 2; }
+            if ((st = wf_config_set(&c->cfg, val, "--set"))) return fail("option", st);
+            i++;
+        } else if (!strcmp(a, "--stream") && val) { c->stream = val; i++; }
+        else if (!strcmp(a, "--replay") && val) { c->replay = val; i++; }
+        else if (!strcmp(a, "--rates") && val) { c->rates = val; i++; }
+        else if (a[0] == '-' && a[1] == '-') {
+            fprintf(stderr, "wfisim: unknown option '%s' (see wfisim --help)\n", a);
+            return 2;
+        } else if (!c->positional) c->positional = a;
+        else { fprintf(stderr, "wfisim: unexpected argument '%s'\n", a); return 2; }
+    }
+    if ((st = wf_config_finish(&c->cfg, &c->clock))) return fail("config", st);
+    return 0;
+}
+
+static wf_status make_dir(const char *dir)
+{
+    char buf[WF_PATH_MAX];
+    snprintf(buf, sizeof buf, "%s", dir);
+    for (char *p = buf + 1; *p; p++)
+        if (*p == '/') {
+            *p = '\0';
+            if (mkdir(buf, 0777) != 0 && errno != EEXIST) return wf_error(WF_ERR_IO, "%s: cannot create directory", buf);
+            *p = '/';
+        }
+    if (mkdir(buf, 0777) != 0 && errno != EEXIST) return wf_error(WF_ERR_IO, "%s: cannot create directory", buf);
+    return WF_OK;
+}
+
+static void grid_from_config(const wf_config *cfg, wf_scene_grid *g)
+{
+    g->ncols = cfg->ro.ncols;
+    g->nrows = cfg->ro.nrows;
+    g->sky = cfg->sky_rate;
+    g->flux = cfg->grid_flux;
+    g->sigma = cfg->grid_sigma;
+    g->spacing = cfg->grid_spacing;
+}
+
+typedef struct assembler_thread {
+    FILE *in;
+    wf_assemble_options opt;
+    wf_status status;
+    char message[1024];
+    char path[WF_PATH_MAX];
+} assembler_thread;
+
+static void *assemble_main(void *arg)
+{
+    assembler_thread *a = arg;
+    a->status = wf_assemble_stream(a->in, "in-process stream", &a->opt, a->path, sizeof a->path);
+    if (a->status) snprintf(a->message, sizeof a->message, "%s", wf_error_message());
+    /* drain so that a writer blocked on a full pipe sees EOF handling, not a hang */
+    char sink[65536];
+    while (fread(sink, 1, sizeof sink, a->in) > 0) {}
+    return NULL;
+}
+
+static int run_exposure(cli *c, int demo)
+{
+    wf_config *cfg = &c->cfg;
+    int T = cfg->threads < 1 ? 1 : cfg->threads;
+    wf_scene_source *scenes = calloc((size_t)T, sizeof *scenes);
+    wf_scene_replay *replays = calloc((size_t)T, sizeof *replays);
+    wf_scene_grid grid;
+    wf_status st = WF_OK;
+    int rc = 0, opened = 0;
+    if (!scenes || !replays) { st = wf_error(WF_ERR_NOMEM, "out of memory"); goto done; }
+    grid_from_config(cfg, &grid);
+    for (int i = 0; i < T; i++) {
+        if (c->replay) {
+            if ((st = wf_scene_replay_open(&replays[i], c->replay, &scenes[i]))) goto done;
+            opened = i + 1;
+            if (replays[i].ncols != cfg->ro.ncols || replays[i].nrows != cfg->ro.nrows) {
+                st = wf_error(WF_ERR_INPUT, "%s: recording is %d x %d, the SCA is %d x %d", c->replay,
+                              replays[i].ncols, replays[i].nrows, cfg->ro.ncols, cfg->ro.nrows);
+                goto done;
+            }
+        } else if ((st = wf_scene_grid_source(&grid, &scenes[i]))) goto done;
+    }
+    char extra[1024];
+    snprintf(extra, sizeof extra,
+             "hdr.FILTER = %s / optical element\n"
+             "hdr.SCENE = %s / scene source\n"
+             "hdr.SKYRATE = %.9g / sky rate of the built-in scene, e-/pixel/s\n"
+             "hdr.ORIGIN = wfisim %s / software\n",
+             cfg->filter, c->replay ? "replay" : (demo ? "built-in demo grid" : "built-in grid"),
+             cfg->sky_rate, WFISIM_VERSION);
+
+    wf_expose_job job = {0};
+    job.ro = cfg->ro;
+    job.clock = c->clock;
+    job.noise = (wf_noise){WF_NOISE_PHILOX, cfg->seed, cfg->ro.exposure, cfg->ro.sca};
+    job.scenes = scenes;
+    job.threads = T;
+    job.progress = !cfg->quiet && isatty(STDERR_FILENO);
+    job.meta_extra = extra;
+
+    wf_link link;
+    wf_link_stream ls;
+    if (c->stream) {
+        FILE *f = strcmp(c->stream, "-") ? fopen(c->stream, "wb") : stdout;
+        if (!f) { st = wf_error(WF_ERR_IO, "%s: cannot create stream file", c->stream); goto done; }
+        wf_link_stream_open(&ls, f, c->stream, &link);
+        job.link = &link;
+        st = wf_expose_run(&job);
+        if (fflush(f) != 0 && !st) st = wf_error(WF_ERR_IO, "%s: write failed", c->stream);
+        if (f != stdout && fclose(f) != 0 && !st) st = wf_error(WF_ERR_IO, "%s: close failed", c->stream);
+        wf_link_stream_close(&ls);
+        goto done;
+    }
+    /* In-process: the same bytes go through a pipe to an assembler thread, so the FITS is
+     * identical to `wfisim expose --stream - | wfisim assemble -`. */
+    if ((st = make_dir(cfg->out_dir))) goto done;
+    int fds[2];
+    if (pipe(fds) != 0) { st = wf_error(WF_ERR_IO, "cannot create a pipe"); goto done; }
+    FILE *w = fdopen(fds[1], "wb"), *r = fdopen(fds[0], "rb");
+    assembler_thread at = {0};
+    at.in = r;
+    at.opt.out_dir = cfg->out_dir;
+    at.opt.quiet = cfg->quiet;
+    pthread_t th;
+    pthread_create(&th, NULL, assemble_main, &at);
+    wf_link_stream_open(&ls, w, "in-process stream", &link);
+    job.link = &link;
+    st = wf_expose_run(&job);
+    char expose_msg[1024];
+    snprintf(expose_msg, sizeof expose_msg, "%s", wf_error_message());
+    fclose(w);
+    pthread_join(th, NULL);
+    fclose(r);
+    wf_link_stream_close(&ls);
+    if (st) { wf_error(st, "%s", expose_msg); goto done; }
+    if (at.status) { st = wf_error(at.status, "%s", at.message); goto done; }
+    if (!cfg->quiet)
+        fprintf(stderr, "wfisim: wrote %s (arena %.1f MiB per readout instance, %.1f MiB used)\n",
+                at.path, job.arena_bytes / 1048576.0, job.arena_high_water / 1048576.0);
+done:
+    for (int i = 0; i < opened; i++) wf_scene_replay_close(&replays[i]);
+    free(scenes);
+    free(replays);
+    if (st) rc = fail(demo ? "demo" : "expose", st);
+    return rc;
+}
+
+static int cmd_assemble(cli *c)
+{
+    if (!c->positional) { fprintf(stderr, "wfisim assemble: give a stream file or '-'\n"); return 2; }
+    wf_status st = make_dir(c->cfg.out_dir);
+    if (st) return fail("assemble", st);
+    FILE *in = strcmp(c->positional, "-") ? fopen(c->positional, "rb") : stdin;
+    if (!in) { wf_error(WF_ERR_IO, "%s: cannot open", c->positional); return fail("assemble", WF_ERR_IO); }
+    wf_assemble_options opt = {c->cfg.out_dir, c->cfg.quiet};
+    char path[WF_PATH_MAX] = "";
+    st = wf_assemble_stream(in, c->positional, &opt, path, sizeof path);
+    if (in != stdin) fclose(in);
+    return st ? fail("assemble", st) : 0;
+}
+
+static int cmd_record(cli *c)
+{
+    if (!c->rates) { fprintf(stderr, "wfisim record: give --rates FILE\n"); return 2; }
+    wf_scene_grid grid;
+    wf_scene_source src;
+    grid_from_config(&c->cfg, &grid);
+    wf_status st = wf_scene_grid_source(&grid, &src);
+    float *scratch = malloc((size_t)c->cfg.ro.tile_rows * c->cfg.ro.ncols * sizeof *scratch);
+    if (!scratch) return fail("record", wf_error(WF_ERR_NOMEM, "out of memory"));
+    if (!st) st = wf_scene_record(&src, c->cfg.ro.ncols, c->cfg.ro.nrows, c->cfg.ro.tile_rows, scratch, c->rates);
+    free(scratch);
+    return st ? fail("record", st) : 0;
+}
+
+int main(int argc, char **argv)
+{
+    signal(SIGPIPE, SIG_IGN); /* a closed pipe is an I/O error we report, not a silent death */
+    if (argc < 2) { fputs(usage_text, stderr); return 2; }
+    const char *cmd = argv[1];
+    if (!strcmp(cmd, "--help") || !strcmp(cmd, "-h") || !strcmp(cmd, "help")) { fputs(usage_text, stdout); return 0; }
+    if (!strcmp(cmd, "--version")) { puts("wfisim " WFISIM_VERSION); return 0; }
+    if (!strcmp(cmd, "config")) {
+        if (argc >= 3 && !strcmp(argv[2], "doc")) { wf_config_write_doc(stdout); return 0; }
+        if (argc >= 4 && !strcmp(argv[2], "check")) {
+            wf_config cfg;
+            wf_clock clock;
+            wf_config_defaults(&cfg);
+            wf_status st = wf_config_load(&cfg, argv[3]);
+            if (!st) st = wf_config_finish(&cfg, &clock);
+            if (st) return fail("config", st);
+            printf("%s: ok\n", argv[3]);
+            return 0;
+        }
+        fprintf(stderr, "usage: wfisim config doc | wfisim config check FILE\n");
+        return 2;
+    }
+    cli c;
+    int rc = parse(argc - 2, argv + 2, &c);
+    if (rc) return rc;
+    if (!strcmp(cmd, "demo")) return run_exposure(&c, 1);
+    if (!strcmp(cmd, "expose")) return run_exposure(&c, 0);
+    if (!strcmp(cmd, "assemble")) return cmd_assemble(&c);
+    if (!strcmp(cmd, "record")) return cmd_record(&c);
+    fprintf(stderr, "wfisim: unknown command '%s'\n\n%s", cmd, usage_text);
+    return 2;
+}
