@@ -68,3 +68,7 @@ bench: deps $(PROG)
 
 clean:
 	rm -rf build bin
+
+$(BUILD)/bench/%: bench/%.c $(LIB) $(wildcard */*.h)
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $< $(LIB) $(LDLIBS)

@@ -11,8 +11,8 @@
 /* Direct-resultant sampling: below this many photons in a group the within-group placement
  * is drawn photon by photon (exact); above, a Gaussian with the exact conditional mean and
  * variance (the placement sum is symmetric, so its skewness is zero and the excess kurtosis
- * -1.2/N is the only departure). */
-#define WF_DIRECT_EXACT_MAX 64
+ * -1.2/N is the only departure: -0.15 at the switch, where read noise dominates anyway). */
+#define WF_DIRECT_EXACT_MAX 8
 
 struct wf_readout {
     wf_readout_config cfg;
@@ -27,6 +27,10 @@ struct wf_readout {
     double *mean;                  /* halo block, expected e- per frame time */
     double *charge;                /* halo block, collected e- */
     double *meas;                  /* halo block, measured e- at this read */
+    double *expm;                  /* halo block, exp(-mean) for one-frame Poisson inversion */
+    float *gauss;                  /* tile rows, this read's standard normal for read noise */
+    uint32_t *words;               /* [4][ncols]: first Philox block of each pixel's stream */
+    int noise_off;                 /* WF_NOISE_OFF: draws are expectations */
     double *row;                   /* one row after IPC */
     double *sum;                   /* tile rows, ADU summed over the resultant's reads */
     uint16_t *res_out;             /* [nres][tile_rows][ncols] */
@@ -81,7 +85,9 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     size_t tile = (size_t)cfg->tile_rows * (size_t)cfg->ncols;
     size_t n = wf_arena_cost(sizeof(wf_readout));
     n += wf_arena_cost(halo * sizeof(float));
-    n += 3 * wf_arena_cost(halo * sizeof(double));
+    n += 4 * wf_arena_cost(halo * sizeof(double));
+    n += wf_arena_cost(tile * sizeof(float));
+    n += wf_arena_cost(4 * (size_t)cfg->ncols * sizeof(uint32_t));
     n += wf_arena_cost((size_t)cfg->ncols * sizeof(double));
     n += wf_arena_cost(tile * sizeof(double));
     if (cfg->mode == WF_MODE_RAMP)
@@ -129,6 +135,10 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     TAKE(ro->mean, halo, "expected electrons");
     TAKE(ro->charge, halo, "collected charge");
     TAKE(ro->meas, halo, "measured charge");
+    TAKE(ro->expm, halo, "Poisson inversion start");
+    TAKE(ro->gauss, tile, "read-noise normals");
+    TAKE(ro->words, 4 * (size_t)cfg->ncols, "noise words");
+    ro->noise_off = noise->kind == WF_NOISE_OFF;
     TAKE(ro->row, cfg->ncols, "IPC row");
     TAKE(ro->sum, tile, "resultant sums");
     if (cfg->mode == WF_MODE_RAMP) {
@@ -189,7 +199,55 @@ static void expected_per_frame(wf_readout *ro, int npix)
         if (d->on.reciprocity) r = wf_det_reciprocity_rate(r, d->recip_alpha, d->recip_f0);
         if (d->on.dark) r += d->dark_current;
         ro->mean[i] = r * ft;
+        ro->expm[i] = exp(-ro->mean[i]);
     }
+}
+
+/* Each (pixel, read) has one stream. Its first block, computed a row at a time by
+ * wf_noise_block_row, serves the common case: word 0 is the read-noise normal, words 1-3
+ * the uniforms of Poisson draws by inversion. Draws that need more (PTRS above a mean of
+ * 10, photon placement) continue the same stream from block 1, created on first use. */
+typedef struct more_noise {
+    wf_rng rng;
+    int ready;
+    const wf_noise *noise;
+    uint32_t pixel, read;
+    wf_purpose purpose;
+} more_noise;
+
+static inline wf_rng *more(more_noise *m)
+{
+    if (!m->ready) {
+        wf_rng_init(&m->rng, m->noise, m->pixel, m->read, m->purpose);
+        wf_rng_seek(&m->rng, 1);
+        m->ready = 1;
+    }
+    return &m->rng;
+}
+
+static inline double poisson_word(uint32_t w, double mean, double expm, more_noise *mn)
+{
+    if (!(mean > 0.0)) return 0.0;
+    if (mean >= 10.0) return wf_rng_poisson(more(mn), mean);
+    double u = ((double)w + 0.5) * (1.0 / 4294967296.0), p = expm, cdf = p, k = 0.0;
+    while (u > cdf && k < 200.0) { /* stop where the terms no longer move the sum */
+        k += 1.0;
+        p *= mean / k;
+        double next = cdf + p;
+        if (next == cdf) break;
+        cdf = next;
+    }
+    return k;
+}
+
+/* Fills the noise words of row y for (read, purpose) and, for tile rows, the normals. */
+static void row_noise(wf_readout *ro, int y, uint32_t read, wf_purpose purpose, float *z)
+{
+    int nc = ro->cfg.ncols;
+    uint32_t *w = ro->words;
+    wf_noise_block_row(&ro->noise, (uint32_t)y * (uint32_t)nc, nc, read, purpose, w, w + nc,
+                       w + 2 * nc, w + 3 * nc);
+    if (z) wf_norm_from_u32(w, nc, z);
 }
 
 /* Full well and nonlinearity: what the read-out would measure from the charge. */
@@ -217,10 +275,10 @@ static const double *ipc_row(wf_readout *ro, int y, int h0, int h1)
 }
 
 /* Read noise, gain, ADC. Returns ADU; sets *clipped when the ADC saturated. */
-static inline double digitise(const wf_detector *d, double e, double noise_sigma, wf_rng *rng,
+static inline double digitise(const wf_detector *d, double e, double noise_sigma, double z,
                               int *clipped)
 {
-    if (d->on.read_noise && noise_sigma > 0.0) e += noise_sigma * wf_rng_gauss(rng);
+    if (d->on.read_noise) e += noise_sigma * z;
     double adu = e / d->gain;
     if (d->on.quantize) adu = wf_det_quantize(adu);
     if (d->on.saturation) {
@@ -259,15 +317,24 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
         for (int y = h0; y < h1; y++) {
             double *q = ro->charge + (size_t)(y - h0) * nc;
             const double *m = ro->mean + (size_t)(y - h0) * nc;
+            const double *em = ro->expm + (size_t)(y - h0) * nc;
+            float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
+            int photons = d->on.photon_noise && !ro->noise_off;
+            if (photons || (z && d->on.read_noise && !ro->noise_off)) {
+                row_noise(ro, y, (uint32_t)k, WF_PURPOSE_PHOTON, z && d->on.read_noise ? z : NULL);
+            } else if (z) {
+                memset(z, 0, (size_t)nc * sizeof *z);
+            }
+            if (!photons) {
+                for (int x = 0; x < nc; x++) q[x] += m[x] * frames;
+                continue;
+            }
+            const uint32_t *w1 = ro->words + nc;
             for (int x = 0; x < nc; x++) {
-                if (!(m[x] > 0.0)) continue;
-                if (d->on.photon_noise) {
-                    wf_rng rng;
-                    wf_rng_init(&rng, &ro->noise, pixel_id(ro, y, x), (uint32_t)k, WF_PURPOSE_PHOTON);
-                    q[x] += wf_rng_poisson(&rng, m[x] * frames);
-                } else {
-                    q[x] += m[x] * frames;
-                }
+                double mean = m[x] * frames;
+                more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)k,
+                                 .purpose = WF_PURPOSE_PHOTON};
+                q[x] += poisson_word(w1[x], mean, frames == 1.0 ? em[x] : exp(-mean), &mn);
             }
         }
         if (ro->cosmic_on)
@@ -285,11 +352,10 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
             double *s = ro->sum + (size_t)(y - y0) * nc;
             uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
             uint16_t *out = ro->res_out + (size_t)r * plane + (size_t)(y - y0) * nc;
+            const float *z = ro->gauss + (size_t)(y - y0) * nc;
             for (int x = 0; x < nc; x++) {
-                wf_rng rng;
-                wf_rng_init(&rng, &ro->noise, pixel_id(ro, y, x), (uint32_t)k, WF_PURPOSE_READ);
                 int clipped = d->on.saturation && q[x] >= d->full_well;
-                s[x] += digitise(d, v[x], d->read_noise_e, &rng, &clipped);
+                s[x] += digitise(d, v[x], d->read_noise_e, z[x], &clipped);
                 if (clipped && sat[x] == 255) sat[x] = (uint8_t)r;
                 if (last_of_resultant) {
                     out[x] = to_u16(s[x] / nreads);
@@ -344,35 +410,43 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
         int n = ma->first[r + 1] - ma->first[r];
         double lead = reads[0] - prev_read, span = reads[n - 1] - reads[0];
         prev_read = reads[n - 1];
+        double seen = 0.0; /* frames of charge each read of the group adds, averaged */
+        for (int j = 1; j < n; j++) seen += (reads[j] - reads[j - 1]) * (double)(n - j) / n;
         for (int y = h0; y < h1; y++) {
             double *q = ro->charge + (size_t)(y - h0) * nc;
             double *a = avg + (size_t)(y - h0) * nc;
             const double *m = ro->mean + (size_t)(y - h0) * nc;
+            const double *em = ro->expm + (size_t)(y - h0) * nc;
+            float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
+            int photons = d->on.photon_noise && !ro->noise_off;
+            if (photons || (z && d->on.read_noise && !ro->noise_off)) {
+                row_noise(ro, y, (uint32_t)r, WF_PURPOSE_RESULTANT, z && d->on.read_noise ? z : NULL);
+            } else if (z) {
+                memset(z, 0, (size_t)nc * sizeof *z);
+            }
+            const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
             for (int x = 0; x < nc; x++) {
-                if (!(m[x] > 0.0)) { a[x] = q[x]; continue; }
-                if (d->on.photon_noise) {
-                    wf_rng rng;
-                    wf_rng_init(&rng, &ro->noise, pixel_id(ro, y, x), (uint32_t)r, WF_PURPOSE_RESULTANT);
-                    q[x] += wf_rng_poisson(&rng, m[x] * lead);
-                    double inside = wf_rng_poisson(&rng, m[x] * span);
-                    a[x] = q[x] + group_placement(&rng, inside, reads, n);
-                    q[x] += inside;
-                } else {
+                if (!photons) {
                     q[x] += m[x] * lead;
-                    double seen = 0.0; /* frames of charge each read of the group adds, averaged */
-                    for (int j = 1; j < n; j++) seen += (reads[j] - reads[j - 1]) * (double)(n - j) / n;
                     a[x] = q[x] + m[x] * seen;
                     q[x] += m[x] * span;
+                    continue;
                 }
+                more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)r,
+                                 .purpose = WF_PURPOSE_RESULTANT};
+                q[x] += poisson_word(w1[x], m[x] * lead, lead == 1.0 ? em[x] : exp(-m[x] * lead), &mn);
+                double inside = poisson_word(w2[x], m[x] * span, exp(-m[x] * span), &mn);
+                a[x] = q[x] + (inside > 0.0 ? group_placement(more(&mn), inside, reads, n) : 0.0);
+                q[x] += inside;
             }
         }
         if (ro->cosmic_on)
             for (; next_dep < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[next_dep].read <= reads[n - 1]; next_dep++) {
                 const wf_cr_deposit *dp = &ro->cosmic.deposits[next_dep];
-                int seen = 0;
-                for (int j = 0; j < n; j++) seen += reads[j] >= (int)dp->read;
+                int later = 0; /* reads of the group that see the hit */
+                for (int j = 0; j < n; j++) later += reads[j] >= (int)dp->read;
                 ro->charge[dp->pixel] += dp->electrons;
-                avg[dp->pixel] += dp->electrons * seen / n;
+                avg[dp->pixel] += dp->electrons * later / n;
             }
         for (int i = 0; i < hn; i++) {
             if (d->on.saturation && ro->charge[i] > d->full_well) ro->charge[i] = d->full_well;
@@ -384,12 +458,11 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
             const double *q = ro->charge + (size_t)(y - h0) * nc;
             uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
             uint16_t *out = ro->res_out + (size_t)r * plane + (size_t)(y - y0) * nc;
+            const float *z = ro->gauss + (size_t)(y - y0) * nc;
             for (int x = 0; x < nc; x++) {
-                wf_rng rng;
-                wf_rng_init(&rng, &ro->noise, pixel_id(ro, y, x), (uint32_t)r, WF_PURPOSE_READ);
                 int clipped = d->on.saturation && q[x] >= d->full_well;
                 /* the mean of n reads' independent read noise is N(0, sigma^2 / n) */
-                double adu = digitise(d, v[x], d->read_noise_e / sqrt((double)n), &rng, &clipped);
+                double adu = digitise(d, v[x], d->read_noise_e / sqrt((double)n), z[x], &clipped);
                 if (clipped && sat[x] == 255) sat[x] = (uint8_t)r;
                 out[x] = to_u16(adu);
             }
@@ -408,14 +481,22 @@ static wf_status single_frame(wf_readout *ro, int y0, int y1, int h0, int h1)
     for (int y = h0; y < h1; y++) {
         const float *rate = ro->rate + (size_t)(y - h0) * nc;
         double *q = ro->charge + (size_t)(y - h0) * nc;
+        float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
+        int photons = d->on.photon_noise && !ro->noise_off;
+        if (photons || (z && d->on.read_noise && !ro->noise_off)) {
+            row_noise(ro, y, 0, WF_PURPOSE_PHOTON, z && d->on.read_noise ? z : NULL);
+        } else if (z) {
+            memset(z, 0, (size_t)nc * sizeof *z);
+        }
+        const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
+        const double dark = d->dark_current * t, edark = exp(-dark);
         for (int x = 0; x < nc; x++) {
             double e = rate[x] > 0.0f ? rate[x] * t : 0.0; /* negative set to zero before Poisson */
-            wf_rng rng;
-            wf_rng_init(&rng, &ro->noise, pixel_id(ro, y, x), 0, WF_PURPOSE_PHOTON);
-            if (d->on.photon_noise) e = wf_rng_poisson(&rng, e);
+            more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = 0,
+                             .purpose = WF_PURPOSE_PHOTON};
+            if (photons) e = poisson_word(w1[x], e, e < 10.0 ? exp(-e) : 0.0, &mn);
             if (d->on.reciprocity) e = wf_det_reciprocity(e, t, d->recip_alpha, d->recip_f0);
-            if (d->on.dark) e += d->on.photon_noise ? wf_rng_poisson(&rng, d->dark_current * t)
-                                                    : d->dark_current * t;
+            if (d->on.dark) e += photons ? poisson_word(w2[x], dark, edark, &mn) : dark;
             q[x] = e;
         }
     }
@@ -425,11 +506,10 @@ static wf_status single_frame(wf_readout *ro, int y0, int y1, int h0, int h1)
         const double *q = ro->charge + (size_t)(y - h0) * nc;
         float *out = ro->single_out + (size_t)(y - y0) * nc;
         uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
+        const float *z = ro->gauss + (size_t)(y - y0) * nc;
         for (int x = 0; x < nc; x++) {
-            wf_rng rng;
-            wf_rng_init(&rng, &ro->noise, pixel_id(ro, y, x), 0, WF_PURPOSE_READ);
             int clipped = d->on.saturation && q[x] >= d->full_well;
-            out[x] = (float)digitise(d, v[x], d->read_noise_e, &rng, &clipped);
+            out[x] = (float)digitise(d, v[x], d->read_noise_e, z[x], &clipped);
             if (clipped) sat[x] = 0;
         }
     }

@@ -34,13 +34,15 @@ typedef struct wf_config {
 /* Every key at its documented default (SPEC values). */
 void wf_config_defaults(wf_config *cfg);
 
-/* Applies a YAML file on top of cfg. */
+/* Applies a YAML file on top of cfg; on any error cfg is left as it was. */
 wf_status wf_config_load(wf_config *cfg, const char *path);
 
-/* Applies one "key=value" override; origin names where it came from in messages. */
+/* Applies one "key=value" override; origin names where it came from in messages (NULL:
+ * "--set"). On any error cfg is left as it was. */
 wf_status wf_config_set(wf_config *cfg, const char *assignment, const char *origin);
 
-/* Resolves derived values: the MA table into clock, checks cross-key constraints. */
+/* Resolves derived values: the MA table and frame time into clock, seed into cfg->ro;
+ * clamps readout.tile_rows to readout.nrows and checks cross-key constraints. */
 wf_status wf_config_finish(wf_config *cfg, wf_clock *clock);
 
 /* Writes the Markdown reference of every key (docs/CONFIG.md is this output). */

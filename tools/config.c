@@ -1,0 +1,1144 @@
+#include "tools/config.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <limits.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
+#include <yaml.h>
+
+/* Enum keys store the index of the chosen name as an int, so the choice lists below must
+ * stay in the order of the C enums and the enums must be int-sized. */
+_Static_assert(WF_MODE_RAMP == 0 && WF_MODE_SINGLE == 1, "exposure.mode choices follow wf_mode");
+_Static_assert(WF_SAMPLE_PER_READ == 0 && WF_SAMPLE_DIRECT == 1,
+               "exposure.sampling choices follow wf_sampling");
+_Static_assert(sizeof(wf_mode) == sizeof(int) && sizeof(wf_sampling) == sizeof(int),
+               "enum keys are stored through int");
+
+/* Default sky, SPEC §2: zodiacal light at the deep field in Y106 (GalSim table), the pixel
+ * scale, stray light as a fraction of the zodiacal light, and the Y106 thermal background. */
+#define ZODI_Y106_DEEP 29.7      /* e-/s/arcsec^2 */
+#define PIXEL_SCALE 0.11         /* arcsec/pixel */
+#define STRAY_LIGHT_FRACTION 0.1
+#define THERMAL_Y106 0.0         /* e-/pixel/s */
+
+static double default_sky_rate(void)
+{
+    return ZODI_Y106_DEEP * PIXEL_SCALE * PIXEL_SCALE * (1.0 + STRAY_LIGHT_FRACTION) +
+           THERMAL_Y106;
+}
+
+/* ---- the key table ------------------------------------------------------------------ */
+
+typedef enum {
+    KT_BOOL,   /* int, 0 or 1 */
+    KT_INT,    /* int */
+    KT_UINT,   /* uint32_t or uint64_t, by size */
+    KT_DOUBLE, /* double, finite */
+    KT_STRING, /* char[size]; optionally restricted to choices */
+    KT_ENUM,   /* int: index into choices */
+    KT_KERNEL  /* double[3][3], sum 1 within IPC_SUM_TOL */
+} key_type;
+
+#define IPC_SUM_TOL 1e-6
+
+typedef struct key_desc {
+    const char *name;            /* dotted path */
+    key_type type;
+    const char *unit;            /* "" when dimensionless */
+    const char *def;             /* default as text; NULL: set in code (see doc_default) */
+    const char *doc_default;     /* what the doc shows instead of the value, or NULL */
+    double lo, hi;               /* numeric bounds, used when has_lo / has_hi */
+    unsigned char has_lo, has_hi, lo_open, nonempty;
+    const char *const *choices;  /* NULL-terminated, KT_ENUM and restricted KT_STRING */
+    size_t off, size;            /* storage in wf_config */
+    const char *doc;             /* one line */
+} key_desc;
+
+#define FIELD(m) .off = offsetof(wf_config, m), .size = sizeof(((wf_config *)0)->m)
+#define MIN(v) .has_lo = 1, .lo = (v)
+#define ABOVE(v) .has_lo = 1, .lo_open = 1, .lo = (v)
+#define MAX(v) .has_hi = 1, .hi = (v)
+
+static const char *const filters[] = {"R062", "Z087", "Y106", "J129", "H158",
+                                      "F184", "K213", "W146", NULL};
+static const char *const modes[] = {"ramp", "single", NULL};
+static const char *const samplings[] = {"per-read", "direct", NULL};
+
+static const key_desc keys[] = {
+    {.name = "seed", .type = KT_UINT, .unit = "", .def = "1", FIELD(seed),
+     .doc = "Seed of every random number; products are bit-identical for a given seed."},
+
+    {.name = "exposure.id", .type = KT_UINT, .unit = "", .def = "1", MIN(0), MAX(4294967295.0),
+     FIELD(ro.exposure),
+     .doc = "Exposure number: a noise key and the packet header's exposure id."},
+    {.name = "exposure.sca", .type = KT_UINT, .unit = "", .def = "1", MIN(1), MAX(18),
+     FIELD(ro.sca), .doc = "Sensor chip assembly simulated."},
+    {.name = "exposure.filter", .type = KT_STRING, .unit = "", .def = "Y106", .choices = filters,
+     FIELD(filter), .doc = "Filter element (W146 is also called W149)."},
+    {.name = "exposure.mode", .type = KT_ENUM, .unit = "", .def = "ramp", .choices = modes,
+     FIELD(ro.mode),
+     .doc = "`ramp`: read up the ramp and grouped by the MA table; `single`: GalSim's "
+            "single-frame chain."},
+    {.name = "exposure.sampling", .type = KT_ENUM, .unit = "", .def = "per-read",
+     .choices = samplings, FIELD(ro.sampling),
+     .doc = "Ramp mode: draw every read (`per-read`) or each resultant at once (`direct`)."},
+    {.name = "exposure.exptime", .type = KT_DOUBLE, .unit = "s", .def = "300", ABOVE(0),
+     FIELD(ro.exptime),
+     .doc = "Exposure time in single mode; ramp mode takes it from the MA table."},
+
+    {.name = "readout.ncols", .type = KT_INT, .unit = "pixels", .def = "4088", MIN(1), MAX(4088),
+     FIELD(ro.ncols), .doc = "Active columns read (a smaller SCA for quick runs)."},
+    {.name = "readout.nrows", .type = KT_INT, .unit = "pixels", .def = "4088", MIN(1), MAX(4088),
+     FIELD(ro.nrows), .doc = "Active rows read."},
+    {.name = "readout.tile_rows", .type = KT_INT, .unit = "rows", .def = "64", MIN(1), MAX(4088),
+     FIELD(ro.tile_rows),
+     .doc = "Rows per firmware tile; sets memory, never the result. Clamped to readout.nrows."},
+    {.name = "readout.frame_time", .type = KT_DOUBLE, .unit = "s", .def = NULL, ABOVE(0),
+     FIELD(frame_time), .doc = "Time per full-frame read (romanisim's value; older tools 3.04)."},
+    {.name = "readout.ma_table", .type = KT_STRING, .unit = "", .def = "6", .nonempty = 1,
+     FIELD(ma_table),
+     .doc = "MultiAccum table: built-in Rev F `4`, `6`, `11`, or a table file (path from the "
+            "working directory)."},
+    {.name = "readout.compress", .type = KT_BOOL, .unit = "", .def = "true",
+     FIELD(ro.compress), .doc = "Deflate packet payloads on the link."},
+
+    {.name = "run.threads", .type = KT_INT, .unit = "", .def = "1", MIN(1), MAX(1024),
+     FIELD(threads), .doc = "Readout instances run in parallel; products do not depend on it."},
+    {.name = "run.quiet", .type = KT_BOOL, .unit = "", .def = "false", FIELD(quiet),
+     .doc = "Do not report progress and files written on stderr."},
+    {.name = "run.out", .type = KT_STRING, .unit = "", .def = "out", .nonempty = 1,
+     FIELD(out_dir), .doc = "Directory that receives the products."},
+
+    {.name = "detector.dark_current", .type = KT_DOUBLE, .unit = "e-/pixel/s", MIN(0),
+     FIELD(ro.det.dark_current), .doc = "Dark current."},
+    {.name = "detector.read_noise", .type = KT_DOUBLE, .unit = "e-", MIN(0),
+     FIELD(ro.det.read_noise_e),
+     .doc = "Read noise rms: per read in ramp mode, per exposure in single mode."},
+    {.name = "detector.gain", .type = KT_DOUBLE, .unit = "e-/ADU", ABOVE(0), FIELD(ro.det.gain),
+     .doc = "Conversion gain."},
+    {.name = "detector.nl_beta", .type = KT_DOUBLE, .unit = "1/e-", FIELD(ro.det.nl_beta),
+     .doc = "Classical nonlinearity: q_meas = q + beta q^2."},
+    {.name = "detector.recip_alpha", .type = KT_DOUBLE, .unit = "", FIELD(ro.det.recip_alpha),
+     .doc = "Reciprocity failure: q' = q (q / (t f0))^(alpha / ln 10)."},
+    {.name = "detector.recip_f0", .type = KT_DOUBLE, .unit = "e-/s", ABOVE(0),
+     FIELD(ro.det.recip_f0), .doc = "Reference flux of the reciprocity-failure law."},
+    {.name = "detector.ipc", .type = KT_KERNEL, .unit = "",
+     .doc_default = "GalSim kernel / its sum (below)", FIELD(ro.det.ipc),
+     .doc = "IPC kernel, rows top to bottom; used as given: it must sum to 1 within 1e-6."},
+    {.name = "detector.full_well", .type = KT_DOUBLE, .unit = "e-", ABOVE(0),
+     FIELD(ro.det.full_well), .doc = "Charge at which a pixel saturates."},
+    {.name = "detector.adc_max", .type = KT_DOUBLE, .unit = "ADU", MIN(1), MAX(65535),
+     FIELD(ro.det.adc_max), .doc = "Ceiling of the 16-bit ADC."},
+    {.name = "detector.cr_rate", .type = KT_DOUBLE, .unit = "hits/cm^2/s", MIN(0),
+     FIELD(ro.det.cr_rate), .doc = "Cosmic-ray hit rate at L2."},
+    {.name = "detector.pixel_um", .type = KT_DOUBLE, .unit = "um", ABOVE(0),
+     FIELD(ro.det.pixel_um), .doc = "Pixel pitch, for cosmic-ray tracks."},
+    {.name = "detector.depth_um", .type = KT_DOUBLE, .unit = "um", ABOVE(0),
+     FIELD(ro.det.depth_um), .doc = "Sensitive depth, for cosmic-ray tracks."},
+    {.name = "detector.cr_lmin_um", .type = KT_DOUBLE, .unit = "um", ABOVE(0),
+     FIELD(ro.det.cr_lmin_um),
+     .doc = "Shortest cosmic-ray path length (below detector.cr_lmax_um)."},
+    {.name = "detector.cr_lmax_um", .type = KT_DOUBLE, .unit = "um", ABOVE(0),
+     FIELD(ro.det.cr_lmax_um), .doc = "Longest cosmic-ray path length."},
+    {.name = "detector.cr_slope", .type = KT_DOUBLE, .unit = "", FIELD(ro.det.cr_slope),
+     .doc = "Power-law index of the path-length distribution."},
+    {.name = "detector.cr_dedx_loc", .type = KT_DOUBLE, .unit = "eV/um", MIN(0),
+     FIELD(ro.det.cr_dedx_loc), .doc = "Location of the Moyal energy-loss distribution."},
+    {.name = "detector.cr_dedx_scale", .type = KT_DOUBLE, .unit = "eV/um", ABOVE(0),
+     FIELD(ro.det.cr_dedx_scale), .doc = "Scale of the Moyal energy-loss distribution."},
+    {.name = "detector.cr_ev_per_e", .type = KT_DOUBLE, .unit = "eV", ABOVE(0),
+     FIELD(ro.det.cr_ev_per_e), .doc = "Energy deposited per electron collected."},
+
+    {.name = "detector.effects.photon_noise", .type = KT_BOOL, .unit = "",
+     FIELD(ro.det.on.photon_noise), .doc = "Poisson noise on the signal."},
+    {.name = "detector.effects.reciprocity", .type = KT_BOOL, .unit = "",
+     FIELD(ro.det.on.reciprocity), .doc = "Reciprocity failure."},
+    {.name = "detector.effects.dark", .type = KT_BOOL, .unit = "", FIELD(ro.det.on.dark),
+     .doc = "Dark current (Poisson)."},
+    {.name = "detector.effects.nonlinearity", .type = KT_BOOL, .unit = "",
+     FIELD(ro.det.on.nonlinearity), .doc = "Classical nonlinearity."},
+    {.name = "detector.effects.ipc", .type = KT_BOOL, .unit = "", FIELD(ro.det.on.ipc),
+     .doc = "Interpixel capacitance."},
+    {.name = "detector.effects.read_noise", .type = KT_BOOL, .unit = "",
+     FIELD(ro.det.on.read_noise), .doc = "Gaussian read noise."},
+    {.name = "detector.effects.quantize", .type = KT_BOOL, .unit = "", FIELD(ro.det.on.quantize),
+     .doc = "ADU quantization (round half to even)."},
+    {.name = "detector.effects.saturation", .type = KT_BOOL, .unit = "",
+     FIELD(ro.det.on.saturation), .doc = "Full-well and ADC saturation."},
+    {.name = "detector.effects.cosmic_rays", .type = KT_BOOL, .unit = "",
+     FIELD(ro.det.on.cosmic_rays), .doc = "Cosmic-ray hits."},
+
+    {.name = "scene.sky_rate", .type = KT_DOUBLE, .unit = "e-/pixel/s", MIN(0),
+     FIELD(sky_rate),
+     .doc = "Uniform sky. Default: Y106 zodiacal light at the deep field, 29.7 e-/s/arcsec^2, "
+            "x 0.11^2 arcsec^2 x (1 + 0.1 stray light), + 0 thermal; it does not follow "
+            "exposure.filter."},
+    {.name = "scene.grid.flux", .type = KT_DOUBLE, .unit = "e-/s", .def = "1000", MIN(0),
+     FIELD(grid_flux), .doc = "Total flux of each point source of the built-in grid scene."},
+    {.name = "scene.grid.sigma", .type = KT_DOUBLE, .unit = "pixels", .def = "1", ABOVE(0),
+     FIELD(grid_sigma), .doc = "Gaussian sigma of the grid's sources."},
+    {.name = "scene.grid.spacing", .type = KT_INT, .unit = "pixels", .def = "256", MIN(1),
+     MAX(1000000), FIELD(grid_spacing),
+     .doc = "Distance between grid sources; the first is at spacing/2."},
+
+    {.name = "paths.data", .type = KT_STRING, .unit = "",
+     .doc_default = "`$WFISIM_DATA`, else empty", FIELD(data_dir),
+     .doc = "Directory of the shared data (`roman/`, `salt3/`, ...); empty: built-in values."},
+    {.name = "paths.reference", .type = KT_STRING, .unit = "",
+     .doc_default = "`$WFISIM_REFERENCE`, else empty", FIELD(reference_dir),
+     .doc = "Directory of the reference outputs used by comparisons; empty: none."},
+};
+
+#define NKEYS ((int)(sizeof keys / sizeof keys[0]))
+
+static void *key_ptr(wf_config *cfg, const key_desc *k) { return (char *)cfg + k->off; }
+
+static const void *key_cptr(const wf_config *cfg, const key_desc *k)
+{
+    return (const char *)cfg + k->off;
+}
+
+static int find_key(const char *name)
+{
+    for (int i = 0; i < NKEYS; i++)
+        if (!strcmp(keys[i].name, name)) return i;
+    return -1;
+}
+
+/* A section is a proper prefix of some key ending at a dot: "detector", "detector.effects". */
+static const char *first_key_in(const char *section)
+{
+    size_t n = strlen(section);
+    for (int i = 0; i < NKEYS; i++)
+        if (!strncmp(keys[i].name, section, n) && keys[i].name[n] == '.') return keys[i].name;
+    return "";
+}
+
+static int is_section(const char *name) { return *first_key_in(name) != '\0'; }
+
+/* ---- messages ----------------------------------------------------------------------- */
+
+/* Where a value came from: a YAML file and 1-based line, or a --set origin. */
+typedef struct where {
+    const char *file;
+    int line;
+    const char *origin;
+} where;
+
+static const char *where_text(const where *w, char *buf, size_t n)
+{
+    if (w->file && w->line > 0)
+        snprintf(buf, n, "%s:%d", w->file, w->line);
+    else
+        snprintf(buf, n, "%s", w->file ? w->file : w->origin);
+    return buf;
+}
+
+static wf_status key_error(wf_status code, const where *w, const char *key, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+
+static wf_status key_error(wf_status code, const where *w, const char *key, const char *fmt, ...)
+{
+    char at[WF_PATH_MAX + 32], what[768];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(what, sizeof what, fmt, ap);
+    va_end(ap);
+    return wf_error(code, "%s: %s: %s", where_text(w, at, sizeof at), key, what);
+}
+
+static int edit_distance(const char *a, const char *b)
+{
+    int la = (int)strlen(a), lb = (int)strlen(b);
+    int row[128];
+    if (la > 127 || lb > 127) return INT_MAX;
+    for (int j = 0; j <= lb; j++) row[j] = j;
+    for (int i = 1; i <= la; i++) {
+        int diag = row[0];
+        row[0] = i;
+        for (int j = 1; j <= lb; j++) {
+            int up = row[j];
+            int best = diag + (a[i - 1] != b[j - 1]);
+            if (up + 1 < best) best = up + 1;
+            if (row[j - 1] + 1 < best) best = row[j - 1] + 1;
+            row[j] = best;
+            diag = up;
+        }
+    }
+    return row[lb];
+}
+
+static const char *last_part(const char *name)
+{
+    const char *dot = strrchr(name, '.');
+    return dot ? dot + 1 : name;
+}
+
+/* The closest key or section to a misspelt name, or NULL when none is plausibly meant.
+ * A key with the same last part wins first: that catches a right name in a wrong section. */
+static const char *suggest(const char *name, char *buf, size_t n)
+{
+    for (int i = 0; i < NKEYS; i++)
+        if (!strcmp(last_part(keys[i].name), last_part(name))) {
+            snprintf(buf, n, "%s", keys[i].name);
+            return buf;
+        }
+    int best = INT_MAX;
+    for (int i = 0; i < NKEYS; i++) {
+        /* every key and every section above it */
+        char cand[128];
+        snprintf(cand, sizeof cand, "%s", keys[i].name);
+        for (;;) {
+            int d = edit_distance(name, cand);
+            if (d < best) {
+                best = d;
+                snprintf(buf, n, "%s", cand);
+            }
+            char *dot = strrchr(cand, '.');
+            if (!dot) break;
+            *dot = '\0';
+        }
+    }
+    int len = (int)strlen(name);
+    return best <= 2 || best <= len / 4 ? buf : NULL;
+}
+
+static wf_status unknown_key(const where *w, const char *name, int section)
+{
+    char hint[128];
+    const char *s = suggest(name, hint, sizeof hint);
+    const char *what = section ? "unknown section" : "unknown key";
+    if (s) return key_error(WF_ERR_INPUT, w, name, "%s (did you mean '%s'?)", what, s);
+    return key_error(WF_ERR_INPUT, w, name, "%s (docs/CONFIG.md lists every key)", what);
+}
+
+/* ---- values ------------------------------------------------------------------------- */
+
+static void format_double(double v, char *buf, size_t n)
+{
+    /* whole numbers in full (100000, not 1e+05); otherwise the shortest text that reads
+     * back as v, capped where float noise would show */
+    if (v == floor(v) && fabs(v) < 1e15) {
+        snprintf(buf, n, "%.0f", v);
+        return;
+    }
+    for (int p = 1; p <= 15; p++) {
+        snprintf(buf, n, "%.*g", p, v);
+        if (strtod(buf, NULL) == v) return;
+    }
+    snprintf(buf, n, "%.15g", v);
+}
+
+static void range_text(const key_desc *k, char *buf, size_t n)
+{
+    char lo[32], hi[32];
+    format_double(k->lo, lo, sizeof lo);
+    format_double(k->hi, hi, sizeof hi);
+    if (k->has_lo && k->has_hi)
+        snprintf(buf, n, "%s%s to %s", k->lo_open ? "above " : "", lo, hi);
+    else if (k->has_lo)
+        snprintf(buf, n, "%s %s", k->lo_open ? ">" : "≥", lo);
+    else if (k->has_hi)
+        snprintf(buf, n, "≤ %s", hi);
+    else
+        snprintf(buf, n, "any");
+}
+
+static wf_status check_range(const key_desc *k, double v, const char *text, const where *w)
+{
+    int low = k->has_lo && (k->lo_open ? !(v > k->lo) : !(v >= k->lo));
+    int high = k->has_hi && !(v <= k->hi);
+    if (!low && !high) return WF_OK;
+    char r[80];
+    range_text(k, r, sizeof r);
+    return key_error(WF_ERR_RANGE, w, k->name, "%.60s is out of range (allowed: %s%s%s)", text, r,
+                     *k->unit ? " " : "", k->unit);
+}
+
+static void choices_text(const char *const *choices, char *buf, size_t n)
+{
+    size_t used = 0;
+    buf[0] = '\0';
+    for (int i = 0; choices[i]; i++)
+        used += (size_t)snprintf(buf + used, used < n ? n - used : 0, "%s%s", i ? ", " : "",
+                                 choices[i]);
+}
+
+static int choice_index(const char *const *choices, const char *text)
+{
+    for (int i = 0; choices[i]; i++)
+        if (!strcmp(choices[i], text)) return i;
+    return -1;
+}
+
+static int yaml_nonfinite_word(const char *text)
+{
+    static const char *const words[] = {".nan", ".inf", "+.inf", "-.inf", NULL};
+    for (int i = 0; words[i]; i++)
+        if (!strcasecmp(text, words[i])) return 1;
+    return 0;
+}
+
+static wf_status parse_double(const key_desc *k, const char *name, const char *text, double *out,
+                              const where *w)
+{
+    if (yaml_nonfinite_word(text))
+        return key_error(WF_ERR_RANGE, w, name, "%.60s is not a finite number", text);
+    char *end;
+    errno = 0;
+    double v = strtod(text, &end);
+    if (end == text || *end)
+        return key_error(WF_ERR_INPUT, w, name, "expected a number%s%s, got '%.60s'",
+                         k && *k->unit ? " in " : "", k ? k->unit : "", text);
+    if (!isfinite(v))
+        return key_error(WF_ERR_RANGE, w, name, "%.60s is not a finite number", text);
+    *out = v;
+    return WF_OK;
+}
+
+/* Text of one value (a YAML scalar or the right side of --set) into cfg. */
+static wf_status set_from_text(wf_config *cfg, const key_desc *k, const char *text,
+                               const where *w)
+{
+    void *dst = key_ptr(cfg, k);
+    switch (k->type) {
+    case KT_BOOL: {
+        static const char *const yes[] = {"true", "yes", "on", "1", NULL};
+        static const char *const no[] = {"false", "no", "off", "0", NULL};
+        for (int i = 0; yes[i]; i++) {
+            if (!strcasecmp(text, yes[i])) {
+                *(int *)dst = 1;
+                return WF_OK;
+            }
+            if (!strcasecmp(text, no[i])) {
+                *(int *)dst = 0;
+                return WF_OK;
+            }
+        }
+        return key_error(WF_ERR_INPUT, w, k->name, "expected true or false, got '%.60s'", text);
+    }
+    case KT_INT: {
+        char *end;
+        errno = 0;
+        long long v = strtoll(text, &end, 10);
+        if (end == text || *end || isspace((unsigned char)text[0]))
+            return key_error(WF_ERR_INPUT, w, k->name, "expected an integer, got '%.60s'", text);
+        /* strtoll clamps on overflow, which the bounds then reject with their range */
+        wf_status st = check_range(k, (double)v, text, w);
+        if (st) return st;
+        if (errno == ERANGE || v < INT_MIN || v > INT_MAX)
+            return key_error(WF_ERR_RANGE, w, k->name, "%.60s is out of range", text);
+        *(int *)dst = (int)v;
+        return WF_OK;
+    }
+    case KT_UINT: {
+        char *end;
+        /* strtoull would quietly wrap a minus sign around */
+        if (!isdigit((unsigned char)text[text[0] == '+']))
+            return key_error(text[0] == '-' && isdigit((unsigned char)text[1]) ? WF_ERR_RANGE
+                                                                                : WF_ERR_INPUT,
+                             w, k->name, "expected an unsigned integer, got '%.60s'", text);
+        errno = 0;
+        unsigned long long v = strtoull(text, &end, 10);
+        if (*end)
+            return key_error(WF_ERR_INPUT, w, k->name, "expected an unsigned integer, got '%.60s'",
+                             text);
+        wf_status st = check_range(k, (double)v, text, w);
+        if (st) return st;
+        if (errno == ERANGE || (k->size == sizeof(uint32_t) && v > UINT32_MAX))
+            return key_error(WF_ERR_RANGE, w, k->name, "%.60s is out of range (allowed: 0 to %s)",
+                             text, k->size == sizeof(uint32_t) ? "2^32-1" : "2^64-1");
+        if (k->size == sizeof(uint32_t)) {
+            uint32_t v32 = (uint32_t)v;
+            memcpy(dst, &v32, sizeof v32);
+        } else {
+            uint64_t v64 = v;
+            memcpy(dst, &v64, sizeof v64);
+        }
+        return WF_OK;
+    }
+    case KT_DOUBLE: {
+        double v;
+        wf_status st = parse_double(k, k->name, text, &v, w);
+        if (!st) st = check_range(k, v, text, w);
+        if (!st) *(double *)dst = v;
+        return st;
+    }
+    case KT_STRING:
+        if (k->choices && choice_index(k->choices, text) < 0) {
+            char c[256];
+            choices_text(k->choices, c, sizeof c);
+            return key_error(WF_ERR_INPUT, w, k->name, "'%.60s' is not one of %s", text, c);
+        }
+        if (k->nonempty && !*text)
+            return key_error(WF_ERR_INPUT, w, k->name, "must not be empty");
+        if (strlen(text) >= k->size)
+            return key_error(WF_ERR_RANGE, w, k->name, "longer than %zu characters",
+                             k->size - 1);
+        memcpy(dst, text, strlen(text) + 1);
+        return WF_OK;
+    case KT_ENUM: {
+        int i = choice_index(k->choices, text);
+        if (i < 0) {
+            char c[256];
+            choices_text(k->choices, c, sizeof c);
+            return key_error(WF_ERR_INPUT, w, k->name, "'%.60s' is not one of %s", text, c);
+        }
+        *(int *)dst = i;
+        return WF_OK;
+    }
+    case KT_KERNEL:
+        break;
+    }
+    return key_error(WF_ERR_INTERNAL, w, k->name, "no text form for this key");
+}
+
+static int yaml_line(const yaml_node_t *node) { return (int)node->start_mark.line + 1; }
+
+static const char *node_kind(const yaml_node_t *node)
+{
+    switch (node->type) {
+    case YAML_MAPPING_NODE: return "a mapping";
+    case YAML_SEQUENCE_NODE: return "a list";
+    default: return "a scalar";
+    }
+}
+
+static int is_null_scalar(const yaml_node_t *node)
+{
+    if (node->data.scalar.style != YAML_PLAIN_SCALAR_STYLE) return 0;
+    const char *v = (const char *)node->data.scalar.value;
+    return !*v || !strcmp(v, "~") || !strcmp(v, "null") || !strcmp(v, "Null") ||
+           !strcmp(v, "NULL");
+}
+
+/* A 3x3 list of lists of numbers. Lines in messages are those of the offending element. */
+static wf_status set_kernel(wf_config *cfg, const key_desc *k, yaml_document_t *doc,
+                            yaml_node_t *node, const where *w0)
+{
+    where w = *w0;
+    if (w.file) w.line = yaml_line(node);
+    double kern[3][3], sum = 0.0;
+    if (node->type != YAML_SEQUENCE_NODE ||
+        node->data.sequence.items.top - node->data.sequence.items.start != 3)
+        return key_error(WF_ERR_INPUT, &w, k->name,
+                         "expected a 3x3 list of lists of numbers, e.g. [[0,0,0],[0,1,0],[0,0,0]]");
+    for (int a = 0; a < 3; a++) {
+        yaml_node_t *row = yaml_document_get_node(doc, node->data.sequence.items.start[a]);
+        if (w.file) w.line = yaml_line(row);
+        if (row->type != YAML_SEQUENCE_NODE ||
+            row->data.sequence.items.top - row->data.sequence.items.start != 3)
+            return key_error(WF_ERR_INPUT, &w, k->name, "row %d: expected a list of 3 numbers",
+                             a + 1);
+        for (int b = 0; b < 3; b++) {
+            yaml_node_t *e = yaml_document_get_node(doc, row->data.sequence.items.start[b]);
+            if (w.file) w.line = yaml_line(e);
+            if (e->type != YAML_SCALAR_NODE || e->data.scalar.style != YAML_PLAIN_SCALAR_STYLE)
+                return key_error(WF_ERR_INPUT, &w, k->name,
+                                 "row %d, column %d: expected a number, got %s", a + 1, b + 1,
+                                 e->type == YAML_SCALAR_NODE ? "a quoted string" : node_kind(e));
+            char elem[96];
+            snprintf(elem, sizeof elem, "%s (row %d, column %d)", k->name, a + 1, b + 1);
+            wf_status st = parse_double(NULL, elem, (const char *)e->data.scalar.value,
+                                        &kern[a][b], &w);
+            if (st) return st;
+            sum += kern[a][b];
+        }
+    }
+    if (w.file) w.line = yaml_line(node);
+    if (!(fabs(sum - 1.0) <= IPC_SUM_TOL))
+        return key_error(WF_ERR_RANGE, &w, k->name,
+                         "kernel sums to %.9g; it is used as given and must sum to 1 within %g",
+                         sum, IPC_SUM_TOL);
+    memcpy(key_ptr(cfg, k), kern, sizeof kern);
+    return WF_OK;
+}
+
+/* One YAML value node for key k. */
+static wf_status set_from_node(wf_config *cfg, const key_desc *k, yaml_document_t *doc,
+                               yaml_node_t *node, const where *w0)
+{
+    if (k->type == KT_KERNEL) return set_kernel(cfg, k, doc, node, w0);
+    where w = *w0;
+    w.line = yaml_line(node);
+    if (node->type != YAML_SCALAR_NODE)
+        return key_error(WF_ERR_INPUT, &w, k->name, "expected a single value, got %s",
+                         node_kind(node));
+    const char *text = (const char *)node->data.scalar.value;
+    if (is_null_scalar(node))
+        return key_error(WF_ERR_INPUT, &w, k->name, "no value given%s",
+                         k->type == KT_STRING ? " (write \"\" for an empty string)" : "");
+    /* YAML types a quoted scalar as a string; a number or switch must be written plain */
+    int numeric = k->type == KT_BOOL || k->type == KT_INT || k->type == KT_UINT ||
+                  k->type == KT_DOUBLE;
+    if (numeric && node->data.scalar.style != YAML_PLAIN_SCALAR_STYLE)
+        return key_error(WF_ERR_INPUT, &w, k->name,
+                         "expected %s, got the quoted string \"%.60s\" (drop the quotes)",
+                         k->type == KT_BOOL ? "true or false" : "a number", text);
+    if (strlen(text) != node->data.scalar.length)
+        return key_error(WF_ERR_INPUT, &w, k->name, "value holds a NUL character");
+    return set_from_text(cfg, k, text, &w);
+}
+
+/* ---- defaults ----------------------------------------------------------------------- */
+
+static void default_from_env(char *dst, size_t n, const char *var)
+{
+    const char *v = getenv(var);
+    /* one too long is left empty here and reported by wf_config_finish */
+    if (v && strlen(v) < n) memcpy(dst, v, strlen(v) + 1);
+}
+
+void wf_config_defaults(wf_config *cfg)
+{
+    memset(cfg, 0, sizeof *cfg);
+    /* the detector's numbers live with its physics, the clock's with the clock */
+    wf_detector_defaults(&cfg->ro.det);
+    cfg->frame_time = WF_FRAME_TIME_DEFAULT;
+    cfg->sky_rate = default_sky_rate();
+    default_from_env(cfg->data_dir, sizeof cfg->data_dir, "WFISIM_DATA");
+    default_from_env(cfg->reference_dir, sizeof cfg->reference_dir, "WFISIM_REFERENCE");
+    const where w = {.origin = "built-in default"};
+    for (int i = 0; i < NKEYS; i++)
+        if (keys[i].def) (void)set_from_text(cfg, &keys[i], keys[i].def, &w);
+    cfg->ro.seed = cfg->seed;
+}
+
+/* ---- YAML files ---------------------------------------------------------------------- */
+
+typedef struct load_ctx {
+    const char *path;
+    yaml_document_t *doc;
+    wf_config *cfg;
+    int seen_line[NKEYS]; /* line where each key was set in this file, 0 if not */
+} load_ctx;
+
+static wf_status walk_mapping(load_ctx *lc, yaml_node_t *map, const char *prefix)
+{
+    for (yaml_node_pair_t *p = map->data.mapping.pairs.start; p < map->data.mapping.pairs.top;
+         p++) {
+        yaml_node_t *kn = yaml_document_get_node(lc->doc, p->key);
+        yaml_node_t *vn = yaml_document_get_node(lc->doc, p->value);
+        where w = {.file = lc->path, .line = yaml_line(kn)};
+        char name[256];
+        if (kn->type != YAML_SCALAR_NODE)
+            return key_error(WF_ERR_INPUT, &w, *prefix ? prefix : "(top level)",
+                             "a key must be a name, not %s", node_kind(kn));
+        const char *kt = (const char *)kn->data.scalar.value;
+        if ((size_t)snprintf(name, sizeof name, "%s%s%s", prefix, *prefix ? "." : "", kt) >=
+            sizeof name)
+            return key_error(WF_ERR_INPUT, &w, *prefix ? prefix : "(top level)",
+                             "key name too long");
+        for (yaml_node_pair_t *q = map->data.mapping.pairs.start; q < p; q++) {
+            yaml_node_t *qn = yaml_document_get_node(lc->doc, q->key);
+            if (qn->type == YAML_SCALAR_NODE && !strcmp((const char *)qn->data.scalar.value, kt))
+                return key_error(WF_ERR_INPUT, &w, name, "given twice (first at line %d)",
+                                 yaml_line(qn));
+        }
+        int i = find_key(name);
+        if (i >= 0) {
+            if (lc->seen_line[i])
+                return key_error(WF_ERR_INPUT, &w, name, "given twice (first at line %d)",
+                                 lc->seen_line[i]);
+            lc->seen_line[i] = w.line;
+            wf_status st = set_from_node(lc->cfg, &keys[i], lc->doc, vn, &w);
+            if (st) return st;
+        } else if (is_section(name)) {
+            if (vn->type != YAML_MAPPING_NODE) {
+                w.line = yaml_line(vn);
+                return key_error(WF_ERR_INPUT, &w, name,
+                                 "is a section: expected a mapping of its keys, got %s",
+                                 node_kind(vn));
+            }
+            wf_status st = walk_mapping(lc, vn, name);
+            if (st) return st;
+        } else {
+            return unknown_key(&w, name, vn->type == YAML_MAPPING_NODE);
+        }
+    }
+    return WF_OK;
+}
+
+/* libyaml knows where the syntax broke but not under which key; a second pass over the
+ * events up to the error recovers the dotted key, so the message can name it. */
+static void key_near_error(FILE *f, char *out, size_t n)
+{
+    struct frame {
+        int mapping, want_key;
+        char key[128];
+    } st[32];
+    int depth = 0;
+    out[0] = '\0';
+    rewind(f);
+    yaml_parser_t parser;
+    if (!yaml_parser_initialize(&parser)) return;
+    yaml_parser_set_input_file(&parser, f);
+    for (;;) {
+        yaml_event_t ev;
+        if (!yaml_parser_parse(&parser, &ev)) break;
+        yaml_event_type_t t = ev.type;
+        struct frame *top = depth > 0 && depth <= 32 ? &st[depth - 1] : NULL;
+        int is_value_start = t == YAML_SCALAR_EVENT || t == YAML_MAPPING_START_EVENT ||
+                             t == YAML_SEQUENCE_START_EVENT || t == YAML_ALIAS_EVENT;
+        if (top && top->mapping && top->want_key && t == YAML_SCALAR_EVENT) {
+            snprintf(top->key, sizeof top->key, "%s", (const char *)ev.data.scalar.value);
+            top->want_key = 0;
+        } else if (is_value_start && top && top->mapping) {
+            top->want_key = 1; /* this node is the value; the next one is a key */
+        }
+        if (t == YAML_MAPPING_START_EVENT || t == YAML_SEQUENCE_START_EVENT) {
+            if (depth < 32) {
+                st[depth].mapping = t == YAML_MAPPING_START_EVENT;
+                st[depth].want_key = 1;
+                st[depth].key[0] = '\0';
+            }
+            depth++;
+            if (top && top->mapping) top->want_key = 0; /* still inside top's value */
+        } else if (t == YAML_MAPPING_END_EVENT || t == YAML_SEQUENCE_END_EVENT) {
+            if (depth > 0) depth--;
+            if (depth > 0 && depth <= 32 && st[depth - 1].mapping) st[depth - 1].want_key = 1;
+        }
+        yaml_event_delete(&ev);
+        if (t == YAML_STREAM_END_EVENT) break;
+    }
+    yaml_parser_delete(&parser);
+    size_t used = 0;
+    for (int d = 0; d < depth && d < 32; d++) {
+        if (!st[d].mapping || !st[d].key[0]) continue;
+        used += (size_t)snprintf(out + used, used < n ? n - used : 0, "%s%s", used ? "." : "",
+                                 st[d].key);
+    }
+}
+
+static int line_of_offset(FILE *f, size_t offset)
+{
+    int line = 1;
+    rewind(f);
+    for (size_t i = 0; i < offset; i++) {
+        int c = getc(f);
+        if (c == EOF) break;
+        if (c == '\n') line++;
+    }
+    return line;
+}
+
+static wf_status yaml_syntax_error(const char *path, FILE *f, const yaml_parser_t *parser)
+{
+    const char *problem = parser->problem ? parser->problem : "malformed YAML";
+    if (parser->error == YAML_MEMORY_ERROR)
+        return wf_error(WF_ERR_NOMEM, "%s: out of memory while parsing YAML", path);
+    if (parser->error == YAML_READER_ERROR)
+        return wf_error(WF_ERR_INPUT, "%s:%d: %s (byte %zu)", path,
+                        line_of_offset(f, parser->problem_offset), problem,
+                        parser->problem_offset);
+    int line = (int)parser->problem_mark.line + 1, col = (int)parser->problem_mark.column + 1;
+    char ctx[160] = "";
+    if (parser->context)
+        snprintf(ctx, sizeof ctx, " (%s at line %d)", parser->context,
+                 (int)parser->context_mark.line + 1);
+    char key[256];
+    key_near_error(f, key, sizeof key);
+    return wf_error(WF_ERR_INPUT, "%s:%d:%d: %s%s%s: YAML syntax: %s%s", path, line, col,
+                    key[0] ? "near key " : "", key, key[0] ? "" : "at top level", problem, ctx);
+}
+
+wf_status wf_config_load(wf_config *cfg, const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return wf_error(WF_ERR_IO, "%s: cannot open config file: %s", path, strerror(errno));
+    struct stat sb;
+    if (fstat(fileno(f), &sb) == 0 && S_ISDIR(sb.st_mode)) {
+        fclose(f);
+        return wf_error(WF_ERR_IO, "%s: is a directory, not a config file", path);
+    }
+    yaml_parser_t parser;
+    yaml_document_t doc, extra;
+    int have_doc = 0;
+    wf_status st = WF_OK;
+    /* applied to a copy so that a file with an error leaves cfg as it was */
+    wf_config *tmp = malloc(sizeof *tmp);
+    if (!tmp) {
+        fclose(f);
+        return wf_error(WF_ERR_NOMEM, "%s: no memory for the configuration", path);
+    }
+    memcpy(tmp, cfg, sizeof *tmp);
+    if (!yaml_parser_initialize(&parser)) {
+        st = wf_error(WF_ERR_NOMEM, "%s: cannot initialise the YAML parser", path);
+        goto exit_noparser;
+    }
+    yaml_parser_set_input_file(&parser, f);
+    if (!yaml_parser_load(&parser, &doc)) {
+        st = yaml_syntax_error(path, f, &parser);
+        goto exit;
+    }
+    have_doc = 1;
+    yaml_node_t *root = yaml_document_get_root_node(&doc);
+    if (!root) goto exit; /* an empty file changes nothing */
+    if (root->type != YAML_MAPPING_NODE) {
+        if (root->type == YAML_SCALAR_NODE && is_null_scalar(root)) goto exit;
+        st = wf_error(WF_ERR_INPUT, "%s:%d: (top level): expected a mapping of keys, got %s",
+                      path, yaml_line(root), node_kind(root));
+        goto exit;
+    }
+    load_ctx lc = {.path = path, .doc = &doc, .cfg = tmp};
+    st = walk_mapping(&lc, root, "");
+    if (st) goto exit;
+    if (!yaml_parser_load(&parser, &extra)) {
+        st = yaml_syntax_error(path, f, &parser);
+        goto exit;
+    }
+    yaml_node_t *second = yaml_document_get_root_node(&extra);
+    if (second)
+        st = wf_error(WF_ERR_INPUT, "%s:%d: a second YAML document; a config file holds one",
+                      path, (int)extra.start_mark.line + 1);
+    yaml_document_delete(&extra);
+exit:
+    if (have_doc) yaml_document_delete(&doc);
+    yaml_parser_delete(&parser);
+exit_noparser:
+    fclose(f);
+    if (!st) memcpy(cfg, tmp, sizeof *cfg);
+    free(tmp);
+    return st;
+}
+
+/* ---- --set -------------------------------------------------------------------------- */
+
+static char *trim(char *s)
+{
+    while (isspace((unsigned char)*s)) s++;
+    size_t n = strlen(s);
+    while (n > 0 && isspace((unsigned char)s[n - 1])) s[--n] = '\0';
+    return s;
+}
+
+static wf_status set_kernel_text(wf_config *cfg, const key_desc *k, const char *text,
+                                 const where *w)
+{
+    yaml_parser_t parser;
+    yaml_document_t doc;
+    if (!yaml_parser_initialize(&parser))
+        return key_error(WF_ERR_NOMEM, w, k->name, "cannot initialise the YAML parser");
+    yaml_parser_set_input_string(&parser, (const unsigned char *)text, strlen(text));
+    wf_status st;
+    if (!yaml_parser_load(&parser, &doc)) {
+        st = key_error(WF_ERR_INPUT, w, k->name, "not a YAML list: %s",
+                       parser.problem ? parser.problem : "malformed");
+    } else {
+        yaml_node_t *root = yaml_document_get_root_node(&doc);
+        if (!root)
+            st = key_error(WF_ERR_INPUT, w, k->name, "no value given");
+        else
+            st = set_kernel(cfg, k, &doc, root, w);
+        yaml_document_delete(&doc);
+    }
+    yaml_parser_delete(&parser);
+    return st;
+}
+
+wf_status wf_config_set(wf_config *cfg, const char *assignment, const char *origin)
+{
+    const where w = {.origin = origin && *origin ? origin : "--set"};
+    char buf[WF_PATH_MAX + 256];
+    if (strlen(assignment) >= sizeof buf)
+        return wf_error(WF_ERR_INPUT, "%s: override longer than %zu characters", w.origin,
+                        sizeof buf - 1);
+    memcpy(buf, assignment, strlen(assignment) + 1);
+    char *eq = strchr(buf, '=');
+    if (!eq)
+        return wf_error(WF_ERR_INPUT, "%s: '%.80s': expected key=value", w.origin, assignment);
+    *eq = '\0';
+    char *name = trim(buf), *value = trim(eq + 1);
+    if (!*name)
+        return wf_error(WF_ERR_INPUT, "%s: '%.80s': no key before '='", w.origin, assignment);
+    int i = find_key(name);
+    if (i < 0) {
+        if (is_section(name))
+            return key_error(WF_ERR_INPUT, &w, name, "is a section; set one of its keys, e.g. %s",
+                             first_key_in(name));
+        return unknown_key(&w, name, 0);
+    }
+    const key_desc *k = &keys[i];
+    if (!*value && k->type != KT_STRING)
+        return key_error(WF_ERR_INPUT, &w, k->name, "no value given");
+    wf_config *tmp = malloc(sizeof *tmp);
+    if (!tmp) return key_error(WF_ERR_NOMEM, &w, k->name, "no memory for the configuration");
+    memcpy(tmp, cfg, sizeof *tmp);
+    wf_status st = k->type == KT_KERNEL ? set_kernel_text(tmp, k, value, &w)
+                                        : set_from_text(tmp, k, value, &w);
+    if (!st) memcpy(cfg, tmp, sizeof *cfg);
+    free(tmp);
+    return st;
+}
+
+/* ---- cross-key constraints ---------------------------------------------------------- */
+
+static wf_status env_fits(const char *var, const char *dir, const char *key)
+{
+    const char *v = getenv(var);
+    if (v && strlen(v) >= WF_PATH_MAX && !*dir)
+        return wf_error(WF_ERR_RANGE, "%s: $%s is longer than %d characters", key, var,
+                        WF_PATH_MAX - 1);
+    return WF_OK;
+}
+
+wf_status wf_config_finish(wf_config *cfg, wf_clock *clock)
+{
+    if (cfg->ro.tile_rows > cfg->ro.nrows) cfg->ro.tile_rows = cfg->ro.nrows;
+    if (!(cfg->ro.det.cr_lmin_um < cfg->ro.det.cr_lmax_um))
+        return wf_error(WF_ERR_RANGE,
+                        "detector.cr_lmin_um (%g) must be below detector.cr_lmax_um (%g)",
+                        cfg->ro.det.cr_lmin_um, cfg->ro.det.cr_lmax_um);
+    wf_status st = env_fits("WFISIM_DATA", cfg->data_dir, "paths.data");
+    if (!st) st = env_fits("WFISIM_REFERENCE", cfg->reference_dir, "paths.reference");
+    if (st) return st;
+    clock->frame_time = cfg->frame_time;
+    st = wf_ma_resolve(cfg->ma_table, &clock->ma);
+    if (st) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", wf_error_message());
+        return wf_error(st, "readout.ma_table: %s", msg);
+    }
+    cfg->ro.seed = cfg->seed;
+    return WF_OK;
+}
+
+/* ---- the reference ------------------------------------------------------------------ */
+
+static const struct {
+    const char *name, *doc;
+} sections[] = {
+    {"", "Keys outside any section."},
+    {"exposure", "What is observed and how the SCA is read."},
+    {"readout", "Firmware readout: image size, tiling, the read pattern and the link."},
+    {"run", "How the program runs; none of these changes a product."},
+    {"detector", "Detector physics (SPEC §2, §3.2; GalSim and romanisim values)."},
+    {"detector.effects", "Switches of the detector chain, in its order (SPEC §3.1); a "
+                         "switched-off effect is skipped, not computed as identity."},
+    {"scene", "The built-in grid scene: a uniform sky plus a square grid of Gaussian point "
+              "sources."},
+    {"paths", "Where optional inputs live; the program runs without them on built-in values."},
+};
+
+/* The listed section a key belongs to: the longest one that is a prefix of its name, so
+ * scene.grid.* stays under `scene`. */
+static int section_of(const char *name)
+{
+    int best = 0;
+    size_t best_len = 0;
+    for (int s = 1; s < (int)(sizeof sections / sizeof sections[0]); s++) {
+        size_t n = strlen(sections[s].name);
+        if (n > best_len && !strncmp(name, sections[s].name, n) && name[n] == '.') {
+            best = s;
+            best_len = n;
+        }
+    }
+    return best;
+}
+
+static const char *type_text(const key_desc *k)
+{
+    switch (k->type) {
+    case KT_BOOL: return "bool";
+    case KT_INT: return "integer";
+    case KT_UINT: return "unsigned";
+    case KT_DOUBLE: return "number";
+    case KT_STRING: return k->choices ? "choice" : "string";
+    case KT_ENUM: return "choice";
+    case KT_KERNEL: return "3x3 numbers";
+    }
+    return "?";
+}
+
+static void value_text(const wf_config *cfg, const key_desc *k, char *buf, size_t n)
+{
+    const void *src = key_cptr(cfg, k);
+    char num[40];
+    switch (k->type) {
+    case KT_BOOL: snprintf(buf, n, "`%s`", *(const int *)src ? "true" : "false"); return;
+    case KT_INT: snprintf(buf, n, "`%d`", *(const int *)src); return;
+    case KT_UINT:
+        if (k->size == sizeof(uint32_t)) {
+            uint32_t v;
+            memcpy(&v, src, sizeof v);
+            snprintf(buf, n, "`%lu`", (unsigned long)v);
+        } else {
+            uint64_t v;
+            memcpy(&v, src, sizeof v);
+            snprintf(buf, n, "`%llu`", (unsigned long long)v);
+        }
+        return;
+    case KT_DOUBLE:
+        format_double(*(const double *)src, num, sizeof num);
+        snprintf(buf, n, "`%s`", num);
+        return;
+    case KT_STRING:
+        snprintf(buf, n, *(const char *)src ? "`%s`" : "(empty)", (const char *)src);
+        return;
+    case KT_ENUM: snprintf(buf, n, "`%s`", k->choices[*(const int *)src]); return;
+    case KT_KERNEL: snprintf(buf, n, "(see below)"); return;
+    }
+}
+
+static void allowed_text(const key_desc *k, char *buf, size_t n)
+{
+    switch (k->type) {
+    case KT_BOOL: snprintf(buf, n, "true, false"); return;
+    case KT_STRING:
+        if (k->choices)
+            choices_text(k->choices, buf, n);
+        else if (k->nonempty)
+            snprintf(buf, n, "non-empty, < %zu characters", k->size);
+        else
+            snprintf(buf, n, "< %zu characters", k->size);
+        return;
+    case KT_ENUM: choices_text(k->choices, buf, n); return;
+    case KT_KERNEL: snprintf(buf, n, "sum 1 ± 1e-6"); return;
+    case KT_UINT:
+        if (!k->has_lo && !k->has_hi) {
+            snprintf(buf, n, "0 to 2^64-1");
+            return;
+        }
+        range_text(k, buf, n);
+        return;
+    default: range_text(k, buf, n); return;
+    }
+}
+
+/* Markdown table cell: a '|' in the text would end the cell. */
+static void cell(FILE *out, const char *text)
+{
+    fputs(" ", out);
+    for (const char *p = text; *p; p++) {
+        if (*p == '|') fputc('\\', out);
+        fputc(*p, out);
+    }
+    fputs(" |", out);
+}
+
+void wf_config_write_doc(FILE *out)
+{
+    wf_config def;
+    wf_config_defaults(&def);
+    fputs("# Configuration reference\n"
+          "\n"
+          "<!-- Generated by wf_config_write_doc() in tools/config.c; do not edit by hand.\n"
+          "     tests/test_config.c checks that this file matches the code. -->\n"
+          "\n"
+          "A run is configured by YAML files and `--set key=value` overrides, applied in the\n"
+          "order given on top of the defaults below (a later value wins). One table in\n"
+          "`tools/config.c` defines every key; it drives parsing, range checks, `--set` and this\n"
+          "page.\n"
+          "\n"
+          "Keys are dotted paths into nested mappings: `detector.gain` is written\n"
+          "\n"
+          "```yaml\n"
+          "detector:\n"
+          "  gain: 1.0\n"
+          "  effects:\n"
+          "    ipc: false\n"
+          "```\n"
+          "\n"
+          "or, equally, `detector.gain: 1.0` at any level (`detector: {effects.ipc: false}`). On\n"
+          "the command line: `--set detector.gain=1.0`, `--set detector.effects.ipc=false`,\n"
+          "`--set 'detector.ipc=[[0,0,0],[0,1,0],[0,0,0]]'`.\n"
+          "\n"
+          "Value types:\n"
+          "\n"
+          "- **bool**: `true`/`false` (also `yes`/`no`, `on`/`off`, `1`/`0`).\n"
+          "- **integer**, **unsigned**: decimal, no fraction.\n"
+          "- **number**: decimal or exponent notation; NaN and infinities are rejected.\n"
+          "- **choice**: one of the listed words, exactly as spelt.\n"
+          "- **string**: any text; quote it in YAML if it looks like something else.\n"
+          "- In YAML, numbers and bools must be plain (`gain: 1.0`, not `gain: \"1.0\"`: YAML\n"
+          "  reads a quoted value as a string). An empty value (`gain:`) is an error;\n"
+          "  write `\"\"` for an empty string.\n"
+          "\n"
+          "Errors (the program exits non-zero and writes nothing) name the file and line, or\n"
+          "the `--set` origin, and the key:\n"
+          "\n"
+          "| problem | status |\n"
+          "|---|---|\n"
+          "| file cannot be opened or read | `WF_ERR_IO` |\n"
+          "| malformed YAML (libyaml's message, line and column, the key it was under) | "
+          "`WF_ERR_INPUT` |\n"
+          "| unknown key (the closest known key is suggested), key given twice | "
+          "`WF_ERR_INPUT` |\n"
+          "| wrong type (text for a number, a list for a single value, a section given a value) "
+          "| `WF_ERR_INPUT` |\n"
+          "| word not among a choice's values | `WF_ERR_INPUT` |\n"
+          "| value out of its range, NaN or infinite, IPC kernel not summing to 1 | "
+          "`WF_ERR_RANGE` |\n"
+          "\n"
+          "A file with an error changes nothing. An empty file is valid and changes nothing.\n",
+          out);
+
+    int cur = -1;
+    for (int i = 0; i < NKEYS; i++) {
+        const key_desc *k = &keys[i];
+        int sec = section_of(k->name);
+        if (sec != cur) {
+            cur = sec;
+            const char *sn = sections[sec].name;
+            fprintf(out, "\n## %s%s%s\n\n%s\n\n", *sn ? "`" : "", *sn ? sn : "General",
+                    *sn ? "`" : "", sections[sec].doc);
+            fputs("| key | type | default | allowed | unit | meaning |\n"
+                  "|---|---|---|---|---|---|\n",
+                  out);
+        }
+        char name[140], dtext[128], allowed[256];
+        snprintf(name, sizeof name, "`%s`", k->name);
+        if (k->doc_default)
+            snprintf(dtext, sizeof dtext, "%s", k->doc_default);
+        else
+            value_text(&def, k, dtext, sizeof dtext);
+        allowed_text(k, allowed, sizeof allowed);
+        fputs("|", out);
+        cell(out, name);
+        cell(out, type_text(k));
+        cell(out, dtext);
+        cell(out, allowed);
+        cell(out, *k->unit ? k->unit : "");
+        cell(out, k->doc);
+        fputs("\n", out);
+    }
+
+    double ipc[3][3];
+    wf_detector_ipc_default(ipc);
+    fputs("\n## Notes\n"
+          "\n"
+          "Default `detector.ipc`, GalSim's `ipc_kernel` (SPEC §2) divided by its sum; the\n"
+          "centre row and column are the pixel itself, `ipc[a][b]` weighs `in[y+a-1][x+b-1]`:\n"
+          "\n"
+          "```yaml\n"
+          "detector:\n"
+          "  ipc:\n",
+          out);
+    for (int a = 0; a < 3; a++) {
+        fputs("    - [", out);
+        for (int b = 0; b < 3; b++) {
+            char num[40];
+            format_double(ipc[a][b], num, sizeof num);
+            fprintf(out, "%s%s", b ? ", " : "", num);
+        }
+        fputs("]\n", out);
+    }
+    fputs("```\n"
+          "\n"
+          "Resolved after every file and override is applied (`wf_config_finish`):\n"
+          "\n"
+          "- `readout.ma_table` is read (a built-in name or a file, see `hal/clock.h`), and\n"
+          "  `readout.frame_time` goes with it into the clock.\n"
+          "- `readout.tile_rows` above `readout.nrows` is clamped to `readout.nrows`: one tile\n"
+          "  holds the whole image.\n"
+          "- `detector.cr_lmin_um` must be below `detector.cr_lmax_um` (`WF_ERR_RANGE`).\n"
+          "- `exposure.exptime` is used in single mode only; in ramp mode the exposure time is\n"
+          "  that of the last read of the MA table.\n",
+          out);
+}
