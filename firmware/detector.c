@@ -61,6 +61,8 @@ void wf_det_ipc_row(const double *above, const double *row, const double *below,
                     const double k[3][3], double *out)
 {
     const double *in[3] = {above, row, below};
+    if (ncols <= 0)
+        return; /* the edge terms below would touch out[0], out[-1] and r[1] */
     for (int x = 0; x < ncols; x++) out[x] = 0.0;
     for (int a = 0; a < 3; a++) {
         const double *r = in[a];

@@ -51,6 +51,12 @@ uint32_t wf_rng_u32(wf_rng *rng)
     return rng->buf[rng->next++];
 }
 
+void wf_rng_seek(wf_rng *rng, uint32_t block)
+{
+    rng->ctr[3] = (rng->ctr[3] & 0xffff0000u) | (block & 0xffffu);
+    rng->next = 4;
+}
+
 double wf_rng_uniform(wf_rng *rng)
 {
     return ((double)wf_rng_u32(rng) + 0.5) * (1.0 / 4294967296.0);
@@ -59,7 +65,10 @@ double wf_rng_uniform(wf_rng *rng)
 double wf_rng_uniform53(wf_rng *rng)
 {
     uint64_t hi = wf_rng_u32(rng) >> 5, lo = wf_rng_u32(rng) >> 6; /* 27 + 26 bits */
-    return ((double)(hi * 67108864u + lo) + 0.5) * (1.0 / 9007199254740992.0);
+    double u = ((double)(hi * 67108864u + lo) + 0.5) * (1.0 / 9007199254740992.0);
+    /* Above 2^52, x + 0.5 is not representable and rounds to even: x = 2^53 - 1 would give
+     * exactly 1.0. Keep the interval open with the largest double below 1. */
+    return u < 1.0 ? u : 0x1.fffffffffffffp-1;
 }
 
 double wf_norm_ppf(double p)
@@ -96,7 +105,7 @@ double wf_rng_gauss(wf_rng *rng)
     return wf_norm_ppf(wf_rng_uniform(rng));
 }
 
-/* log(k!) - (k log k - k): Stirling's series, error < 1e-12 for k >= 10. */
+/* log(k!) - (k log k - k): Stirling's series, truncation error < 1e-10 for k >= 10 (6e-11 at 10). */
 static double stirling_tail(double k)
 {
     double k2 = k * k;
@@ -146,11 +155,16 @@ double wf_rng_poisson(wf_rng *rng, double mean)
     double u = wf_rng_uniform53(rng);
     double p = exp(-mean), cdf = p;
     double k = 0.0;
-    /* The cap only guards against u rounding above the summed CDF (probability < 1e-15). */
+    /* The summed CDF can stay below 1 by ~1e-15 in floating point, so u may lie above all
+     * of it: stop once the terms no longer change the sum (u is then in the far tail, and k
+     * is there) instead of running on to the cap, which would return 200 electrons. */
     while (u > cdf && k < 200.0) {
         k += 1.0;
         p *= mean / k;
-        cdf += p;
+        double next = cdf + p;
+        if (next == cdf)
+            break;
+        cdf = next;
     }
     return k;
 }

@@ -52,9 +52,21 @@ double wf_rng_uniform(wf_rng *rng);   /* (0, 1), 32-bit resolution */
 double wf_rng_uniform53(wf_rng *rng); /* (0, 1), 53-bit resolution */
 double wf_rng_gauss(wf_rng *rng);     /* N(0, 1) */
 /* Poisson(mean): exact inversion below 10, Hörmann's PTRS rejection above (exact in
- * distribution; log-probabilities via a Stirling form accurate to ~1e-12 up to 1e9 and
+ * distribution; log-probabilities via a Stirling form accurate to ~1e-10 up to 1e9 and
  * beyond). mean <= 0 or NaN gives 0, as GalSim sets negative values to zero. */
 double wf_rng_poisson(wf_rng *rng, double mean);
+
+/* Positions a stream at block `block` (0 is where wf_rng_init starts): lets code that took
+ * the first block from wf_noise_block_row continue the same stream. */
+void wf_rng_seek(wf_rng *rng, uint32_t block);
+
+/* The first block (4 words) of the streams of pixels pixel0 .. pixel0+n-1 at one read, for
+ * one purpose: identical to wf_rng_init + 4 x wf_rng_u32, computed a row at a time. */
+void wf_noise_block_row(const wf_noise *noise, uint32_t pixel0, int n, uint32_t read,
+                        wf_purpose purpose, uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3);
+
+/* Standard normals from 32-bit words: wf_norm_ppf((w + 0.5) / 2^32), rounded to float. */
+void wf_norm_from_u32(const uint32_t *w, int n, float *out);
 
 /* Inverse of the standard normal CDF, relative error < 1.2e-9 (Acklam's rational form). */
 double wf_norm_ppf(double p);

@@ -1,0 +1,89 @@
+#!/bin/sh
+# make bench: runs the benchmarks and writes docs/BENCHMARKS.md (measured table, the
+# command that produced each line, and the machine). Sized for a 2-core machine: about
+# 10 minutes. BENCH_QUICK=1 runs a reduced set (smaller images) for a smoke test.
+set -eu
+cd "$(dirname "$0")/.."
+B=build/rel/bench
+make -s $B/bench_readout $B/rss bin/wfisim >/dev/null
+out=docs/BENCHMARKS.md
+tmp=$(mktemp)
+N=4088
+[ "${BENCH_QUICK:-0}" = 1 ] && N=1024
+cpu=$(grep -m1 'model name' /proc/cpuinfo | sed 's/.*: //')
+mem=$(awk '/MemTotal/ {printf "%.0f GiB", $2/1048576}' /proc/meminfo)
+field() { echo "$1" | tr ' ' '\n' | sed -n "s/^$2=//p"; }
+
+row_readout() { # label, args...
+  label=$1; shift
+  line=$($B/bench_readout "$@")
+  echo "| $label | \`bench_readout $*\` | $(field "$line" wall_s) | $(field "$line" cpu_s) | $(field "$line" Mpixreads_per_cpu_s) | $(field "$line" arena_MiB) | $(field "$line" peak_rss_MiB) |" >>"$tmp"
+  echo "  $label: $line" >&2
+}
+
+{
+  echo "# Benchmarks"
+  echo
+  echo "Written by \`make bench\` (bench/run.sh) on $(date -u +%Y-%m-%d). Machine: $cpu, $(nproc) cores, $mem, $(uname -sr)."
+  echo "Compiler: $(cc --version | head -n 1). Numbers are single runs on a machine that may"
+  echo "be doing other work; compare orders of magnitude, not the last digit."
+  echo
+  echo "## Firmware path: full SCA, Y106 deep-field sky only, MA table 6 (300 s)"
+  echo
+  echo "Packets go to a null link, so this is the readout alone (scene source, detector chain,"
+  echo "resultant averaging, deflate). Pixel-reads per CPU-second count every digitised read"
+  echo "(per-read) or every drawn resultant (direct)."
+  echo
+  echo "| case | command | wall s | CPU s | M pixel-reads / CPU-s | arena MiB | peak RSS MiB |"
+  echo "|---|---|---|---|---|---|---|"
+} >"$tmp"
+for t in 16 64 256; do
+  row_readout "per-read, ${t}-row tiles, 2 threads" $N $N $t per-read 6 2
+done
+for t in 16 64 256; do
+  row_readout "direct, ${t}-row tiles, 2 threads" $N $N $t direct 6 2
+done
+row_readout "per-read, 64-row tiles, 1 thread" $N $N 64 per-read 6 1
+row_readout "direct, MA table 11 (900 s), 64-row tiles, 2 threads" $N $N 64 direct 11 2
+{
+  echo
+  echo "## Peak RSS against image size (per-read, 64-row tiles, 1 thread)"
+  echo
+  echo "The firmware reserves its arena from the tile height and MA table only; RSS must stay flat."
+  echo
+  echo "| case | command | wall s | CPU s | M pixel-reads / CPU-s | arena MiB | peak RSS MiB |"
+  echo "|---|---|---|---|---|---|---|"
+} >>"$tmp"
+for n in 1024 2048; do
+  row_readout "${n}x${n}" $n $n 64 per-read 6 1
+done
+[ $N = 4088 ] && row_readout "4088x4088" 4088 4088 64 per-read 6 1
+{
+  echo
+  echo "## Single-frame mode (GalSim allDetectorEffects order), full SCA, 300 s"
+  echo
+  echo "GalSim 2.8.4's detector chain on the same kind of machine: 1.9 s wall, 2.0 s CPU"
+  echo "(../shared/reference/galsim/README.md)."
+  echo
+  echo "| case | command | wall s | CPU s | M pixels / CPU-s | arena MiB | peak RSS MiB |"
+  echo "|---|---|---|---|---|---|---|"
+} >>"$tmp"
+row_readout "single frame, 1 thread" $N $N 64 single 6 1
+row_readout "single frame, 2 threads" $N $N 64 single 6 2
+{
+  echo
+  echo "## Whole program: \`wfisim demo\` (readout + in-process assembly + ramp fit + FITS)"
+  echo
+  echo "| case | command | wall s | CPU s | peak RSS MiB |"
+  echo "|---|---|---|---|---|"
+} >>"$tmp"
+for th in 1 2; do
+  d=$(mktemp -d)
+  r=$($B/rss bin/wfisim demo --quiet --threads $th --out "$d" --set readout.ncols=$N --set readout.nrows=$N 2>&1 | grep '^rss:')
+  echo "| demo, $th thread(s) | \`wfisim demo --threads $th\` | $(field "$r" wall_s) | $(field "$r" cpu_s) | $(field "$r" peak_rss_MiB) |" >>"$tmp"
+  echo "  demo $th: $r" >&2
+  rm -rf "$d"
+done
+if [ -f docs/BENCHMARKS.notes.md ]; then echo >>"$tmp"; cat docs/BENCHMARKS.notes.md >>"$tmp"; fi
+mv "$tmp" "$out"
+echo "wrote $out" >&2
