@@ -1,0 +1,178 @@
+/* The wfisim program end to end, as users run it: in-process and two-process paths give
+ * identical FITS; tile height and thread count do not change a byte; bad input exits
+ * non-zero with a message naming the file and leaves no product; the FITS opens in astropy. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "tests/testutil.h"
+
+#define SMALL "--quiet --set readout.ncols=96 --set readout.nrows=80 --set readout.ma_table=4 " \
+              "--set detector.cr_rate=500 --set scene.grid.spacing=20 --set scene.grid.flux=2e4"
+
+static char *slurp(const char *path, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *buf = malloc((size_t)n + 1);
+    *len = fread(buf, 1, (size_t)n, f);
+    buf[*len] = '\0';
+    fclose(f);
+    return buf;
+}
+
+static int run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+#include <stdarg.h>
+static int run(const char *fmt, ...)
+{
+    char cmd[8192];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(cmd, sizeof cmd, fmt, ap);
+    va_end(ap);
+    int rc = system(cmd);
+    return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
+}
+
+static void assert_same_file(const char *a, const char *b)
+{
+    size_t la, lb;
+    char *x = slurp(a, &la), *y = slurp(b, &lb);
+    ck_assert_msg(x != NULL, "%s missing", a);
+    ck_assert_msg(y != NULL, "%s missing", b);
+    ck_assert_msg(la == lb && !memcmp(x, y, la), "%s and %s differ", a, b);
+    free(x);
+    free(y);
+}
+
+static int exists(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0;
+}
+
+#define FITS "wfisim_e000001_sca01.fits"
+
+START_TEST(pipe_equals_in_process)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    ck_assert_int_eq(run("%s expose " SMALL " --out %s/a", bin, d), 0);
+    ck_assert_int_eq(run("%s expose " SMALL " --stream - | %s assemble - --quiet --out %s/b", bin, bin, d), 0);
+    ck_assert_int_eq(run("%s expose " SMALL " --stream %s/s.bin && %s assemble %s/s.bin --quiet --out %s/c",
+                         bin, d, bin, d, d), 0);
+    char a[4200], b[4200], c[4200];
+    snprintf(a, sizeof a, "%s/a/" FITS, d);
+    snprintf(b, sizeof b, "%s/b/" FITS, d);
+    snprintf(c, sizeof c, "%s/c/" FITS, d);
+    assert_same_file(a, b);
+    assert_same_file(a, c);
+}
+END_TEST
+
+START_TEST(tile_height_and_threads_do_not_matter)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    const char *modes[] = {"ramp --sampling per-read", "ramp --sampling direct", "single"};
+    for (int m = 0; m < 3; m++) {
+        ck_assert_int_eq(run("%s expose " SMALL " --mode %s --tile-rows 80 --out %s/ref%d", bin, modes[m], d, m), 0);
+        char ref[4200];
+        snprintf(ref, sizeof ref, "%s/ref%d/" FITS, d, m);
+        const int heights[] = {1, 7, 64};
+        for (int i = 0; i < 3; i++)
+            for (int t = 1; t <= 2; t++) {
+                ck_assert_int_eq(run("%s expose " SMALL " --mode %s --tile-rows %d --threads %d --out %s/t%d_%d_%d",
+                                     bin, modes[m], heights[i], t, d, m, heights[i], t), 0);
+                char p[4200];
+                snprintf(p, sizeof p, "%s/t%d_%d_%d/" FITS, d, m, heights[i], t);
+                assert_same_file(ref, p);
+            }
+    }
+}
+END_TEST
+
+START_TEST(bad_config_named_and_no_product)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char cfg[4200], log[4200];
+    snprintf(cfg, sizeof cfg, "%s/bad.yaml", d);
+    snprintf(log, sizeof log, "%s/err.txt", d);
+    FILE *f = fopen(cfg, "w");
+    fputs("seed: 3\ndetector:\n  gain: 1.0\n  read_nosie: 5\n", f);
+    fclose(f);
+    int rc = run("%s expose --quiet --config %s --out %s/out 2>%s", bin, cfg, d, log);
+    ck_assert_int_ne(rc, 0);
+    size_t n;
+    char *msg = slurp(log, &n);
+    ck_assert_msg(strstr(msg, "bad.yaml") && strstr(msg, ":4") && strstr(msg, "read_nosie"),
+                  "message does not name file, line and key: %s", msg);
+    free(msg);
+    char out[4200];
+    snprintf(out, sizeof out, "%s/out/" FITS, d);
+    ck_assert(!exists(out));
+    /* an unknown filter on the command line */
+    ck_assert_int_ne(run("%s expose --quiet --filter Q999 --out %s/out 2>/dev/null", bin, d), 0);
+}
+END_TEST
+
+START_TEST(corrupt_stream_leaves_nothing)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    ck_assert_int_eq(run("%s expose " SMALL " --stream %s/s.bin", bin, d), 0);
+    /* flip one byte in the middle of the stream */
+    char path[4200];
+    snprintf(path, sizeof path, "%s/s.bin", d);
+    size_t n;
+    char *buf = slurp(path, &n);
+    buf[n / 2] ^= 0x40;
+    FILE *f = fopen(path, "wb");
+    fwrite(buf, 1, n, f);
+    fclose(f);
+    free(buf);
+    ck_assert_int_ne(run("%s assemble %s --quiet --out %s/out 2>/dev/null", bin, path, d), 0);
+    char out[4200], tmp[4300];
+    snprintf(out, sizeof out, "%s/out/" FITS, d);
+    snprintf(tmp, sizeof tmp, "%s.tmp", out);
+    ck_assert(!exists(out));
+    ck_assert(!exists(tmp));
+}
+END_TEST
+
+START_TEST(fits_opens_in_astropy)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    if (run("/usr/bin/python3 -c 'import astropy' 2>/dev/null") != 0) WF_SKIP("python3 with astropy not installed");
+    const char *d = wf_test_tmpdir();
+    ck_assert_int_eq(run("%s expose " SMALL " --out %s", bin, d), 0);
+    ck_assert_int_eq(run("/usr/bin/python3 tests/fits_check.py %s/" FITS, d), 0);
+}
+END_TEST
+
+static Suite *suite(void)
+{
+    Suite *s = suite_create("program");
+    TCase *tc = tcase_create("program");
+    tcase_set_timeout(tc, 600);
+    tcase_add_test(tc, pipe_equals_in_process);
+    tcase_add_test(tc, tile_height_and_threads_do_not_matter);
+    tcase_add_test(tc, bad_config_named_and_no_product);
+    tcase_add_test(tc, corrupt_stream_leaves_nothing);
+    tcase_add_test(tc, fits_opens_in_astropy);
+    suite_add_tcase(s, tc);
+    return s;
+}
+
+int main(void) { return wf_test_main(suite()); }
