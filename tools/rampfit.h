@@ -31,6 +31,9 @@ typedef struct wf_rampfit_result {
     double rate;        /* e-/s */
     double var_read;    /* (e-/s)^2 */
     double var_poisson; /* (e-/s)^2, at the fitted rate (clipped at 0) */
+    double poisson_coef; /* var_poisson = max(rate, 0) * poisson_coef, (e-/s)^2 per e-/s: lets
+                          * a caller evaluate the Poisson term at a less noisy rate, since the
+                          * clip at 0 overstates it where fitted rates are often negative */
     uint32_t dq;        /* WF_DQ_* */
     int njumps;
 } wf_rampfit_result;
@@ -42,7 +45,13 @@ wf_status wf_rampfit_setup_init(const wf_clock *clock, double read_noise_e,
  * resultant holding a saturated read (nres or more: none).
  * Defined results for short ramps: 2+ usable resultants -> fit with intercept; exactly 1 ->
  * rate = R0 / tbar0 (the reset level is zero in simulation); 0 usable (saturated in the
- * first resultant) -> rate = R0 / tbar0 as a lower bound, DQ SATURATED | DO_NOT_USE. */
+ * first resultant) -> rate = R0 / tbar0 as a lower bound, DQ SATURATED | DO_NOT_USE.
+ * Variances are always those of the estimator returned. When jumps leave no two adjacent
+ * clean resultants, the one-resultant estimate is used if R0 is clean (DQ JUMP_DET), else
+ * the fit ignoring jumps (DQ JUMP_DET | DO_NOT_USE). The power of the Casertano weights is
+ * chosen from the S/N of a GLS slope, not a first-pass OLS one (see rampfit.c). Returns
+ * WF_ERR_INPUT for NULL pointers, an invalid setup, first_saturated < 0 or a non-finite
+ * resultant among those used; WF_ERR_RANGE for one beyond 1e30 e-. */
 wf_status wf_rampfit_pixel(const wf_rampfit_setup *setup, const double *resultants,
                            int first_saturated, wf_rampfit_result *out);
 

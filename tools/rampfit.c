@@ -1,0 +1,392 @@
+#include "tools/rampfit.h"
+
+#include <math.h>
+#include <stddef.h>
+
+/* One fitted stretch of consecutive resultants [start, end]. The Poisson variance is kept per
+ * unit rate so that segments can be combined before the rate it is evaluated at is known. */
+typedef struct seg_fit {
+    int start, end;
+    double slope;
+    double var_read;
+    double pois_coef; /* Var_poisson = rate * pois_coef */
+} seg_fit;
+
+wf_status wf_rampfit_setup_init(const wf_clock *clock, double read_noise_e,
+                                wf_rampfit_setup *out)
+{
+    if (!clock || !out)
+        return wf_error(WF_ERR_INPUT, "wf_rampfit_setup_init: NULL argument");
+    const wf_ma_table *ma = &clock->ma;
+    if (!(clock->frame_time > 0.0) || !isfinite(clock->frame_time))
+        return wf_error(WF_ERR_INPUT, "ramp fit: frame time %g s is not positive", clock->frame_time);
+    if (!(read_noise_e >= 0.0) || !isfinite(read_noise_e))
+        return wf_error(WF_ERR_INPUT, "ramp fit: read noise %g e- is not >= 0", read_noise_e);
+    if (ma->nresultants < 1 || ma->nresultants > WF_MA_MAX_RESULTANTS)
+        return wf_error(WF_ERR_INPUT, "ramp fit: MA table '%s' has %d resultants (allowed 1..%d)",
+                        ma->name, ma->nresultants, WF_MA_MAX_RESULTANTS);
+    wf_rampfit_setup s = {0};
+    s.nres = ma->nresultants;
+    s.read_noise = read_noise_e;
+    s.detect_jumps = 1;
+    s.jump_threshold = 0.0;
+    int last = -1;
+    for (int r = 0; r < s.nres; r++) {
+        int a = ma->first[r], b = ma->first[r + 1], n = b - a;
+        if (n < 1 || a < 0 || b > ma->nreads || b > WF_MA_MAX_READS)
+            return wf_error(WF_ERR_INPUT, "ramp fit: MA table '%s' resultant %d has no reads",
+                            ma->name, r + 1);
+        double sum_t = 0.0, sum_min = 0.0;
+        for (int k = 0; k < n; k++) {
+            if (ma->read[a + k] <= last)
+                return wf_error(WF_ERR_INPUT, "ramp fit: MA table '%s' reads do not increase at resultant %d",
+                                ma->name, r + 1);
+            last = ma->read[a + k];
+            double t = wf_clock_read_time(clock, ma->read[a + k]);
+            sum_t += t;
+            /* With reads in time order, min(t_a, t_b) over all ordered pairs counts read k
+             * once as (k, k) and twice for each later read: 2(n-k)-1 times. */
+            sum_min += (2.0 * (n - k) - 1.0) * t;
+        }
+        s.nreads[r] = n;
+        s.tbar[r] = sum_t / n;
+        s.tau[r] = sum_min / ((double)n * n);
+    }
+    *out = s;
+    return WF_OK;
+}
+
+static wf_status check_setup(const wf_rampfit_setup *s)
+{
+    if (s->nres < 1 || s->nres > WF_MA_MAX_RESULTANTS)
+        return wf_error(WF_ERR_INPUT, "ramp fit: setup has %d resultants (allowed 1..%d)", s->nres,
+                        WF_MA_MAX_RESULTANTS);
+    if (!(s->read_noise >= 0.0) || !isfinite(s->read_noise))
+        return wf_error(WF_ERR_INPUT, "ramp fit: read noise %g e- is not >= 0", s->read_noise);
+    if (isnan(s->jump_threshold))
+        return wf_error(WF_ERR_INPUT, "ramp fit: jump threshold is NaN");
+    for (int r = 0; r < s->nres; r++) {
+        if (s->nreads[r] < 1 || !(s->tbar[r] > 0.0) || !isfinite(s->tbar[r]) ||
+            !(s->tau[r] >= 0.0) || !isfinite(s->tau[r]))
+            return wf_error(WF_ERR_INPUT,
+                            "ramp fit: setup resultant %d has nreads %d, tbar %g s, tau %g s",
+                            r + 1, s->nreads[r], s->tbar[r], s->tau[r]);
+        /* Strictly increasing tbar is what makes every 2+ resultant fit well-posed. */
+        if (r > 0 && !(s->tbar[r] > s->tbar[r - 1]))
+            return wf_error(WF_ERR_INPUT, "ramp fit: setup tbar does not increase at resultant %d",
+                            r + 1);
+    }
+    return WF_OK;
+}
+
+/* Casertano et al. (2022) Table 2: the power of |t - t_mid| in the weights, by S/N. */
+static double cas22_power(double snr)
+{
+    if (snr < 5.0) return 0.0;
+    if (snr < 10.0) return 0.4;
+    if (snr < 20.0) return 1.0;
+    if (snr < 50.0) return 3.0;
+    if (snr < 100.0) return 6.0;
+    return 10.0;
+}
+
+/* Slope coefficients c_i (sum c_i = 0, sum c_i tbar_i = 1) for the weights w. Times are
+ * centred on the weighted mean first: the textbook f0 f2 - f1^2 form cancels catastrophically
+ * once tbar ~ 1e3 s and the power-law weights span many decades. Returns 0 when the weights
+ * leave fewer than two distinct times. */
+static int slope_coeffs(const double *tbar, const double *w, int m, double *c)
+{
+    double f0 = 0.0, f1 = 0.0;
+    for (int i = 0; i < m; i++) {
+        f0 += w[i];
+        f1 += w[i] * tbar[i];
+    }
+    if (!(f0 > 0.0))
+        return 0;
+    double tw = f1 / f0, d = 0.0;
+    for (int i = 0; i < m; i++)
+        d += w[i] * (tbar[i] - tw) * (tbar[i] - tw);
+    double span = tbar[m - 1] - tbar[0];
+    /* Relative to the spread of times, d below this means one time carries all the weight. */
+    if (!(d > 1e-300) || !(d > 1e-24 * f0 * span * span))
+        return 0;
+    for (int i = 0; i < m; i++)
+        c[i] = w[i] * (tbar[i] - tw) / d;
+    return 1;
+}
+
+/* Generalised least squares slope at an assumed rate, used only to choose the power.
+ * Differences D_i = R_{i+1} - R_i remove the intercept and have a tridiagonal covariance
+ * (neighbours share one resultant's reads; others share nothing), so GLS costs O(m):
+ *   Var(D_i)          = rn^2 (1/n_i + 1/n_{i+1}) + rate (tau_i + tau_{i+1} - 2 tbar_i)
+ *   Cov(D_i, D_{i+1}) = rate (tbar_{i+1} - tau_{i+1}) - rn^2 / n_{i+1}.
+ * Why not choose the power from a plain first-pass slope: the chosen power then correlates
+ * with the noise, and switching between two unbiased estimators on a noisy statistic biases
+ * the mean (measured -0.01 sigma per pixel at Casertano's S/N boundaries). The minimum-
+ * variance estimate is uncorrelated with the difference of any two unbiased estimators, so
+ * choosing on it leaves no first-order bias. Returns 0 when the covariance is singular. */
+static int gls_slope(const double *t, const double *tau, const int *n, const double *R, int m,
+                     double rn2, double rate, double *slope)
+{
+    const int k = m - 1;
+    double cdiag[WF_MA_MAX_RESULTANTS], x[WF_MA_MAX_RESULTANTS];
+    double prev_off = 0.0, num = 0.0, den = 0.0;
+    /* Thomas algorithm for C x = dt (C symmetric positive definite: no pivoting needed). */
+    for (int i = 0; i < k; i++) {
+        double diag = rn2 * (1.0 / n[i] + 1.0 / n[i + 1]) + rate * (tau[i] + tau[i + 1] - 2.0 * t[i]);
+        double off = i + 1 < k ? rate * (t[i + 1] - tau[i + 1]) - rn2 / n[i + 1] : 0.0;
+        double piv = diag - (i > 0 ? prev_off * cdiag[i - 1] : 0.0);
+        if (!(piv > 1e-12 * diag))
+            return 0; /* no read noise and no signal: nothing to weight by */
+        cdiag[i] = off / piv;
+        x[i] = ((t[i + 1] - t[i]) - (i > 0 ? prev_off * x[i - 1] : 0.0)) / piv;
+        prev_off = off;
+    }
+    for (int i = k - 2; i >= 0; i--)
+        x[i] -= cdiag[i] * x[i + 1];
+    for (int i = 0; i < k; i++) {
+        num += x[i] * (R[i + 1] - R[i]);
+        den += x[i] * (t[i + 1] - t[i]);
+    }
+    if (!(den > 0.0) || !isfinite(num / den))
+        return 0;
+    *slope = num / den;
+    return 1;
+}
+
+static void fit_segment(const wf_rampfit_setup *su, const double *res, int start, int end,
+                        seg_fit *out)
+{
+    const int m = end - start + 1;
+    const double *t = su->tbar + start, *R = res + start, *tau = su->tau + start;
+    const int *n = su->nreads + start;
+    double w[WF_MA_MAX_RESULTANTS] = {0}, c[WF_MA_MAX_RESULTANTS] = {0};
+    const double rn2 = su->read_noise * su->read_noise;
+
+    /* Unweighted first pass (weight n_i: every read counted once) for the rate at which the
+     * GLS covariance is evaluated; GLS weights vary slowly with rate, so this suffices. */
+    for (int i = 0; i < m; i++)
+        w[i] = n[i];
+    (void)slope_coeffs(t, w, m, c); /* cannot fail: tbar strictly increasing, m >= 2 */
+    double slope0 = 0.0;
+    for (int i = 0; i < m; i++)
+        slope0 += c[i] * R[i];
+    double snr_slope = slope0;
+    (void)gls_slope(t, tau, n, R, m, rn2, fmax(slope0, 0.0), &snr_slope);
+
+    /* Casertano Eq. 44 with the signal over this segment (as stcal: a segment after a jump
+     * should not inherit the charge collected before it). */
+    double signal = fmax(snr_slope, 0.0) * (t[m - 1] - t[0]);
+    double noise = sqrt(rn2 + signal);
+    double power = cas22_power(noise > 0.0 ? signal / noise : 0.0);
+
+    if (power > 0.0) {
+        double tmid = 0.5 * (t[0] + t[m - 1]), tscale = 0.5 * (t[m - 1] - t[0]);
+        for (int i = 0; i < m; i++) {
+            /* Casertano Eq. 45; scaled by tscale so |x|^10 stays within double range. */
+            double x = fabs(t[i] - tmid) / tscale;
+            w[i] = (1.0 + power) * n[i] / (1.0 + power * n[i]) * pow(x, power);
+        }
+        if (!slope_coeffs(t, w, m, c)) {
+            for (int i = 0; i < m; i++)
+                w[i] = n[i];
+            (void)slope_coeffs(t, w, m, c);
+        }
+    }
+
+    double slope = 0.0, cr = 0.0, cp = 0.0, suffix = 0.0;
+    for (int i = m - 1; i >= 0; i--) {
+        slope += c[i] * R[i];
+        cr += c[i] * c[i] / n[i];
+        /* Var = sum_i c_i^2 tau_i + 2 sum_{i<j} c_i c_j tbar_i per unit rate, since
+         * Cov(R_i, R_j) = rate * tbar_i for i < j; suffix holds sum_{j>i} c_j. */
+        cp += c[i] * c[i] * tau[i] + 2.0 * c[i] * t[i] * suffix;
+        suffix += c[i];
+    }
+    out->start = start;
+    out->end = end;
+    out->slope = slope;
+    out->var_read = rn2 * cr;
+    out->pois_coef = fmax(cp, 0.0); /* a variance: only rounding can make it negative */
+}
+
+static double jump_threshold(const wf_rampfit_setup *su, double slope)
+{
+    if (su->jump_threshold > 0.0)
+        return su->jump_threshold;
+    double s = fmin(fmax(slope, 1.0), 1e4);
+    return 5.5 - log10(s) / 3.0;
+}
+
+/* The largest standardized excess of a consecutive-resultant difference over the fitted
+ * slope, one-sided because charge deposits only add. Its variance is that of the raw
+ * difference (ignoring that the slope came from the same data), which is slightly larger
+ * than the residual's, so the test errs against false jumps. Returns the index i of the
+ * pair (i, i+1), or -1 when no difference has a positive variance. */
+static int worst_difference(const wf_rampfit_setup *su, const double *res, const seg_fit *f,
+                            double *stat)
+{
+    const double rn2 = su->read_noise * su->read_noise, rate = fmax(f->slope, 0.0);
+    int best = -1;
+    double best_stat = 0.0;
+    for (int i = f->start; i < f->end; i++) {
+        double d = res[i + 1] - res[i] - f->slope * (su->tbar[i + 1] - su->tbar[i]);
+        double v = rn2 * (1.0 / su->nreads[i] + 1.0 / su->nreads[i + 1]) +
+                   rate * (su->tau[i] + su->tau[i + 1] - 2.0 * su->tbar[i]);
+        if (!(v > 0.0))
+            continue;
+        double z = d / sqrt(v);
+        if (best < 0 || z > best_stat) {
+            best = i;
+            best_stat = z;
+        }
+    }
+    *stat = best_stat;
+    return best;
+}
+
+/* Inverse-variance mean of independent segments: they share no reads (and so no Poisson
+ * increments or read noise), which makes the combined variances exact sums. The Poisson part
+ * of each weight is taken at one common rate, never at the segment's own slope, which would
+ * down-weight segments that happened to fluctuate high and bias the mean low. */
+static void combine(const seg_fit *f, int nf, wf_rampfit_result *out)
+{
+    double w[2 * WF_MA_MAX_RESULTANTS];
+    double rate = 0.0;
+    for (int pass = 0; pass < 2; pass++) {
+        int all_read = 1;
+        for (int k = 0; k < nf; k++)
+            if (!(f[k].var_read > 0.0)) all_read = 0;
+        double sw = 0.0, sr = 0.0;
+        for (int k = 0; k < nf; k++) {
+            double v;
+            if (pass == 0)
+                v = all_read ? f[k].var_read : f[k].pois_coef; /* no read noise: Poisson shape */
+            else
+                v = f[k].var_read + fmax(rate, 0.0) * f[k].pois_coef;
+            w[k] = v > 0.0 ? 1.0 / v : 1.0;
+            sw += w[k];
+            sr += w[k] * f[k].slope;
+        }
+        rate = sr / sw;
+    }
+    double sw = 0.0, vr = 0.0, vp = 0.0;
+    for (int k = 0; k < nf; k++)
+        sw += w[k];
+    for (int k = 0; k < nf; k++) {
+        double a = w[k] / sw;
+        vr += a * a * f[k].var_read;
+        vp += a * a * f[k].pois_coef;
+    }
+    out->rate = rate;
+    out->var_read = vr;
+    out->poisson_coef = vp;
+    out->var_poisson = fmax(rate, 0.0) * vp;
+}
+
+/* Rate from one resultant against a zero reset level (true in simulation; a real detector
+ * would need the reset read). */
+static void single_resultant(const wf_rampfit_setup *su, const double *res, int r,
+                             wf_rampfit_result *out)
+{
+    double t = su->tbar[r];
+    out->rate = res[r] / t;
+    out->var_read = su->read_noise * su->read_noise / (su->nreads[r] * t * t);
+    out->poisson_coef = su->tau[r] / (t * t);
+    out->var_poisson = fmax(out->rate, 0.0) * out->poisson_coef;
+}
+
+wf_status wf_rampfit_pixel(const wf_rampfit_setup *setup, const double *resultants,
+                           int first_saturated, wf_rampfit_result *out)
+{
+    if (!setup || !resultants || !out)
+        return wf_error(WF_ERR_INPUT, "wf_rampfit_pixel: NULL argument");
+    wf_status st = check_setup(setup);
+    if (st != WF_OK)
+        return st;
+    if (first_saturated < 0)
+        return wf_error(WF_ERR_INPUT, "ramp fit: first saturated resultant %d is negative",
+                        first_saturated);
+    const int usable = first_saturated < setup->nres ? first_saturated : setup->nres;
+    const int checked = usable > 0 ? usable : 1;
+    for (int r = 0; r < checked; r++) {
+        if (!isfinite(resultants[r]))
+            return wf_error(WF_ERR_INPUT, "ramp fit: resultant %d is not finite (%g)", r + 1,
+                            resultants[r]);
+        /* Far beyond any full well (1e5 e-), and low enough that no intermediate overflows. */
+        if (fabs(resultants[r]) > 1e30)
+            return wf_error(WF_ERR_RANGE, "ramp fit: resultant %d is %g e-", r + 1, resultants[r]);
+    }
+
+    wf_rampfit_result res = {0};
+    if (usable < setup->nres)
+        res.dq |= WF_DQ_SATURATED;
+    if (usable <= 1) {
+        single_resultant(setup, resultants, 0, &res);
+        if (usable == 0)
+            res.dq |= WF_DQ_DO_NOT_USE;
+        *out = res;
+        return WF_OK;
+    }
+
+    /* Segments still to examine (a stack) and segments accepted. Every split makes strictly
+     * shorter pieces, so at most usable - 1 splits happen and both arrays stay bounded. */
+    int todo_s[WF_MA_MAX_RESULTANTS], todo_e[WF_MA_MAX_RESULTANTS], ntodo = 0;
+    seg_fit done[WF_MA_MAX_RESULTANTS];
+    int ndone = 0, first_clean = 1;
+    todo_s[ntodo] = 0;
+    todo_e[ntodo++] = usable - 1;
+    while (ntodo > 0) {
+        ntodo--;
+        int s = todo_s[ntodo], e = todo_e[ntodo];
+        if (e - s + 1 < 2)
+            continue; /* one resultant carries no slope once the intercept is free */
+        seg_fit f;
+        fit_segment(setup, resultants, s, e, &f);
+        if (setup->detect_jumps && e - s + 1 >= 3) {
+            double z;
+            int i = worst_difference(setup, resultants, &f, &z);
+            if (i >= 0 && z > jump_threshold(setup, f.slope)) {
+                res.njumps++;
+                res.dq |= WF_DQ_JUMP_DET;
+                /* The jump lies after the first read of R_i and by the last read of R_{i+1}:
+                 * a resultant averaging several reads may hold it part-way, so drop it; a
+                 * single read is wholly before or wholly after and is kept. */
+                int lo_end = setup->nreads[i] > 1 ? i - 1 : i;
+                int hi_start = setup->nreads[i + 1] > 1 ? i + 2 : i + 1;
+                if (lo_end < 0)
+                    first_clean = 0;
+                if (ntodo + 2 > WF_MA_MAX_RESULTANTS)
+                    return wf_error(WF_ERR_INTERNAL, "ramp fit: segment stack overflow");
+                if (hi_start <= e) {
+                    todo_s[ntodo] = hi_start;
+                    todo_e[ntodo++] = e;
+                }
+                if (lo_end >= s) {
+                    todo_s[ntodo] = s;
+                    todo_e[ntodo++] = lo_end;
+                }
+                continue;
+            }
+        }
+        if (ndone >= WF_MA_MAX_RESULTANTS)
+            return wf_error(WF_ERR_INTERNAL, "ramp fit: too many segments");
+        done[ndone++] = f;
+    }
+
+    if (ndone > 0) {
+        combine(done, ndone, &res);
+    } else if (first_clean) {
+        /* Jumps left no two neighbouring clean resultants but the first is clean: fall back
+         * to the one-resultant estimate, as for a ramp saturated after one resultant. */
+        single_resultant(setup, resultants, 0, &res);
+    } else {
+        /* Nothing clean: report the plain fit of all usable resultants, not to be trusted. */
+        seg_fit f;
+        fit_segment(setup, resultants, 0, usable - 1, &f);
+        combine(&f, 1, &res);
+        res.dq |= WF_DQ_DO_NOT_USE;
+    }
+    *out = res;
+    return WF_OK;
+}
