@@ -34,6 +34,7 @@ PROG    := $(BUILD)/wfisim
 endif
 
 .PHONY: all demo test tests bench clean deps
+.SECONDARY: $(TESTUTIL)
 all: $(PROG)
 
 deps:

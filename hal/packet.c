@@ -185,21 +185,26 @@ wf_status wf_packet_reader_next(wf_packet_reader *r, wf_packet_header *h, const 
         return wf_error(st, "%s: packet %ld at offset %llu: %s", r->name, r->count + 1,
                         (unsigned long long)r->offset, why);
     }
-    if ((st = grow(&r->wire, &r->wire_cap, h->payload_len + 1u)) != WF_OK) return st;
+    /* A header with a valid CRC can still be crafted: bound both lengths before allocating. */
+    if (h->payload_len > WF_PACKET_MAX_PAYLOAD || h->raw_len > WF_PACKET_MAX_PAYLOAD)
+        return wf_error(WF_ERR_CORRUPT, "%s: packet %ld at offset %llu claims %u/%u payload bytes (limit %u)",
+                        r->name, r->count + 1, (unsigned long long)r->offset, h->payload_len,
+                        h->raw_len, (unsigned)WF_PACKET_MAX_PAYLOAD);
+    if ((st = grow(&r->wire, &r->wire_cap, (size_t)h->payload_len + 1u)) != WF_OK) return st;
     if (fread(r->wire, 1, h->payload_len, r->file) != h->payload_len)
         return wf_error(WF_ERR_CORRUPT, "%s: truncated stream: packet %ld (rows %u-%u) at offset %llu ends early",
-                        r->name, r->count + 1, h->first_row, h->first_row + h->row_count,
+                        r->name, r->count + 1, h->first_row, h->first_row + h->row_count - 1,
                         (unsigned long long)r->offset);
     if ((uint32_t)crc32(0L, r->wire, h->payload_len) != h->payload_crc)
         return wf_error(WF_ERR_CORRUPT, "%s: bad CRC in packet %ld (kind %u, rows %u-%u) at offset %llu",
-                        r->name, r->count + 1, h->kind, h->first_row, h->first_row + h->row_count,
+                        r->name, r->count + 1, h->kind, h->first_row, h->first_row + h->row_count - 1,
                         (unsigned long long)r->offset);
     if (h->flags & WF_PACKET_FLAG_DEFLATE) {
-        if ((st = grow(&r->raw, &r->raw_cap, h->raw_len + 1u)) != WF_OK) return st;
+        if ((st = grow(&r->raw, &r->raw_cap, (size_t)h->raw_len + 1u)) != WF_OK) return st;
         uLongf out_len = h->raw_len;
         if (uncompress(r->raw, &out_len, r->wire, h->payload_len) != Z_OK || out_len != h->raw_len)
             return wf_error(WF_ERR_CORRUPT, "%s: packet %ld (rows %u-%u) does not inflate to %u bytes",
-                            r->name, r->count + 1, h->first_row, h->first_row + h->row_count, h->raw_len);
+                            r->name, r->count + 1, h->first_row, h->first_row + h->row_count - 1, h->raw_len);
         *payload = r->raw;
     } else {
         if (h->raw_len != h->payload_len)

@@ -17,6 +17,7 @@
 #define WF_PACKET_VERSION 1
 #define WF_PACKET_HEADER_SIZE 48
 #define WF_PACKET_FLAG_DEFLATE 0x1
+#define WF_PACKET_MAX_PAYLOAD (1u << 30) /* bytes, wire or raw: a 4088-wide tile of 64 resultants x 1024 rows fits */
 
 typedef enum {
     WF_PK_META = 1,       /* text "key = value" lines: exposure keywords and MA table */

@@ -1,7 +1,8 @@
 /* Host-side assembly: a packet stream in, one FITS file per exposure and SCA out.
  * HDUs: primary (exposure keywords, MA table, detector values), SCI (rate, e-/s, float32),
  * ERR (e-/s, float32), DQ (uint32, WF_DQ_*), and in up-the-ramp mode RESULTANTS (uint16 ADU
- * cube [resultant][y][x]); CHECKSUM/DATASUM on every HDU. Tiles are fitted and written as
+ * cube [resultant][y][x]); COSMICRAYS (cosmic-ray truth table) when cosmic rays are on;
+ * CHECKSUM/DATASUM on every HDU (docs/PACKETS.md). Tiles are fitted and written as
  * they arrive (memory bounded by a tile, not the SCA). Written to "<name>.tmp" and renamed
  * only when every row arrived exactly once, so a damaged stream leaves no FITS behind. */
 #ifndef WF_ASSEMBLE_H

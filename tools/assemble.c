@@ -1,0 +1,1201 @@
+#include "tools/assemble.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <fitsio.h>
+#include <inttypes.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "hal/clock.h"
+#include "hal/packet.h"
+#include "tools/fitsout.h"
+#include "tools/rampfit.h"
+
+/* Per-row bookkeeping: which payloads have covered the row. Rows, not tiles, are the unit,
+ * so RESULTANTS and SATURATION packets need not share a tiling to be paired. */
+enum { ROW_DATA = 1, ROW_SAT = 2, ROW_FIT = 4 };
+
+/* ---- exposure description from META ------------------------------------------------------ */
+
+typedef struct hdr_line {
+    char key[FLEN_KEYWORD];
+    const char *value, *comment; /* into the META text copy */
+    int line;
+    int quoted; /* 'text': a string even if it looks like a number */
+} hdr_line;
+
+typedef struct meta {
+    char *text; /* owned copy; key/value pointers point into it */
+    uint32_t exposure, sca;
+    long ncols, nrows;
+    int ramp;
+    const char *mode, *sampling, *ma_name, *effects;
+    int have_seed;
+    unsigned long long seed;
+    double exptime, gain, read_noise; /* frame time is clock.frame_time */
+    double dark_current, full_well, adc_max, saturation_adu, nl_beta;
+    int have_dark, have_full_well, have_adc_max, have_sat_adu, have_nl_beta;
+    int nonlinearity; /* nonlinearity among the effects: resultants are linearised before fitting */
+    wf_clock clock;
+    hdr_line *hdr;
+    int nhdr;
+} meta;
+
+/* A SATURATION payload whose rows still wait for their resultants. */
+typedef struct pending_sat {
+    uint32_t first_row, row_count, left; /* left: rows of it not yet fitted */
+    uint8_t *sat;
+} pending_sat;
+
+typedef struct exposure {
+    meta m;
+    wf_rampfit_setup fit;
+    fitsfile *f;
+    char path[4096], tmp[4100];
+    uint8_t *rows; /* ROW_* per row */
+    pending_sat *pend;
+    size_t npend, pend_cap;
+    wf_cosmic_record *cr;
+    size_t ncr, cr_cap;
+    /* scratch, grown to the largest run of rows fitted at once (a tile) */
+    uint16_t *cube;
+    size_t cube_cap;
+    float *sci, *err;
+    uint32_t *dq;
+    size_t out_cap;
+} exposure;
+
+enum { HDU_PRIMARY = 1, HDU_SCI, HDU_ERR, HDU_DQ, HDU_RESULTANTS };
+
+typedef struct assembler {
+    const char *name;
+    const wf_assemble_options *opt;
+    /* the packet being handled, for messages */
+    long packet;
+    unsigned long long offset;
+    wf_packet_header h;
+    exposure **open;
+    size_t nopen, open_cap;
+    struct { uint32_t exposure, sca; } *done;
+    size_t ndone, done_cap;
+} assembler;
+
+static const char *kind_name(unsigned kind)
+{
+    static const char *names[] = {"?", "META", "RESULTANTS", "SINGLE", "SATURATION", "COSMIC", "END"};
+    return kind <= WF_PK_END ? names[kind] : "?";
+}
+
+/* Every message names the stream, the packet (index, kind, rows, offset) and the exposure. */
+static wf_status fail(const assembler *a, wf_status code, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
+static wf_status fail(const assembler *a, wf_status code, const char *fmt, ...)
+{
+    char detail[768], rows[48] = "";
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(detail, sizeof detail, fmt, ap);
+    va_end(ap);
+    const wf_packet_header *h = &a->h;
+    if (h->row_count > 0 && h->kind != WF_PK_END)
+        snprintf(rows, sizeof rows, ", rows %" PRIu32 "-%" PRIu32, h->first_row,
+                 h->first_row + h->row_count - 1);
+    return wf_error(code, "%s: packet %ld (%s%s, exposure %" PRIu32 " SCA %u) at offset %llu: %s",
+                    a->name, a->packet, kind_name(h->kind), rows, h->exposure, (unsigned)h->sca,
+                    a->offset, detail);
+}
+
+static wf_status fail_fits(const assembler *a, const exposure *e, int status, const char *doing)
+{
+    wf_fits_error(status, e->tmp, doing);
+    char msg[1024];
+    snprintf(msg, sizeof msg, "%s", wf_error_message());
+    return fail(a, WF_ERR_IO, "%s", msg);
+}
+
+/* "16-31, 40, 50-63" for the rows in [lo, hi) whose `bit` is set (want = 1) or clear (0). */
+static uint32_t row_ranges(const uint8_t *rows, uint32_t lo, uint32_t hi, uint8_t bit, int want,
+                           char *buf, size_t cap)
+{
+    uint32_t count = 0;
+    size_t len = 0;
+    int cut = 0;
+    buf[0] = '\0';
+    for (uint32_t y = lo; y < hi;) {
+        if (((rows[y] & bit) != 0) != want) { y++; continue; }
+        uint32_t end = y;
+        while (end + 1 < hi && ((rows[end + 1] & bit) != 0) == want) end++;
+        count += end - y + 1;
+        if (!cut) {
+            char one[32];
+            if (end == y) snprintf(one, sizeof one, "%" PRIu32, y);
+            else snprintf(one, sizeof one, "%" PRIu32 "-%" PRIu32, y, end);
+            if (len + strlen(one) + 8 < cap) {
+                len += (size_t)snprintf(buf + len, cap - len, "%s%s", len ? ", " : "", one);
+            } else {
+                snprintf(buf + len, cap - len, ", ...");
+                cut = 1;
+            }
+        }
+        y = end + 1;
+    }
+    return count;
+}
+
+/* ---- META -------------------------------------------------------------------------------- */
+
+static char *trim(char *s)
+{
+    while (isspace((unsigned char)*s)) s++;
+    char *e = s + strlen(s);
+    while (e > s && isspace((unsigned char)e[-1])) *--e = '\0';
+    return s;
+}
+
+typedef struct kv { const char *key, *value; int line; } kv;
+
+static const char *kv_get(const kv *t, int n, const char *key)
+{
+    for (int i = 0; i < n; i++)
+        if (!strcmp(t[i].key, key)) return t[i].value;
+    return NULL;
+}
+
+static wf_status meta_number(const assembler *a, const kv *t, int n, const char *key, int required,
+                             double *out, int *have)
+{
+    const char *v = kv_get(t, n, key);
+    if (have) *have = v != NULL;
+    if (!v) return required ? fail(a, WF_ERR_INPUT, "META has no '%s'", key) : WF_OK;
+    char *end;
+    errno = 0;
+    double d = strtod(v, &end);
+    if (end == v || *end || errno || !isfinite(d))
+        return fail(a, WF_ERR_INPUT, "META '%s = %s' is not a finite number", key, v);
+    *out = d;
+    return WF_OK;
+}
+
+static wf_status meta_uint(const assembler *a, const kv *t, int n, const char *key,
+                           unsigned long long max, unsigned long long *out)
+{
+    const char *v = kv_get(t, n, key);
+    if (!v) return fail(a, WF_ERR_INPUT, "META has no '%s'", key);
+    char *end;
+    errno = 0;
+    unsigned long long u = strtoull(v, &end, 10);
+    if (end == v || *end || errno || v[0] == '-' || u > max)
+        return fail(a, WF_ERR_INPUT, "META '%s = %s' is not an integer in 0..%llu", key, v, max);
+    *out = u;
+    return WF_OK;
+}
+
+/* ma_reads: resultants separated by '|', each a ','-separated list of 1-based reads or
+ * ranges "a-b" (docs/PACKETS.md). */
+static wf_status parse_ma_reads(const assembler *a, const char *spec, const char *name,
+                                wf_ma_table *ma)
+{
+    memset(ma, 0, sizeof *ma);
+    snprintf(ma->name, sizeof ma->name, "%s", name);
+    const char *p = spec;
+    long last = 0;
+    for (;;) {
+        if (ma->nresultants >= WF_MA_MAX_RESULTANTS)
+            return fail(a, WF_ERR_INPUT, "META ma_reads '%s': more than %d resultants", spec,
+                        WF_MA_MAX_RESULTANTS);
+        ma->first[ma->nresultants] = ma->nreads;
+        for (;;) {
+            while (*p == ' ') p++;
+            char *end;
+            long lo = strtol(p, &end, 10), hi;
+            if (end == p || lo < 1)
+                return fail(a, WF_ERR_INPUT, "META ma_reads '%s': expected a read number at '%s'",
+                            spec, p);
+            p = end;
+            hi = lo;
+            if (*p == '-') {
+                hi = strtol(p + 1, &end, 10);
+                if (end == p + 1 || hi < lo)
+                    return fail(a, WF_ERR_INPUT, "META ma_reads '%s': bad range at '%s'", spec, p);
+                p = end;
+            }
+            if (hi > WF_MA_MAX_READS * 1000L)
+                return fail(a, WF_ERR_INPUT, "META ma_reads '%s': read %ld out of range", spec, hi);
+            if (lo <= last)
+                return fail(a, WF_ERR_INPUT, "META ma_reads '%s': read %ld not after read %ld",
+                            spec, lo, last);
+            if (hi - lo + 1 > WF_MA_MAX_READS - ma->nreads)
+                return fail(a, WF_ERR_INPUT, "META ma_reads '%s': more than %d reads", spec,
+                            WF_MA_MAX_READS);
+            for (long r = lo; r <= hi; r++) ma->read[ma->nreads++] = (int)(r - 1);
+            last = hi;
+            while (*p == ' ') p++;
+            if (*p != ',') break;
+            p++;
+        }
+        ma->nresultants++;
+        if (*p == '\0') break;
+        if (*p != '|')
+            return fail(a, WF_ERR_INPUT, "META ma_reads '%s': unexpected '%c'", spec, *p);
+        p++;
+    }
+    ma->first[ma->nresultants] = ma->nreads;
+    return WF_OK;
+}
+
+static int has_word(const char *list, const char *word)
+{
+    size_t n = strlen(word);
+    for (const char *p = list; p && *p;) {
+        while (*p == ',' || *p == ' ') p++;
+        const char *e = p;
+        while (*e && *e != ',') e++;
+        const char *t = e;
+        while (t > p && t[-1] == ' ') t--;
+        if ((size_t)(t - p) == n && !strncmp(p, word, n)) return 1;
+        p = e;
+    }
+    return 0;
+}
+
+/* Keywords a host line may not set: FITS structure, and what the assembler writes itself
+ * (a second card with the same name would leave readers to pick one). */
+static int reserved_keyword(const char *k)
+{
+    static const char *fixed[] = {"SIMPLE", "BITPIX", "EXTEND", "END", "XTENSION", "PCOUNT",
+                                  "GCOUNT", "CHECKSUM", "DATASUM", "EXTNAME", "BSCALE", "BZERO",
+                                  "BUNIT", "CONTINUE", "LONGSTRN", NULL};
+    for (int i = 0; fixed[i]; i++)
+        if (!strcmp(k, fixed[i])) return 1;
+    return !strncmp(k, "NAXIS", 5) || !strncmp(k, "MAREAD", 6);
+}
+
+static wf_status parse_hdr_line(const assembler *a, char *key, char *value, int line, hdr_line *out)
+{
+    size_t n = strlen(key);
+    if (n < 1 || n > 8)
+        return fail(a, WF_ERR_INPUT, "META line %d: 'hdr.%s' is not a FITS keyword (1-8 characters)",
+                    line, key);
+    for (size_t i = 0; i < n; i++) {
+        char c = (char)toupper((unsigned char)key[i]);
+        if (!(isupper((unsigned char)c) || isdigit((unsigned char)c) || c == '-' || c == '_'))
+            return fail(a, WF_ERR_INPUT,
+                        "META line %d: 'hdr.%s' is not a FITS keyword (A-Z, 0-9, '-', '_')", line, key);
+        out->key[i] = c;
+    }
+    out->key[n] = '\0';
+    if (reserved_keyword(out->key))
+        return fail(a, WF_ERR_INPUT, "META line %d: 'hdr.%s' is a keyword the assembler writes itself",
+                    line, key);
+    /* value [/ comment] as in a FITS card: a quoted value may itself hold " / " */
+    value = trim(value);
+    out->comment = NULL;
+    char *rest;
+    if (value[0] == '\'') {
+        char *w = value, *r = value + 1;
+        for (;; r++) {
+            if (!*r)
+                return fail(a, WF_ERR_INPUT, "META line %d: hdr.%s: unterminated quoted value", line, key);
+            if (*r == '\'' && r[1] == '\'') { *w++ = '\''; r++; continue; } /* '' is a quote */
+            if (*r == '\'') break;
+            *w++ = *r;
+        }
+        *w = '\0';
+        out->quoted = 1;
+        rest = trim(r + 1);
+        if (*rest && *rest != '/')
+            return fail(a, WF_ERR_INPUT, "META line %d: hdr.%s: text after the quoted value", line, key);
+        if (*rest == '/') out->comment = trim(rest + 1);
+    } else {
+        char *slash = strstr(value, " / ");
+        if (slash) {
+            *slash = '\0';
+            out->comment = trim(slash + 3);
+        }
+        value = trim(value);
+    }
+    out->value = value;
+    out->line = line;
+    return WF_OK;
+}
+
+static wf_status parse_meta(const assembler *a, const char *payload, size_t len, meta *m)
+{
+    memset(m, 0, sizeof *m);
+    if (!(m->text = malloc(len + 1)))
+        return fail(a, WF_ERR_NOMEM, "cannot copy %zu bytes of META text", len);
+    memcpy(m->text, payload, len);
+    m->text[len] = '\0';
+    if (strlen(m->text) != len) return fail(a, WF_ERR_CORRUPT, "META text holds a NUL byte");
+
+    size_t nlines = 1;
+    for (size_t i = 0; i < len; i++) nlines += m->text[i] == '\n';
+    kv *t = calloc(nlines, sizeof *t);
+    m->hdr = calloc(nlines, sizeof *m->hdr);
+    if (!t || !m->hdr) {
+        free(t);
+        return fail(a, WF_ERR_NOMEM, "cannot parse META of %zu lines", nlines);
+    }
+    int n = 0, lineno = 0;
+    wf_status st = WF_OK;
+    for (char *p = m->text, *next; p; p = next) {
+        lineno++;
+        next = strchr(p, '\n');
+        if (next) *next++ = '\0';
+        char *line = trim(p);
+        if (!*line || *line == '#') continue;
+        char *eq = strchr(line, '=');
+        if (!eq) {
+            st = fail(a, WF_ERR_INPUT, "META line %d: '%.60s' is not 'key = value'", lineno, line);
+            goto out;
+        }
+        *eq = '\0';
+        char *key = trim(line), *value = eq + 1;
+        if (!strncmp(key, "hdr.", 4)) {
+            hdr_line *h = &m->hdr[m->nhdr];
+            if ((st = parse_hdr_line(a, key + 4, value, lineno, h))) goto out;
+            for (int i = 0; i < m->nhdr; i++)
+                if (!strcmp(m->hdr[i].key, h->key) && strcmp(h->key, "COMMENT") && strcmp(h->key, "HISTORY")) {
+                    st = fail(a, WF_ERR_INPUT, "META line %d: hdr.%s given twice (also line %d)",
+                              lineno, h->key, m->hdr[i].line);
+                    goto out;
+                }
+            m->nhdr++;
+            continue;
+        }
+        if (kv_get(t, n, key)) {
+            st = fail(a, WF_ERR_INPUT, "META line %d: '%s' given twice", lineno, key);
+            goto out;
+        }
+        t[n].key = key;
+        t[n].value = trim(value);
+        t[n].line = lineno;
+        n++;
+    }
+
+    unsigned long long u;
+    if ((st = meta_uint(a, t, n, "ncols", 1u << 20, &u))) goto out;
+    m->ncols = (long)u;
+    if ((st = meta_uint(a, t, n, "nrows", 1u << 20, &u))) goto out;
+    m->nrows = (long)u;
+    if (m->ncols < 1 || m->nrows < 1) {
+        st = fail(a, WF_ERR_INPUT, "META shape %ld x %ld is empty", m->ncols, m->nrows);
+        goto out;
+    }
+    if ((st = meta_uint(a, t, n, "exposure", UINT32_MAX, &u))) goto out;
+    m->exposure = (uint32_t)u;
+    if ((st = meta_uint(a, t, n, "sca", UINT16_MAX, &u))) goto out;
+    m->sca = (uint32_t)u;
+    if (m->exposure != a->h.exposure || m->sca != a->h.sca) {
+        st = fail(a, WF_ERR_INPUT, "META text says exposure %" PRIu32 " SCA %" PRIu32
+                  ", its header exposure %" PRIu32 " SCA %u",
+                  m->exposure, m->sca, a->h.exposure, (unsigned)a->h.sca);
+        goto out;
+    }
+    m->mode = kv_get(t, n, "mode");
+    if (!m->mode || (strcmp(m->mode, "ramp") && strcmp(m->mode, "single"))) {
+        st = fail(a, WF_ERR_INPUT, "META mode '%s' (expected ramp or single)", m->mode ? m->mode : "");
+        goto out;
+    }
+    m->ramp = !strcmp(m->mode, "ramp");
+    m->sampling = kv_get(t, n, "sampling");
+    m->effects = kv_get(t, n, "effects");
+    if (kv_get(t, n, "seed")) {
+        if ((st = meta_uint(a, t, n, "seed", UINT64_MAX, &m->seed))) goto out;
+        m->have_seed = 1;
+    }
+    if ((st = meta_number(a, t, n, "exptime", 1, &m->exptime, NULL)) ||
+        (st = meta_number(a, t, n, "gain", 1, &m->gain, NULL)) ||
+        (st = meta_number(a, t, n, "read_noise", 1, &m->read_noise, NULL)) ||
+        (st = meta_number(a, t, n, "dark_current", 0, &m->dark_current, &m->have_dark)) ||
+        (st = meta_number(a, t, n, "full_well", 0, &m->full_well, &m->have_full_well)) ||
+        (st = meta_number(a, t, n, "adc_max", 0, &m->adc_max, &m->have_adc_max)) ||
+        (st = meta_number(a, t, n, "saturation_adu", 0, &m->saturation_adu, &m->have_sat_adu)) ||
+        (st = meta_number(a, t, n, "nl_beta", 0, &m->nl_beta, &m->have_nl_beta)))
+        goto out;
+    if (!(m->exptime > 0) || !(m->gain > 0) || !(m->read_noise >= 0)) {
+        st = fail(a, WF_ERR_INPUT, "META exptime %g s, gain %g e-/ADU, read_noise %g e-: "
+                  "need exptime > 0, gain > 0, read_noise >= 0", m->exptime, m->gain, m->read_noise);
+        goto out;
+    }
+    m->nonlinearity = has_word(m->effects, "nonlinearity");
+    if (m->nonlinearity && !m->have_nl_beta) {
+        st = fail(a, WF_ERR_INPUT, "META effects include nonlinearity but there is no nl_beta");
+        goto out;
+    }
+    if (m->ramp) {
+        const char *reads = kv_get(t, n, "ma_reads");
+        m->ma_name = kv_get(t, n, "ma_table");
+        if (!reads) {
+            st = fail(a, WF_ERR_INPUT, "META has no 'ma_reads' (ramp mode)");
+            goto out;
+        }
+        if ((st = meta_number(a, t, n, "frame_time", 1, &m->clock.frame_time, NULL))) goto out;
+        if (!(m->clock.frame_time > 0)) {
+            st = fail(a, WF_ERR_INPUT, "META frame_time %g s is not positive", m->clock.frame_time);
+            goto out;
+        }
+        st = parse_ma_reads(a, reads, m->ma_name ? m->ma_name : "", &m->clock.ma);
+    }
+out:
+    free(t);
+    return st;
+}
+
+static void meta_free(meta *m)
+{
+    free(m->text);
+    free(m->hdr);
+    memset(m, 0, sizeof *m);
+}
+
+/* ---- FITS layout ------------------------------------------------------------------------- */
+
+static void key_dbl(fitsfile *f, const char *key, double v, const char *comment, int *status)
+{
+    fits_write_key_dbl(f, key, v, -wf_fits_double_digits(v), comment, status);
+}
+
+/* Strings past one card's 68 characters go out with the CONTINUE convention. */
+static void key_str(fitsfile *f, const char *key, const char *v, const char *comment, int *status)
+{
+    if (strlen(v) > 68) fits_write_key_longstr(f, key, v, comment, status);
+    else fits_write_key_str(f, key, v, comment, status);
+}
+
+static void ma_reads_text(const wf_ma_table *ma, int r, char *buf, size_t cap)
+{
+    size_t len = 0;
+    buf[0] = '\0';
+    for (int j = ma->first[r]; j < ma->first[r + 1];) {
+        int k = j;
+        while (k + 1 < ma->first[r + 1] && ma->read[k + 1] == ma->read[k] + 1) k++;
+        int n = k == j ? snprintf(buf + len, cap - len, "%s%d", len ? "," : "", ma->read[j] + 1)
+                       : snprintf(buf + len, cap - len, "%s%d-%d", len ? "," : "", ma->read[j] + 1,
+                                  ma->read[k] + 1);
+        if (n < 0 || (size_t)n >= cap - len) return;
+        len += (size_t)n;
+        j = k + 1;
+    }
+}
+
+static int write_host_line(fitsfile *f, const hdr_line *h, int *status)
+{
+    const char *v = h->value, *c = h->comment;
+    if (!strcmp(h->key, "COMMENT")) return fits_write_comment(f, v, status);
+    if (!strcmp(h->key, "HISTORY")) return fits_write_history(f, v, status);
+    if (h->quoted) {
+        key_str(f, h->key, v, c, status);
+        return *status;
+    }
+    char *end;
+    errno = 0;
+    long long i = strtoll(v, &end, 10);
+    if (end != v && !*end && !errno) return fits_write_key_lng(f, h->key, i, c, status);
+    errno = 0;
+    double d = strtod(v, &end);
+    if (end != v && !*end && !errno && isfinite(d)) {
+        key_dbl(f, h->key, d, c, status);
+        return *status;
+    }
+    key_str(f, h->key, v, c, status);
+    return *status;
+}
+
+static int write_primary(fitsfile *f, const meta *m, int *status)
+{
+    fits_create_img(f, BYTE_IMG, 0, NULL, status);
+    fits_write_key_lng(f, "EXPOSURE", m->exposure, "exposure id", status);
+    fits_write_key_lng(f, "SCA", m->sca, "sensor chip assembly, 1-18", status);
+    fits_write_key_str(f, "MODE", m->mode, "ramp: up the ramp; single: single frame", status);
+    if (m->sampling) fits_write_key_str(f, "SAMPLING", m->sampling, "per-read or direct resultants", status);
+    key_dbl(f, "EXPTIME", m->exptime, "[s] exposure time", status);
+    if (m->ramp) {
+        key_dbl(f, "FRAMTIME", m->clock.frame_time, "[s] time per full-frame read", status);
+        if (m->ma_name) key_str(f, "MA_TABLE", m->ma_name, "MultiAccum table", status);
+        fits_write_key_lng(f, "NRESULT", m->clock.ma.nresultants, "resultants", status);
+        for (int r = 0; r < m->clock.ma.nresultants; r++) {
+            char key[FLEN_KEYWORD], reads[4096], comment[FLEN_COMMENT];
+            snprintf(key, sizeof key, "MAREAD%02d", r + 1);
+            snprintf(comment, sizeof comment, "reads (1-based) averaged in resultant %d", r + 1);
+            ma_reads_text(&m->clock.ma, r, reads, sizeof reads);
+            key_str(f, key, reads, comment, status);
+        }
+    }
+    key_dbl(f, "GAIN", m->gain, "[electron/adu] gain", status);
+    key_dbl(f, "RDNOISE", m->read_noise,
+            m->ramp ? "[electron] read noise per read" : "[electron] read noise per exposure", status);
+    if (m->have_dark) key_dbl(f, "DARKCUR", m->dark_current, "[electron/s] dark current", status);
+    if (m->have_full_well) key_dbl(f, "FULLWELL", m->full_well, "[electron] full well", status);
+    if (m->have_adc_max) key_dbl(f, "ADCMAX", m->adc_max, "[adu] ADC ceiling", status);
+    if (m->have_sat_adu) key_dbl(f, "SATADU", m->saturation_adu, "[adu] saturation level", status);
+    if (m->have_nl_beta) key_dbl(f, "NLBETA", m->nl_beta, "nonlinearity: q + NLBETA q^2", status);
+    if (m->have_seed) fits_write_key_ulng(f, "SEED", m->seed, "random seed", status);
+    if (m->effects) key_str(f, "EFFECTS", m->effects, "detector effects simulated", status);
+    return *status;
+}
+
+static int create_image(fitsfile *f, int bitpix, int naxis, long *naxes, const char *extname,
+                        const char *bunit, const char *comment, int *status)
+{
+    fits_create_img(f, bitpix, naxis, naxes, status);
+    fits_write_key_str(f, "EXTNAME", extname, comment, status);
+    if (bunit) fits_write_key_str(f, "BUNIT", bunit, "physical unit of the data", status);
+    return *status;
+}
+
+static void exposure_free(exposure *e)
+{
+    if (!e) return;
+    if (e->f) {
+        int status = 0;
+        fits_close_file(e->f, &status);
+        fits_clear_errmsg();
+        e->f = NULL;
+    }
+    if (e->tmp[0]) remove(e->tmp);
+    meta_free(&e->m);
+    for (size_t i = 0; i < e->npend; i++) free(e->pend[i].sat);
+    free(e->pend);
+    free(e->rows);
+    free(e->cr);
+    free(e->cube);
+    free(e->sci);
+    free(e->err);
+    free(e->dq);
+    free(e);
+}
+
+static wf_status reserve(const assembler *a, exposure *e, const char *doing)
+{
+    wf_status st = wf_fits_reserve_checksum(e->f, e->tmp);
+    return st ? fail(a, st, "%s: %s", doing, wf_error_message()) : WF_OK;
+}
+
+static wf_status exposure_open(assembler *a, const void *payload, exposure **out)
+{
+    const wf_packet_header *h = &a->h;
+    *out = NULL;
+    for (size_t i = 0; i < a->nopen; i++)
+        if (a->open[i]->m.exposure == h->exposure && a->open[i]->m.sca == h->sca)
+            return fail(a, WF_ERR_CORRUPT, "second META while the exposure is open (no END before it)");
+    for (size_t i = 0; i < a->ndone; i++)
+        if (a->done[i].exposure == h->exposure && a->done[i].sca == h->sca)
+            return fail(a, WF_ERR_CORRUPT, "exposure already assembled from this stream");
+    exposure *e = calloc(1, sizeof *e);
+    if (!e) return fail(a, WF_ERR_NOMEM, "cannot allocate exposure state");
+    wf_status st = parse_meta(a, payload, h->raw_len, &e->m);
+    if (st) goto bad;
+    const meta *m = &e->m;
+    if (m->ramp && (st = wf_rampfit_setup_init(&m->clock, m->read_noise, &e->fit))) {
+        char why[512];
+        snprintf(why, sizeof why, "%s", wf_error_message());
+        st = fail(a, st, "%s", why);
+        goto bad;
+    }
+    if (!(e->rows = calloc((size_t)m->nrows, 1))) {
+        st = fail(a, WF_ERR_NOMEM, "cannot allocate row table of %ld rows", m->nrows);
+        goto bad;
+    }
+    const char *dir = a->opt && a->opt->out_dir && *a->opt->out_dir ? a->opt->out_dir : ".";
+    int n = snprintf(e->path, sizeof e->path, "%s/wfisim_e%06" PRIu32 "_sca%02" PRIu32 ".fits", dir,
+                     m->exposure, m->sca);
+    if (n < 0 || (size_t)n >= sizeof e->path) {
+        st = fail(a, WF_ERR_INPUT, "output path under '%s' too long", dir);
+        goto bad;
+    }
+    snprintf(e->tmp, sizeof e->tmp, "%s.tmp", e->path);
+    /* A .tmp is only ever a leftover of an interrupted run: replace it. fits_create_diskfile
+     * takes the name literally (no cfitsio "[ext]" or "!" syntax from a user's directory). */
+    remove(e->tmp);
+    int status = 0;
+    if (fits_create_diskfile(&e->f, e->tmp, &status)) {
+        e->f = NULL;
+        st = fail_fits(a, e, status, "creating the FITS file");
+        e->tmp[0] = '\0'; /* not ours: never remove what we could not create */
+        goto bad;
+    }
+    long naxes[3] = {m->ncols, m->nrows, m->ramp ? m->clock.ma.nresultants : 1};
+    if (write_primary(e->f, m, &status)) {
+        st = fail_fits(a, e, status, "writing the primary header");
+        goto bad;
+    }
+    for (int i = 0; i < m->nhdr; i++) {
+        const hdr_line *hl = &m->hdr[i];
+        char card[FLEN_CARD];
+        int probe = 0;
+        if (strcmp(hl->key, "COMMENT") && strcmp(hl->key, "HISTORY") &&
+            fits_read_card(e->f, hl->key, card, &probe) == 0) {
+            st = fail(a, WF_ERR_INPUT, "META line %d: hdr.%s repeats a keyword written from META",
+                      hl->line, hl->key);
+            goto bad;
+        }
+        fits_clear_errmsg(); /* the probe's "keyword not found" */
+        if (write_host_line(e->f, hl, &status)) {
+            char what[128];
+            snprintf(what, sizeof what, "writing hdr.%s (META line %d)", hl->key, hl->line);
+            st = fail_fits(a, e, status, what);
+            goto bad;
+        }
+    }
+    if ((st = reserve(a, e, "primary header"))) goto bad;
+    if (create_image(e->f, FLOAT_IMG, 2, naxes, "SCI", "electron/s",
+                     m->ramp ? "count rate from the ramp fit" : "count rate", &status)) {
+        st = fail_fits(a, e, status, "creating SCI");
+        goto bad;
+    }
+    if ((st = reserve(a, e, "SCI header"))) goto bad;
+    if (create_image(e->f, FLOAT_IMG, 2, naxes, "ERR", "electron/s",
+                     "1-sigma uncertainty: read and Poisson", &status)) {
+        st = fail_fits(a, e, status, "creating ERR");
+        goto bad;
+    }
+    if ((st = reserve(a, e, "ERR header"))) goto bad;
+    if (create_image(e->f, ULONG_IMG, 2, naxes, "DQ", NULL, "data quality: 1 DO_NOT_USE, 2 SATURATED, 4 JUMP_DET", &status)) {
+        st = fail_fits(a, e, status, "creating DQ");
+        goto bad;
+    }
+    if ((st = reserve(a, e, "DQ header"))) goto bad;
+    if (m->ramp) {
+        if (create_image(e->f, USHORT_IMG, 3, naxes, "RESULTANTS", "adu",
+                         "averaged reads [resultant][y][x]", &status)) {
+            st = fail_fits(a, e, status, "creating RESULTANTS");
+            goto bad;
+        }
+        if ((st = reserve(a, e, "RESULTANTS header"))) goto bad;
+    }
+    *out = e;
+    return WF_OK;
+bad:
+    exposure_free(e);
+    return st;
+}
+
+/* ---- pixels ------------------------------------------------------------------------------ */
+
+static int host_is_little_endian(void)
+{
+    const uint16_t one = 1;
+    return *(const unsigned char *)&one == 1;
+}
+
+static wf_status grow(const assembler *a, void **buf, size_t *cap, size_t need, size_t elem)
+{
+    if (need <= *cap) return WF_OK;
+    void *p = realloc(*buf, need * elem);
+    if (!p) return fail(a, WF_ERR_NOMEM, "cannot allocate %zu bytes for a tile", need * elem);
+    *buf = p;
+    *cap = need;
+    return WF_OK;
+}
+
+static wf_status grow_out(const assembler *a, exposure *e, size_t npix)
+{
+    if (npix <= e->out_cap) return WF_OK;
+    size_t c1 = e->out_cap, c2 = e->out_cap, c3 = e->out_cap;
+    void *sci = e->sci, *err = e->err, *dq = e->dq;
+    wf_status st = grow(a, &sci, &c1, npix, sizeof *e->sci);
+    e->sci = sci;
+    if (!st) st = grow(a, &err, &c2, npix, sizeof *e->err);
+    e->err = err;
+    if (!st) st = grow(a, &dq, &c3, npix, sizeof *e->dq);
+    e->dq = dq;
+    if (!st) e->out_cap = npix;
+    return st;
+}
+
+static wf_status grow_cube(const assembler *a, exposure *e, size_t n)
+{
+    void *p = e->cube;
+    wf_status st = grow(a, &p, &e->cube_cap, n, sizeof *e->cube);
+    e->cube = p;
+    return st;
+}
+
+/* Inverse of q_meas = q + beta q^2 on the rising branch; past the turnover (where the
+ * forward law has no preimage) the turnover charge. Written as 2 q / (1 + sqrt(...)) so
+ * beta -> 0 has no cancellation. */
+static double linearise(double qm, double beta)
+{
+    double disc = 1.0 + 4.0 * beta * qm;
+    return 2.0 * qm / (1.0 + sqrt(disc > 0.0 ? disc : 0.0));
+}
+
+/* Fits one row: cube points at resultant 0 of the row, planes `stride` apart. */
+static wf_status fit_row(const assembler *a, const exposure *e, uint32_t y, const uint16_t *cube,
+                         size_t stride, const uint8_t *sat, float *sci, float *err, uint32_t *dq)
+{
+    const meta *m = &e->m;
+    const int nres = e->fit.nres;
+    double q[WF_MA_MAX_RESULTANTS];
+    for (long x = 0; x < m->ncols; x++) {
+        for (int r = 0; r < nres; r++) {
+            double v = cube[(size_t)r * stride + (size_t)x] * m->gain;
+            q[r] = m->nonlinearity ? linearise(v, m->nl_beta) : v;
+        }
+        int first_sat = sat[x] < nres ? sat[x] : nres;
+        wf_rampfit_result res;
+        wf_status st = wf_rampfit_pixel(&e->fit, q, first_sat, &res);
+        if (st) {
+            char why[512];
+            snprintf(why, sizeof why, "%s", wf_error_message());
+            return fail(a, st, "ramp fit of pixel (x %ld, y %" PRIu32 "): %s", x, y, why);
+        }
+        double var = (res.var_read > 0 ? res.var_read : 0) + (res.var_poisson > 0 ? res.var_poisson : 0);
+        sci[x] = (float)res.rate;
+        err[x] = (float)sqrt(var);
+        dq[x] = res.dq | (first_sat < nres ? WF_DQ_SATURATED : 0u);
+    }
+    return WF_OK;
+}
+
+static wf_status write_rows(const assembler *a, exposure *e, int hdu, int type, uint32_t y0,
+                            uint32_t n, void *data, const char *what)
+{
+    int status = 0;
+    long first[2] = {1, (long)y0 + 1};
+    fits_movabs_hdu(e->f, hdu, NULL, &status);
+    fits_write_pix(e->f, type, first, (LONGLONG)n * e->m.ncols, data, &status);
+    if (status) {
+        char doing[96];
+        snprintf(doing, sizeof doing, "writing %s rows %" PRIu32 "-%" PRIu32, what, y0, y0 + n - 1);
+        return fail_fits(a, e, status, doing);
+    }
+    return WF_OK;
+}
+
+static wf_status write_fit(const assembler *a, exposure *e, uint32_t y0, uint32_t n)
+{
+    wf_status st;
+    if ((st = write_rows(a, e, HDU_SCI, TFLOAT, y0, n, e->sci, "SCI")) ||
+        (st = write_rows(a, e, HDU_ERR, TFLOAT, y0, n, e->err, "ERR")) ||
+        (st = write_rows(a, e, HDU_DQ, TUINT, y0, n, e->dq, "DQ")))
+        return st;
+    for (uint32_t y = y0; y < y0 + n; y++) e->rows[y] |= ROW_FIT;
+    return WF_OK;
+}
+
+static pending_sat *pending_for(exposure *e, uint32_t y)
+{
+    for (size_t i = 0; i < e->npend; i++)
+        if (y >= e->pend[i].first_row && y - e->pend[i].first_row < e->pend[i].row_count)
+            return &e->pend[i];
+    return NULL;
+}
+
+static void pending_done(exposure *e, pending_sat *p)
+{
+    if (--p->left) return;
+    free(p->sat);
+    *p = e->pend[--e->npend];
+}
+
+/* Packet covers rows no earlier packet of its kind covered, and lies inside the SCA. */
+static wf_status check_rows(const assembler *a, const exposure *e, uint8_t bit)
+{
+    const wf_packet_header *h = &a->h;
+    if (h->ncols != (uint32_t)e->m.ncols)
+        return fail(a, WF_ERR_CORRUPT, "%" PRIu32 " columns, META says %ld", h->ncols, e->m.ncols);
+    if (h->row_count == 0 || h->first_row >= (uint32_t)e->m.nrows ||
+        h->row_count > (uint32_t)e->m.nrows - h->first_row)
+        return fail(a, WF_ERR_CORRUPT, "rows outside the %ld rows META announced", e->m.nrows);
+    char dup[256];
+    if (row_ranges(e->rows, h->first_row, h->first_row + h->row_count, bit, 1, dup, sizeof dup))
+        return fail(a, WF_ERR_CORRUPT, "duplicate: rows %s already received", dup);
+    return WF_OK;
+}
+
+static wf_status check_size(const assembler *a, uint64_t planes, uint64_t elem)
+{
+    const wf_packet_header *h = &a->h;
+    uint64_t want = planes * h->row_count * h->ncols * elem;
+    if (h->raw_len != want)
+        return fail(a, WF_ERR_CORRUPT, "payload of %" PRIu32 " bytes, its shape needs %" PRIu64,
+                    h->raw_len, want);
+    return WF_OK;
+}
+
+static wf_status on_resultants(const assembler *a, exposure *e, const void *payload)
+{
+    const wf_packet_header *h = &a->h;
+    const int nres = e->fit.nres;
+    if (!e->m.ramp) return fail(a, WF_ERR_CORRUPT, "RESULTANTS in a single-frame exposure");
+    wf_status st;
+    if ((st = check_rows(a, e, ROW_DATA))) return st;
+    if (h->nplanes != (uint32_t)nres)
+        return fail(a, WF_ERR_CORRUPT, "%" PRIu32 " resultants, META's MA table has %d", h->nplanes, nres);
+    if ((st = check_size(a, (uint64_t)nres, 2))) return st;
+    size_t plane = (size_t)h->row_count * (size_t)h->ncols;
+    const uint16_t *cube = payload;
+    if (!host_is_little_endian()) {
+        if ((st = grow_cube(a, e, plane * nres))) return st;
+        const unsigned char *b = payload;
+        for (size_t i = 0; i < plane * nres; i++) e->cube[i] = (uint16_t)(b[2 * i] | b[2 * i + 1] << 8);
+        cube = e->cube;
+    }
+    int status = 0;
+    long fp[3] = {1, (long)h->first_row + 1, 1};
+    long lp[3] = {e->m.ncols, (long)(h->first_row + h->row_count), nres};
+    fits_movabs_hdu(e->f, HDU_RESULTANTS, NULL, &status);
+    fits_write_subset(e->f, TUSHORT, fp, lp, (void *)(uintptr_t)cube, &status);
+    if (status) return fail_fits(a, e, status, "writing RESULTANTS");
+    for (uint32_t y = h->first_row; y < h->first_row + h->row_count; y++) e->rows[y] |= ROW_DATA;
+
+    if ((st = grow_out(a, e, plane))) return st;
+    const size_t nc = (size_t)e->m.ncols;
+    for (uint32_t y = h->first_row, end = h->first_row + h->row_count; y < end;) {
+        if (!(e->rows[y] & ROW_SAT)) { y++; continue; }
+        uint32_t y0 = y;
+        for (; y < end && (e->rows[y] & ROW_SAT); y++) {
+            pending_sat *p = pending_for(e, y);
+            if (!p) return fail(a, WF_ERR_INTERNAL, "saturation of row %" PRIu32 " lost", y);
+            size_t k = (size_t)(y - y0) * nc;
+            st = fit_row(a, e, y, cube + (size_t)(y - h->first_row) * nc, plane,
+                         p->sat + (size_t)(y - p->first_row) * nc, e->sci + k, e->err + k, e->dq + k);
+            if (st) return st;
+            pending_done(e, p);
+        }
+        if ((st = write_fit(a, e, y0, y - y0))) return st;
+    }
+    return WF_OK;
+}
+
+static wf_status on_saturation_ramp(const assembler *a, exposure *e, const uint8_t *sat)
+{
+    const wf_packet_header *h = &a->h;
+    const int nres = e->fit.nres;
+    const size_t nc = (size_t)e->m.ncols;
+    const uint32_t end = h->first_row + h->row_count;
+    wf_status st;
+    uint32_t waiting = 0;
+    for (uint32_t y = h->first_row; y < end; y++) {
+        e->rows[y] |= ROW_SAT;
+        waiting += !(e->rows[y] & ROW_DATA);
+    }
+    if ((st = grow_out(a, e, (size_t)h->row_count * nc))) return st;
+    /* Rows whose resultants came first were written to the file and not kept: read them back
+     * rather than hold cubes for an unknown time (memory stays one tile whatever the order). */
+    for (uint32_t y = h->first_row; y < end;) {
+        if (!(e->rows[y] & ROW_DATA)) { y++; continue; }
+        uint32_t y0 = y;
+        while (y < end && (e->rows[y] & ROW_DATA)) y++;
+        size_t n = y - y0, plane = n * nc;
+        if ((st = grow_cube(a, e, plane * nres))) return st;
+        int status = 0, anynul = 0;
+        long fp[3] = {1, (long)y0 + 1, 1}, lp[3] = {(long)nc, (long)y, nres}, inc[3] = {1, 1, 1};
+        fits_movabs_hdu(e->f, HDU_RESULTANTS, NULL, &status);
+        fits_read_subset(e->f, TUSHORT, fp, lp, inc, NULL, e->cube, &anynul, &status);
+        if (status) return fail_fits(a, e, status, "reading back RESULTANTS");
+        for (uint32_t r = y0; r < y; r++) {
+            size_t k = (size_t)(r - y0) * nc;
+            st = fit_row(a, e, r, e->cube + k, plane, sat + (size_t)(r - h->first_row) * nc,
+                         e->sci + k, e->err + k, e->dq + k);
+            if (st) return st;
+        }
+        if ((st = write_fit(a, e, y0, (uint32_t)n))) return st;
+    }
+    if (!waiting) return WF_OK;
+    if (e->npend == e->pend_cap) {
+        size_t cap = e->pend_cap ? 2 * e->pend_cap : 8;
+        pending_sat *p = realloc(e->pend, cap * sizeof *p);
+        if (!p) return fail(a, WF_ERR_NOMEM, "cannot grow the pending table");
+        e->pend = p;
+        e->pend_cap = cap;
+    }
+    pending_sat *p = &e->pend[e->npend];
+    if (!(p->sat = malloc((size_t)h->row_count * nc)))
+        return fail(a, WF_ERR_NOMEM, "cannot keep a saturation map of %" PRIu32 " rows", h->row_count);
+    memcpy(p->sat, sat, (size_t)h->row_count * nc);
+    p->first_row = h->first_row;
+    p->row_count = h->row_count;
+    p->left = waiting;
+    e->npend++;
+    return WF_OK;
+}
+
+static wf_status on_single(const assembler *a, exposure *e, const void *payload)
+{
+    const wf_packet_header *h = &a->h;
+    if (e->m.ramp) return fail(a, WF_ERR_CORRUPT, "SINGLE in an up-the-ramp exposure");
+    wf_status st;
+    if ((st = check_rows(a, e, ROW_DATA))) return st;
+    if (h->nplanes != 1) return fail(a, WF_ERR_CORRUPT, "nplanes %" PRIu32 ", expected 1", h->nplanes);
+    if ((st = check_size(a, 1, 4))) return st;
+    size_t npix = (size_t)h->row_count * h->ncols;
+    if ((st = grow_out(a, e, npix))) return st;
+    const unsigned char *b = payload;
+    const int le = host_is_little_endian();
+    const double g = e->m.gain, t = e->m.exptime, rn2 = e->m.read_noise * e->m.read_noise;
+    for (size_t i = 0; i < npix; i++) {
+        float adu;
+        if (le) {
+            memcpy(&adu, b + 4 * i, 4);
+        } else {
+            uint32_t u = (uint32_t)b[4 * i] | (uint32_t)b[4 * i + 1] << 8 |
+                         (uint32_t)b[4 * i + 2] << 16 | (uint32_t)b[4 * i + 3] << 24;
+            memcpy(&adu, &u, 4);
+        }
+        double q = adu * g;
+        e->sci[i] = (float)(q / t);
+        e->err[i] = (float)(sqrt((q > 0 ? q : 0) + rn2) / t);
+    }
+    if ((st = write_rows(a, e, HDU_SCI, TFLOAT, h->first_row, h->row_count, e->sci, "SCI")) ||
+        (st = write_rows(a, e, HDU_ERR, TFLOAT, h->first_row, h->row_count, e->err, "ERR")))
+        return st;
+    for (uint32_t y = h->first_row; y < h->first_row + h->row_count; y++) e->rows[y] |= ROW_DATA;
+    return WF_OK;
+}
+
+static wf_status on_saturation(const assembler *a, exposure *e, const void *payload)
+{
+    const wf_packet_header *h = &a->h;
+    wf_status st;
+    if ((st = check_rows(a, e, ROW_SAT))) return st;
+    if (h->nplanes != 1) return fail(a, WF_ERR_CORRUPT, "nplanes %" PRIu32 ", expected 1", h->nplanes);
+    if ((st = check_size(a, 1, 1))) return st;
+    if (e->m.ramp) return on_saturation_ramp(a, e, payload);
+    size_t npix = (size_t)h->row_count * h->ncols;
+    if ((st = grow_out(a, e, npix))) return st;
+    const uint8_t *sat = payload;
+    for (size_t i = 0; i < npix; i++) e->dq[i] = sat[i] == 0 ? WF_DQ_SATURATED : 0u;
+    if ((st = write_rows(a, e, HDU_DQ, TUINT, h->first_row, h->row_count, e->dq, "DQ"))) return st;
+    for (uint32_t y = h->first_row; y < h->first_row + h->row_count; y++) e->rows[y] |= ROW_SAT | ROW_FIT;
+    return WF_OK;
+}
+
+static float get_f32(const unsigned char *p)
+{
+    uint32_t u = (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+static uint32_t get_u32(const unsigned char *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static wf_status on_cosmic(const assembler *a, exposure *e, const void *payload)
+{
+    const wf_packet_header *h = &a->h;
+    if (h->ncols != (uint32_t)e->m.ncols)
+        return fail(a, WF_ERR_CORRUPT, "%" PRIu32 " columns, META says %ld", h->ncols, e->m.ncols);
+    if ((uint64_t)h->nplanes * 32u != h->raw_len)
+        return fail(a, WF_ERR_CORRUPT, "%" PRIu32 " bytes for %" PRIu32 " records of 32 bytes",
+                    h->raw_len, h->nplanes);
+    if (h->nplanes > SIZE_MAX / sizeof *e->cr - e->ncr)
+        return fail(a, WF_ERR_NOMEM, "too many cosmic-ray records");
+    size_t need = e->ncr + h->nplanes;
+    if (need > e->cr_cap) {
+        size_t cap = 2 * e->cr_cap > need ? 2 * e->cr_cap : need;
+        wf_cosmic_record *p = realloc(e->cr, cap * sizeof *p);
+        if (!p) return fail(a, WF_ERR_NOMEM, "cannot keep %zu cosmic-ray records", need);
+        e->cr = p;
+        e->cr_cap = cap;
+    }
+    const unsigned char *b = payload;
+    for (uint32_t i = 0; i < h->nplanes; i++, b += 32) {
+        wf_cosmic_record *c = &e->cr[e->ncr++];
+        c->x0 = get_f32(b);
+        c->y0 = get_f32(b + 4);
+        c->x1 = get_f32(b + 8);
+        c->y1 = get_f32(b + 12);
+        c->electrons = get_f32(b + 16);
+        c->read = get_u32(b + 20);
+        c->id = get_u32(b + 24);
+        c->reserved = 0;
+    }
+    return WF_OK;
+}
+
+static int cosmic_by_id(const void *pa, const void *pb)
+{
+    const wf_cosmic_record *x = pa, *y = pb;
+    return (x->id > y->id) - (x->id < y->id);
+}
+
+static wf_status write_cosmics(const assembler *a, exposure *e)
+{
+    if (e->ncr) qsort(e->cr, e->ncr, sizeof *e->cr, cosmic_by_id);
+    for (size_t i = 1; i < e->ncr; i++)
+        if (e->cr[i].id == e->cr[i - 1].id)
+            return fail(a, WF_ERR_CORRUPT, "cosmic-ray id %" PRIu32 " received twice", e->cr[i].id);
+    char *ttype[] = {"X0", "Y0", "X1", "Y1", "ELECTRONS", "READ", "ID"};
+    char *tform[] = {"1E", "1E", "1E", "1E", "1E", "1V", "1V"};
+    char *tunit[] = {"pixel", "pixel", "pixel", "pixel", "electron", "", ""};
+    int status = 0;
+    fits_create_tbl(e->f, BINARY_TBL, (LONGLONG)e->ncr, 7, ttype, tform, tunit, "COSMICRAYS", &status);
+    fits_write_comment(e->f, "cosmic-ray truth: track ends (0-based pixel centres), charge, "
+                             "0-based read of the hit, id; sorted by id", &status);
+    if (status) return fail_fits(a, e, status, "creating COSMICRAYS");
+    wf_status st = reserve(a, e, "COSMICRAYS header");
+    if (st || e->ncr == 0) return st;
+    float *col = malloc(e->ncr * sizeof *col);
+    uint32_t *ucol = malloc(e->ncr * sizeof *ucol);
+    if (!col || !ucol) {
+        free(col);
+        free(ucol);
+        return fail(a, WF_ERR_NOMEM, "cannot allocate the COSMICRAYS columns");
+    }
+    for (int c = 0; c < 7 && !status; c++) {
+        for (size_t i = 0; i < e->ncr; i++) {
+            const wf_cosmic_record *r = &e->cr[i];
+            const float fv[5] = {r->x0, r->y0, r->x1, r->y1, r->electrons};
+            if (c < 5) col[i] = fv[c];
+            else ucol[i] = c == 5 ? r->read : r->id;
+        }
+        if (c < 5) fits_write_col(e->f, TFLOAT, c + 1, 1, 1, (LONGLONG)e->ncr, col, &status);
+        else fits_write_col(e->f, TUINT, c + 1, 1, 1, (LONGLONG)e->ncr, ucol, &status);
+    }
+    free(col);
+    free(ucol);
+    return status ? fail_fits(a, e, status, "writing COSMICRAYS") : WF_OK;
+}
+
+static wf_status on_end(assembler *a, exposure *e, char *last_path, size_t last_path_len)
+{
+    const wf_packet_header *h = &a->h;
+    if (h->row_count != (uint32_t)e->m.nrows)
+        return fail(a, WF_ERR_CORRUPT, "END announces %" PRIu32 " rows, META %ld", h->row_count, e->m.nrows);
+    char data[300], sat[300];
+    uint32_t nr = (uint32_t)e->m.nrows;
+    uint32_t miss_d = row_ranges(e->rows, 0, nr, ROW_DATA, 0, data, sizeof data);
+    uint32_t miss_s = row_ranges(e->rows, 0, nr, ROW_SAT, 0, sat, sizeof sat);
+    const char *dk = e->m.ramp ? "RESULTANTS" : "SINGLE";
+    if (miss_d && miss_s && !strcmp(data, sat))
+        return fail(a, WF_ERR_CORRUPT, "rows %s missing (no %s, no SATURATION)", data, dk);
+    if (miss_d || miss_s) {
+        char part_d[400] = "", part_s[400] = "";
+        if (miss_d) snprintf(part_d, sizeof part_d, "rows %s missing (no %s)", data, dk);
+        if (miss_s) snprintf(part_s, sizeof part_s, "rows %s missing (no SATURATION)", sat);
+        return fail(a, WF_ERR_CORRUPT, "%s%s%s", part_d, miss_d && miss_s ? "; " : "", part_s);
+    }
+    uint32_t unfit = row_ranges(e->rows, 0, nr, ROW_FIT, 0, data, sizeof data);
+    if (unfit || e->npend)
+        return fail(a, WF_ERR_INTERNAL, "rows %s received but not fitted", data);
+
+    wf_status st;
+    if ((e->m.effects && has_word(e->m.effects, "cosmic")) || e->ncr)
+        if ((st = write_cosmics(a, e))) return st;
+    if ((st = wf_fits_checksum_all(e->f, e->tmp))) {
+        char why[900];
+        snprintf(why, sizeof why, "%s", wf_error_message());
+        return fail(a, st, "%s", why);
+    }
+    int status = 0;
+    fits_close_file(e->f, &status);
+    e->f = NULL;
+    if (status) return fail_fits(a, e, status, "closing (flushing) the FITS file");
+    if (rename(e->tmp, e->path))
+        return fail(a, WF_ERR_IO, "cannot rename %s to %s: %s", e->tmp, e->path, strerror(errno));
+    e->tmp[0] = '\0';
+    if (!(a->opt && a->opt->quiet)) fprintf(stderr, "wrote %s\n", e->path);
+    if (last_path && last_path_len) snprintf(last_path, last_path_len, "%s", e->path);
+    return WF_OK;
+}
+
+/* ---- the stream -------------------------------------------------------------------------- */
+
+static exposure *find_open(const assembler *a, size_t *index)
+{
+    for (size_t i = 0; i < a->nopen; i++)
+        if (a->open[i]->m.exposure == a->h.exposure && a->open[i]->m.sca == a->h.sca) {
+            if (index) *index = i;
+            return a->open[i];
+        }
+    return NULL;
+}
+
+static wf_status handle(assembler *a, const void *payload, char *last_path, size_t last_path_len)
+{
+    const wf_packet_header *h = &a->h;
+    wf_status st;
+    if (h->kind == WF_PK_META) {
+        exposure *e;
+        if ((st = exposure_open(a, payload, &e))) return st;
+        if (a->nopen == a->open_cap) {
+            size_t cap = a->open_cap ? 2 * a->open_cap : 4;
+            exposure **p = realloc(a->open, cap * sizeof *p);
+            if (!p) {
+                exposure_free(e);
+                return fail(a, WF_ERR_NOMEM, "cannot track open exposures");
+            }
+            a->open = p;
+            a->open_cap = cap;
+        }
+        a->open[a->nopen++] = e;
+        return WF_OK;
+    }
+    size_t idx = 0;
+    exposure *e = find_open(a, &idx);
+    if (!e) return fail(a, WF_ERR_CORRUPT, "packet of an exposure no META announced (packet before META)");
+    switch (h->kind) {
+    case WF_PK_RESULTANTS: return on_resultants(a, e, payload);
+    case WF_PK_SINGLE: return on_single(a, e, payload);
+    case WF_PK_SATURATION: return on_saturation(a, e, payload);
+    case WF_PK_COSMIC: return on_cosmic(a, e, payload);
+    case WF_PK_END:
+        if (a->ndone == a->done_cap) {
+            size_t cap = a->done_cap ? 2 * a->done_cap : 8;
+            void *p = realloc(a->done, cap * sizeof *a->done);
+            if (!p) return fail(a, WF_ERR_NOMEM, "cannot track finished exposures");
+            a->done = p;
+            a->done_cap = cap;
+        }
+        if ((st = on_end(a, e, last_path, last_path_len))) return st;
+        a->done[a->ndone].exposure = e->m.exposure;
+        a->done[a->ndone].sca = e->m.sca;
+        a->ndone++;
+        exposure_free(e);
+        a->open[idx] = a->open[--a->nopen];
+        return WF_OK;
+    default: return fail(a, WF_ERR_CORRUPT, "unknown packet kind %u", (unsigned)h->kind);
+    }
+}
+
+wf_status wf_assemble_stream(FILE *in, const char *name, const wf_assemble_options *opt,
+                             char *last_path, size_t last_path_len)
+{
+    if (last_path && last_path_len) last_path[0] = '\0';
+    assembler a = {.name = name ? name : "-", .opt = opt};
+    wf_packet_reader r;
+    wf_packet_reader_open(&r, in, a.name);
+    wf_status st = WF_OK;
+    for (;;) {
+        const void *payload;
+        int eof;
+        unsigned long long at = r.offset;
+        st = wf_packet_reader_next(&r, &a.h, &payload, &eof);
+        if (st) break;
+        if (eof) break;
+        a.packet = r.count;
+        a.offset = at;
+        if ((st = handle(&a, payload, last_path, last_path_len))) break;
+    }
+    if (st == WF_OK && a.nopen) {
+        const meta *m = &a.open[0]->m;
+        st = wf_error(WF_ERR_CORRUPT, "%s: stream ends after %ld packets without END for exposure %"
+                      PRIu32 " SCA %" PRIu32 "%s; no FITS written for it", a.name, r.count,
+                      m->exposure, m->sca, a.nopen > 1 ? " (and others)" : "");
+    } else if (st == WF_OK && a.ndone == 0) {
+        st = wf_error(WF_ERR_CORRUPT, "%s: stream holds no exposure (%ld packets)", a.name, r.count);
+    } else if (st && a.nopen) {
+        /* the reader's own message already names stream and packet; say what it cost */
+        char why[900];
+        snprintf(why, sizeof why, "%s", wf_error_message());
+        const meta *m = &a.open[0]->m;
+        st = wf_error(st, "%s; exposure %" PRIu32 " SCA %" PRIu32 "%s abandoned, no FITS written",
+                      why, m->exposure, m->sca, a.nopen > 1 ? " (and others)" : "");
+    }
+    for (size_t i = 0; i < a.nopen; i++) exposure_free(a.open[i]);
+    free(a.open);
+    free(a.done);
+    wf_packet_reader_close(&r);
+    return st;
+}

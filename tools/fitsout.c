@@ -1,0 +1,86 @@
+#include "tools/fitsout.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define CHECKSUM_ZERO "0000000000000000"
+#define CHECKSUM_COMMENT "HDU checksum"
+#define DATASUM_COMMENT "data unit checksum"
+
+wf_status wf_fits_error(int status, const char *path, const char *doing)
+{
+    if (status == 0) return WF_OK;
+    char text[FLEN_STATUS] = "", stack[512] = "", msg[FLEN_ERRMSG];
+    fits_get_errstatus(status, text);
+    size_t len = 0;
+    /* The stack holds cfitsio's own context (which keyword, which file call); the oldest
+     * entries are the most specific, so keep them first and cut at the buffer's end. */
+    while (fits_read_errmsg(msg)) {
+        int n = snprintf(stack + len, sizeof stack - len, "%s%s", len ? "; " : "", msg);
+        if (n < 0 || (size_t)n >= sizeof stack - len) {
+            len = sizeof stack - 1;
+            continue; /* drain the rest so the next error starts clean */
+        }
+        len += (size_t)n;
+    }
+    fits_clear_errmsg();
+    if (len)
+        return wf_error(WF_ERR_IO, "%s: %s: cfitsio error %d, %s (%s)", path, doing, status, text,
+                        stack);
+    return wf_error(WF_ERR_IO, "%s: %s: cfitsio error %d, %s", path, doing, status, text);
+}
+
+wf_status wf_fits_reserve_checksum(fitsfile *f, const char *path)
+{
+    int status = 0;
+    fits_write_key_str(f, "CHECKSUM", CHECKSUM_ZERO, CHECKSUM_COMMENT, &status);
+    fits_write_key_str(f, "DATASUM", "0", DATASUM_COMMENT, &status);
+    return wf_fits_error(status, path, "reserving CHECKSUM/DATASUM");
+}
+
+wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path)
+{
+    int status = 0;
+    /* fits_write_chksum does what only cfitsio internals can (close the header, write the
+     * data fill) and gets DATASUM right; then the dated comments are replaced and CHECKSUM
+     * recomputed over the header as it finally stands. */
+    fits_write_chksum(f, &status);
+    fits_modify_comment(f, "DATASUM", DATASUM_COMMENT, &status);
+    fits_modify_comment(f, "CHECKSUM", CHECKSUM_COMMENT, &status);
+    fits_modify_key_str(f, "CHECKSUM", CHECKSUM_ZERO, "&", &status);
+    unsigned long datasum = 0, hdusum = 0;
+    fits_get_chksum(f, &datasum, &hdusum, &status);
+    char ascii[17];
+    fits_encode_chksum(hdusum, 1, ascii);
+    fits_modify_key_str(f, "CHECKSUM", ascii, "&", &status);
+    return wf_fits_error(status, path, "writing CHECKSUM/DATASUM");
+}
+
+wf_status wf_fits_checksum_all(fitsfile *f, const char *path)
+{
+    int status = 0, nhdu = 0, current = 0;
+    /* fits_get_num_hdus leaves out a just-created HDU that has no data written yet (an
+     * empty table), so the current HDU number bounds the count from below. */
+    fits_get_hdu_num(f, &current);
+    if (fits_get_num_hdus(f, &nhdu, &status))
+        return wf_fits_error(status, path, "counting HDUs");
+    if (current > nhdu) nhdu = current;
+    for (int i = 1; i <= nhdu; i++) {
+        if (fits_movabs_hdu(f, i, NULL, &status))
+            return wf_fits_error(status, path, "moving to an HDU for its checksum");
+        wf_status st = wf_fits_checksum_hdu(f, path);
+        if (st) return st;
+    }
+    return WF_OK;
+}
+
+int wf_fits_double_digits(double v)
+{
+    char buf[40];
+    for (int d = 1; d < 17; d++) {
+        snprintf(buf, sizeof buf, "%.*G", d, v);
+        if (strtod(buf, NULL) == v) return d;
+    }
+    return 17;
+}
