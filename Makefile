@@ -59,7 +59,7 @@ $(BUILD)/tests/%: tests/%.c $(TESTUTIL) $(LIB) $(wildcard */*.h)
 tests: $(TESTBIN) $(PROG)
 
 demo: deps $(PROG)
-	$(PROG) demo --out out/demo
+	$(PROG) demo --out out/demo --threads $$(nproc)
 
 test: deps tests
 	@WFISIM_BIN=$(abspath $(PROG)) tests/run-all.sh $(TESTBIN)

@@ -32,6 +32,7 @@ void wf_detector_defaults(wf_detector *det)
     wf_detector_ipc_default(det->ipc);
     det->full_well = 1.0e5;
     det->adc_max = 65535.0;
+    det->bias_adu = 1000.0;
     det->cr_rate = 8.0;
     det->pixel_um = 10.0;
     det->depth_um = 5.0;
@@ -86,6 +87,6 @@ double wf_det_saturation_adu(const wf_detector *det)
 {
     double fw = det->full_well;
     if (det->on.nonlinearity) fw = wf_det_nonlinearity(fw, det->nl_beta);
-    double adu = fw / det->gain;
+    double adu = fw / det->gain + det->bias_adu;
     return adu < det->adc_max ? adu : det->adc_max;
 }

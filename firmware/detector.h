@@ -20,6 +20,8 @@ typedef struct wf_detector {
     double ipc[3][3];      /* kernel, normalised to sum 1; ipc[a][b] weighs in[y+a-1][x+b-1] */
     double full_well;      /* e- [1e5] */
     double adc_max;        /* ADU [65535] */
+    double bias_adu;       /* ADC offset added to every read, ADU [1000]: keeps read noise on
+                              a near-empty pixel from clipping at 0 ADU; the ground subtracts it */
     /* cosmic rays (romanisim cr.py defaults; hit rate at L2) */
     double cr_rate;        /* hits / cm^2 / s [8] */
     double pixel_um;       /* pixel pitch [10] */
@@ -54,8 +56,8 @@ void wf_det_ipc_row(const double *above, const double *row, const double *below,
 /* Round half to even (the ADC's rounding, GalSim quantize). */
 double wf_det_quantize(double adu);
 
-/* Smallest ADU value the ramp fitter treats as saturated: the lower of the ADC ceiling and
- * the full well after nonlinearity and gain. */
+/* Smallest ADU value that means saturated: the lower of the ADC ceiling and the full well
+ * after nonlinearity and gain, plus the bias. */
 double wf_det_saturation_adu(const wf_detector *det);
 
 #endif

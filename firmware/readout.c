@@ -279,7 +279,7 @@ static inline double digitise(const wf_detector *d, double e, double noise_sigma
                               int *clipped)
 {
     if (d->on.read_noise) e += noise_sigma * z;
-    double adu = e / d->gain;
+    double adu = e / d->gain + d->bias_adu;
     if (d->on.quantize) adu = wf_det_quantize(adu);
     if (d->on.saturation) {
         if (adu >= d->adc_max) { adu = d->adc_max; *clipped = 1; }
@@ -601,8 +601,8 @@ wf_status wf_readout_send_meta(wf_readout *ro, const char *extra)
     }
     bad |= append(buf, cap, &len,
                   "gain = %.17g\nread_noise = %.17g\ndark_current = %.17g\nfull_well = %.17g\n"
-                  "adc_max = %.17g\nsaturation_adu = %.17g\nnl_beta = %.17g\neffects = ",
-                  d->gain, d->read_noise_e, d->dark_current, d->full_well, d->adc_max,
+                  "adc_max = %.17g\nbias = %.17g\nsaturation_adu = %.17g\nnl_beta = %.17g\neffects = ",
+                  d->gain, d->read_noise_e, d->dark_current, d->full_well, d->adc_max, d->bias_adu,
                   wf_det_saturation_adu(d), d->nl_beta);
     const char *names[] = {"photon", "reciprocity", "dark", "nonlinearity", "ipc", "read_noise",
                            "quantize", "saturation", "cosmic"};

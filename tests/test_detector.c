@@ -531,14 +531,14 @@ START_TEST(test_saturation_adu)
 {
     wf_detector det;
     wf_detector_defaults(&det);
-    double want = (1e5 - 6e-7 * 1e10) / det.gain;
+    double want = (1e5 - 6e-7 * 1e10) / det.gain + 1000.0; /* SPEC well after NL, plus bias */
     if (want > 65535.0) want = 65535.0;
     ck_assert(wf_det_saturation_adu(&det) == want);
     /* below the ADC ceiling the full-well term decides */
     det.gain = 2.0;
-    ck_assert_double_eq_tol(wf_det_saturation_adu(&det), (1e5 - 6e-7 * 1e10) / 2.0, 1e-9);
+    ck_assert_double_eq_tol(wf_det_saturation_adu(&det), (1e5 - 6e-7 * 1e10) / 2.0 + 1000.0, 1e-9);
     det.on.nonlinearity = 0;
-    ck_assert_double_eq_tol(wf_det_saturation_adu(&det), 1e5 / 2.0, 1e-9);
+    ck_assert_double_eq_tol(wf_det_saturation_adu(&det), 1e5 / 2.0 + 1000.0, 1e-9);
 }
 END_TEST
 

@@ -6,6 +6,8 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <math.h>
+#include <fitsio.h>
 
 #include "tests/testutil.h"
 
@@ -161,6 +163,52 @@ START_TEST(fits_opens_in_astropy)
 }
 END_TEST
 
+/* The whole chain on a flat sky (every effect but cosmic rays on): the mean fitted rate is
+ * the reciprocity-corrected sky plus dark current, within 4 sigma of the reported errors.
+ * This is what catches a bias anywhere between the photons and the slope (clipping at the
+ * ADC floor, averaging, rounding, linearity correction, weights). */
+static void flat_sky_unbiased(const char *mode, double sky)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    ck_assert_int_eq(run("%s expose --quiet --mode %s --set readout.ncols=128 --set readout.nrows=128 "
+                         "--set detector.effects.cosmic_rays=false --set scene.grid.flux=0 "
+                         "--set scene.sky_rate=%g --out %s", bin, mode, sky, d), 0);
+    char path[4200];
+    snprintf(path, sizeof path, "%s/" FITS, d);
+    fitsfile *f;
+    int status = 0;
+    static float sci[128 * 128], err[128 * 128];
+    long first[2] = {1, 1};
+    fits_open_file(&f, path, READONLY, &status);
+    fits_movnam_hdu(f, IMAGE_HDU, "SCI", 0, &status);
+    fits_read_pix(f, TFLOAT, first, 128 * 128, NULL, sci, NULL, &status);
+    fits_movnam_hdu(f, IMAGE_HDU, "ERR", 0, &status);
+    fits_read_pix(f, TFLOAT, first, 128 * 128, NULL, err, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    double sum = 0, var = 0;
+    int n = 0;
+    for (int y = 1; y < 127; y++) /* interior: IPC keeps the charge it moves */
+        for (int x = 1; x < 127; x++) {
+            sum += sci[y * 128 + x];
+            var += (double)err[y * 128 + x] * err[y * 128 + x];
+            n++;
+        }
+    double mean = sum / n, sigma = sqrt(var) / n;
+    double expect = sky * pow(sky, 0.0065 / log(10.0)) + 0.015;
+    ck_assert_msg(fabs(mean - expect) < 4.0 * sigma, "%s: mean rate %.5f, expected %.5f +- %.5f", mode, mean,
+                  expect, sigma);
+}
+
+START_TEST(flat_sky_ramp) { flat_sky_unbiased("ramp", 0.3953); }
+END_TEST
+START_TEST(flat_sky_ramp_bright) { flat_sky_unbiased("ramp", 50.0); }
+END_TEST
+START_TEST(flat_sky_single) { flat_sky_unbiased("single", 0.3953); }
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("program");
@@ -171,6 +219,9 @@ static Suite *suite(void)
     tcase_add_test(tc, bad_config_named_and_no_product);
     tcase_add_test(tc, corrupt_stream_leaves_nothing);
     tcase_add_test(tc, fits_opens_in_astropy);
+    tcase_add_test(tc, flat_sky_ramp);
+    tcase_add_test(tc, flat_sky_ramp_bright);
+    tcase_add_test(tc, flat_sky_single);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -271,7 +271,7 @@ START_TEST(noiseless_flux_conserved)
         for (int r = 0; r < dd.nres; r++) {
             double sum = 0.0;
             for (size_t i = 0; i < (size_t)96 * 96; i++) sum += dd.res[(size_t)r * 96 * 96 + i];
-            double expect = total * wf_clock_resultant_time(&clock, r);
+            double expect = total * wf_clock_resultant_time(&clock, r) + d->bias_adu * 96 * 96;
             /* each pixel is rounded to an integer ADU: at most 0.5 each */
             ck_assert_msg(fabs(sum - expect) <= 0.5 * 96 * 96 + 1e-4 * expect,
                           "resultant %d: sum %.1f, expected %.1f", r, sum, expect);
@@ -319,7 +319,8 @@ START_TEST(direct_matches_per_read)
         double tb = wf_clock_resultant_time(&clock, r);
         ck_assert_msg(fabs(m[0] - m[1]) < 4.0 * sqrt((v[0] + v[1]) / n),
                       "resultant %d: means %.4f vs %.4f", r, m[0], m[1]);
-        ck_assert_msg(fabs(m[0] - 3.0 * tb) < 4.0 * sqrt(v[0] / n) + 0.5, "resultant %d mean %.3f vs %.3f", r, m[0], 3.0 * tb);
+        double expect = 3.0 * tb + cfg.det.bias_adu;
+        ck_assert_msg(fabs(m[0] - expect) < 4.0 * sqrt(v[0] / n) + 0.5, "resultant %d mean %.3f vs %.3f", r, m[0], expect);
         /* variance of a sample variance ~ 2 v^2 / n (near-Gaussian counts), plus rounding */
         double tol = 4.0 * sqrt(2.0 / n) * (v[0] + v[1]) / 2 + 1.0 / 6.0;
         ck_assert_msg(fabs(v[0] - v[1]) < tol, "resultant %d: variances %.4f vs %.4f", r, v[0], v[1]);
@@ -350,7 +351,7 @@ START_TEST(saturation_defined)
     double rate = wf_det_reciprocity_rate(500.0, cfg.det.recip_alpha, cfg.det.recip_f0) + cfg.det.dark_current;
     double sat_adu = wf_det_saturation_adu(&cfg.det);
     /* charge at which the measured signal reaches the saturation level: invert q + beta q^2 */
-    double beta = cfg.det.nl_beta, level = sat_adu * cfg.det.gain;
+    double beta = cfg.det.nl_beta, level = (sat_adu - cfg.det.bias_adu) * cfg.det.gain;
     double q_sat = (-1.0 + sqrt(1.0 + 4.0 * beta * level)) / (2.0 * beta);
     double tol = 5.0 * sqrt(q_sat) + 5.0 * cfg.det.read_noise_e;
     size_t n = 16 * 16;
@@ -396,13 +397,13 @@ START_TEST(single_frame_closed_form)
     decode(buf, len, &dd);
     free(buf);
     double q = wf_det_reciprocity(123.0 * 139.8, 139.8, 0.0065, 1.0) + 0.015 * 139.8;
-    double expect = nearbyint(wf_det_nonlinearity(q, -6e-7));
+    double expect = nearbyint(wf_det_nonlinearity(q, -6e-7) + cfg.det.bias_adu);
     ck_assert_msg(fabs(dd.single[10 * 20 + 10] - expect) < 1e-9, "single frame %.3f vs %.3f",
                   dd.single[10 * 20 + 10], expect);
     /* a corner keeps only the kernel weights that fall inside (zero padding) */
     const double (*k)[3] = cfg.det.ipc;
     double corner = k[1][1] + k[1][2] + k[2][1] + k[2][2];
-    ck_assert_msg(fabs(dd.single[0] - nearbyint(wf_det_nonlinearity(q, -6e-7) * corner)) < 1e-9,
+    ck_assert_msg(fabs(dd.single[0] - nearbyint(wf_det_nonlinearity(q, -6e-7) * corner + cfg.det.bias_adu)) < 1e-9,
                   "corner pixel %.3f", dd.single[0]);
     free_decoded(&dd);
 }

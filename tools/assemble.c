@@ -37,7 +37,7 @@ typedef struct meta {
     int have_seed;
     unsigned long long seed;
     double exptime, gain, read_noise; /* frame time is clock.frame_time */
-    double dark_current, full_well, adc_max, saturation_adu, nl_beta;
+    double dark_current, full_well, adc_max, saturation_adu, nl_beta, bias;
     int have_dark, have_full_well, have_adc_max, have_sat_adu, have_nl_beta;
     int nonlinearity; /* nonlinearity among the effects: resultants are linearised before fitting */
     wf_clock clock;
@@ -416,7 +416,8 @@ static wf_status parse_meta(const assembler *a, const char *payload, size_t len,
         (st = meta_number(a, t, n, "full_well", 0, &m->full_well, &m->have_full_well)) ||
         (st = meta_number(a, t, n, "adc_max", 0, &m->adc_max, &m->have_adc_max)) ||
         (st = meta_number(a, t, n, "saturation_adu", 0, &m->saturation_adu, &m->have_sat_adu)) ||
-        (st = meta_number(a, t, n, "nl_beta", 0, &m->nl_beta, &m->have_nl_beta)))
+        (st = meta_number(a, t, n, "nl_beta", 0, &m->nl_beta, &m->have_nl_beta)) ||
+        (st = meta_number(a, t, n, "bias", 0, &m->bias, NULL)))
         goto out;
     if (!(m->exptime > 0) || !(m->gain > 0) || !(m->read_noise >= 0)) {
         st = fail(a, WF_ERR_INPUT, "META exptime %g s, gain %g e-/ADU, read_noise %g e-: "
@@ -533,6 +534,7 @@ static int write_primary(fitsfile *f, const meta *m, int *status)
     if (m->have_dark) key_dbl(f, "DARKCUR", m->dark_current, "[electron/s] dark current", status);
     if (m->have_full_well) key_dbl(f, "FULLWELL", m->full_well, "[electron] full well", status);
     if (m->have_adc_max) key_dbl(f, "ADCMAX", m->adc_max, "[adu] ADC ceiling", status);
+    key_dbl(f, "BIAS", m->bias, "[adu] ADC offset, subtracted before fitting", status);
     if (m->have_sat_adu) key_dbl(f, "SATADU", m->saturation_adu, "[adu] saturation level", status);
     if (m->have_nl_beta) key_dbl(f, "NLBETA", m->nl_beta, "nonlinearity: q + NLBETA q^2", status);
     if (m->have_seed) fits_write_key_ulng(f, "SEED", m->seed, "random seed", status);
@@ -735,7 +737,7 @@ static wf_status fit_row(const assembler *a, const exposure *e, uint32_t y, cons
     double q[WF_MA_MAX_RESULTANTS];
     for (long x = 0; x < m->ncols; x++) {
         for (int r = 0; r < nres; r++) {
-            double v = cube[(size_t)r * stride + (size_t)x] * m->gain;
+            double v = (cube[(size_t)r * stride + (size_t)x] - m->bias) * m->gain;
             q[r] = m->nonlinearity ? linearise(v, m->nl_beta) : v;
         }
         int first_sat = sat[x] < nres ? sat[x] : nres;
@@ -940,7 +942,7 @@ static wf_status on_single(const assembler *a, exposure *e, const void *payload)
                          (uint32_t)b[4 * i + 2] << 16 | (uint32_t)b[4 * i + 3] << 24;
             memcpy(&adu, &u, 4);
         }
-        double q = adu * g;
+        double q = (adu - e->m.bias) * g;
         e->sci[i] = (float)(q / t);
         e->err[i] = (float)(sqrt((q > 0 ? q : 0) + rn2) / t);
     }
