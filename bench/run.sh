@@ -5,7 +5,7 @@
 set -eu
 cd "$(dirname "$0")/.."
 B=build/rel/bench
-make -s $B/bench_readout $B/rss bin/wfisim >/dev/null
+make -s $B/bench_readout $B/bench_direct_error $B/rss bin/wfisim >/dev/null
 out=docs/BENCHMARKS.md
 tmp=$(mktemp)
 N=4088
@@ -46,6 +46,16 @@ done
 row_readout "per-read, 64-row tiles, 1 thread" $N $N 64 per-read 6 1
 row_readout "direct, MA table 11 (900 s), 64-row tiles, 2 threads" $N $N 64 direct 11 2
 {
+  echo
+  echo "## Error of direct-resultant sampling (knob: exposure.sampling)"
+  echo
+  echo "Flat fields through the whole chain (readout, assembly with linearity correction, ramp"
+  echo "fit) on a 256x256 SCA, cosmic rays off; per-read sampling is the high-fidelity reference."
+  echo "\`bench_direct_error 256 6\` and \`bench_direct_error 256 11\`:"
+  echo
+  $B/bench_direct_error 256 6
+  echo
+  $B/bench_direct_error 256 11 | tail -n +3
   echo
   echo "## Peak RSS against image size (per-read, 64-row tiles, 1 thread)"
   echo

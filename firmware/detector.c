@@ -81,7 +81,6 @@ void wf_det_ipc_row(const double *above, const double *row, const double *below,
     }
 }
 
-double wf_det_quantize(double adu) { return nearbyint(adu); }
 
 double wf_det_saturation_adu(const wf_detector *det)
 {

@@ -229,7 +229,12 @@ static inline double poisson_word(uint32_t w, double mean, double expm, more_noi
 {
     if (!(mean > 0.0)) return 0.0;
     if (mean >= 10.0) return wf_rng_poisson(more(mn), mean);
-    double u = ((double)w + 0.5) * (1.0 / 4294967296.0), p = expm, cdf = p, k = 0.0;
+    double u = ((double)w + 0.5) * (1.0 / 4294967296.0);
+    /* k = 0, 1, 2 without a division or an unpredictable branch: most sky pixels stop here */
+    double p1 = expm * mean, p2 = p1 * mean * 0.5;
+    double f0 = expm, f1 = f0 + p1, f2 = f1 + p2;
+    if (u <= f2) return (double)((u > f0) + (u > f1));
+    double p = p2, cdf = f2, k = 2.0;
     while (u > cdf && k < 200.0) { /* stop where the terms no longer move the sum */
         k += 1.0;
         p *= mean / k;
@@ -460,7 +465,14 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
             uint16_t *out = ro->res_out + (size_t)r * plane + (size_t)(y - y0) * nc;
             const float *z = ro->gauss + (size_t)(y - y0) * nc;
             for (int x = 0; x < nc; x++) {
-                int clipped = d->on.saturation && q[x] >= d->full_well;
+                /* A resultant holds a saturated read when its last read did: the charge at
+                 * that read reached the well, or its measured signal the ADC ceiling. */
+                int clipped = 0;
+                if (d->on.saturation) {
+                    double last = q[x] < d->full_well ? q[x] : d->full_well;
+                    if (d->on.nonlinearity) last = wf_det_nonlinearity(last, d->nl_beta);
+                    clipped = q[x] >= d->full_well || last / d->gain + d->bias_adu >= d->adc_max;
+                }
                 /* the mean of n reads' independent read noise is N(0, sigma^2 / n) */
                 double adu = digitise(d, v[x], d->read_noise_e / sqrt((double)n), z[x], &clipped);
                 if (clipped && sat[x] == 255) sat[x] = (uint8_t)r;
