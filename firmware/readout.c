@@ -225,10 +225,17 @@ static inline wf_rng *more(more_noise *m)
     return &m->rng;
 }
 
-static inline double poisson_word(uint32_t w, double mean, double expm, more_noise *mn)
+/* w feeds inversion below a mean of 10; above, w and *w2 feed the first PTRS attempt when
+ * the caller has a second unused word (w2 != NULL), else the stream does it all. */
+static inline double poisson_word(uint32_t w, const uint32_t *w2, double mean, double expm,
+                                  more_noise *mn)
 {
     if (!(mean > 0.0)) return 0.0;
-    if (mean >= 10.0) return wf_rng_poisson(more(mn), mean);
+    if (mean >= 10.0) {
+        double k;
+        if (w2 && wf_poisson_ptrs_try(mean, w, *w2, &k)) return k;
+        return wf_rng_poisson(more(mn), mean);
+    }
     double u = ((double)w + 0.5) * (1.0 / 4294967296.0);
     /* k = 0, 1, 2 without a division or an unpredictable branch: most sky pixels stop here */
     double p1 = expm * mean, p2 = p1 * mean * 0.5;
@@ -334,12 +341,12 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
                 for (int x = 0; x < nc; x++) q[x] += m[x] * frames;
                 continue;
             }
-            const uint32_t *w1 = ro->words + nc;
+            const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
             for (int x = 0; x < nc; x++) {
                 double mean = m[x] * frames;
                 more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)k,
                                  .purpose = WF_PURPOSE_PHOTON};
-                q[x] += poisson_word(w1[x], mean, frames == 1.0 ? em[x] : exp(-mean), &mn);
+                q[x] += poisson_word(w1[x], &w2[x], mean, frames == 1.0 ? em[x] : exp(-mean), &mn);
             }
         }
         if (ro->cosmic_on)
@@ -429,7 +436,7 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
             } else if (z) {
                 memset(z, 0, (size_t)nc * sizeof *z);
             }
-            const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
+            const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc, *w3 = ro->words + 3 * nc;
             for (int x = 0; x < nc; x++) {
                 if (!photons) {
                     q[x] += m[x] * lead;
@@ -439,8 +446,10 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
                 }
                 more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)r,
                                  .purpose = WF_PURPOSE_RESULTANT};
-                q[x] += poisson_word(w1[x], m[x] * lead, lead == 1.0 ? em[x] : exp(-m[x] * lead), &mn);
-                double inside = poisson_word(w2[x], m[x] * span, exp(-m[x] * span), &mn);
+                /* word 3 is the second PTRS word of whichever draw needs it first */
+                double lm = m[x] * lead, sm = m[x] * span;
+                q[x] += poisson_word(w1[x], &w3[x], lm, lead == 1.0 ? em[x] : exp(-lm), &mn);
+                double inside = poisson_word(w2[x], lm < 10.0 ? &w3[x] : NULL, sm, exp(-sm), &mn);
                 a[x] = q[x] + (inside > 0.0 ? group_placement(more(&mn), inside, reads, n) : 0.0);
                 q[x] += inside;
             }
@@ -500,15 +509,15 @@ static wf_status single_frame(wf_readout *ro, int y0, int y1, int h0, int h1)
         } else if (z) {
             memset(z, 0, (size_t)nc * sizeof *z);
         }
-        const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
+        const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc, *w3 = ro->words + 3 * nc;
         const double dark = d->dark_current * t, edark = exp(-dark);
         for (int x = 0; x < nc; x++) {
             double e = rate[x] > 0.0f ? rate[x] * t : 0.0; /* negative set to zero before Poisson */
             more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = 0,
                              .purpose = WF_PURPOSE_PHOTON};
-            if (photons) e = poisson_word(w1[x], e, e < 10.0 ? exp(-e) : 0.0, &mn);
+            if (photons) e = poisson_word(w1[x], &w2[x], e, e < 10.0 ? exp(-e) : 0.0, &mn);
             if (d->on.reciprocity) e = wf_det_reciprocity(e, t, d->recip_alpha, d->recip_f0);
-            if (d->on.dark) e += photons ? poisson_word(w2[x], dark, edark, &mn) : dark;
+            if (d->on.dark) e += photons ? poisson_word(w3[x], NULL, dark, edark, &mn) : dark;
             q[x] = e;
         }
     }

@@ -123,25 +123,43 @@ static double poisson_logpmf(double k, double mu)
     return delta - k * log1p(delta / mu) - stirling_tail(k);
 }
 
-static double poisson_ptrs(wf_rng *rng, double mu)
+/* One attempt of Hörmann's PTRS: returns k >= 0 when (u, v) is accepted, -1 otherwise. */
+static double ptrs_attempt(double mu, double u01, double v)
 {
     const double smu = sqrt(mu);
     const double b = 0.931 + 2.53 * smu;
     const double a = -0.059 + 0.02483 * b;
-    const double inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
     const double vr = 0.9277 - 3.6224 / (b - 2.0);
+    double u = u01 - 0.5;
+    double us = 0.5 - fabs(u);
+    double k = floor((2.0 * a / us + b) * u + mu + 0.43);
+    if (us >= 0.07 && v <= vr)
+        return k;
+    if (k < 0.0 || (us < 0.013 && v > us))
+        return -1.0;
+    const double inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
+    if (log(v) + log(inv_alpha) - log(a / (us * us) + b) <= poisson_logpmf(k, mu))
+        return k;
+    return -1.0;
+}
+
+static double poisson_ptrs(wf_rng *rng, double mu)
+{
     for (;;) {
-        double u = wf_rng_uniform53(rng) - 0.5;
+        double u = wf_rng_uniform53(rng);
         double v = wf_rng_uniform53(rng);
-        double us = 0.5 - fabs(u);
-        double k = floor((2.0 * a / us + b) * u + mu + 0.43);
-        if (us >= 0.07 && v <= vr)
-            return k;
-        if (k < 0.0 || (us < 0.013 && v > us))
-            continue;
-        if (log(v) + log(inv_alpha) - log(a / (us * us) + b) <= poisson_logpmf(k, mu))
+        double k = ptrs_attempt(mu, u, v);
+        if (k >= 0.0)
             return k;
     }
+}
+
+int wf_poisson_ptrs_try(double mean, uint32_t wu, uint32_t wv, double *k)
+{
+    double u = ((double)wu + 0.5) * (1.0 / 4294967296.0);
+    double v = ((double)wv + 0.5) * (1.0 / 4294967296.0);
+    *k = ptrs_attempt(mean, u, v);
+    return *k >= 0.0;
 }
 
 double wf_rng_poisson(wf_rng *rng, double mean)

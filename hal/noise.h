@@ -68,6 +68,11 @@ void wf_noise_block_row(const wf_noise *noise, uint32_t pixel0, int n, uint32_t 
 /* Standard normals from 32-bit words: wf_norm_ppf((w + 0.5) / 2^32), rounded to float. */
 void wf_norm_from_u32(const uint32_t *w, int n, float *out);
 
+/* The first PTRS attempt for mean >= 10 from two words the caller already has (a row batch):
+ * 1 and *k set when accepted (~88% of calls); 0 when rejected, and the caller continues
+ * with wf_rng_poisson on the pixel's stream (independent uniforms: still exact). */
+int wf_poisson_ptrs_try(double mean, uint32_t wu, uint32_t wv, double *k);
+
 /* Inverse of the standard normal CDF, relative error < 1.2e-9 (Acklam's rational form). */
 double wf_norm_ppf(double p);
 
