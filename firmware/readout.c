@@ -8,11 +8,6 @@
 #include "firmware/cosmic.h"
 #include "hal/packet.h"
 
-/* Direct-resultant sampling: below this many photons in a group the within-group placement
- * is drawn photon by photon (exact); above, a Gaussian with the exact conditional mean and
- * variance (the placement sum is symmetric, so its skewness is zero and the excess kurtosis
- * -1.2/N is the only departure: -0.15 at the switch, where read noise dominates anyway). */
-#define WF_DIRECT_EXACT_MAX 8
 
 struct wf_readout {
     wf_readout_config cfg;
@@ -59,6 +54,14 @@ static size_t tile_payload_max(const wf_readout_config *cfg, const wf_clock *clo
     return res > single ? res : single;
 }
 
+static int direct_blocks(const wf_ma_table *ma);
+
+/* Noise blocks per row the mode needs at once: one, or enough for a whole group. */
+static int words_blocks(const wf_readout_config *cfg, const wf_clock *clock)
+{
+    return cfg->mode == WF_MODE_RAMP && cfg->sampling == WF_SAMPLE_DIRECT ? direct_blocks(&clock->ma) : 1;
+}
+
 static wf_status check_config(const wf_readout_config *cfg, const wf_clock *clock)
 {
     if (cfg->ncols < 1 || cfg->nrows < 1 || cfg->ncols > 65536 || cfg->nrows > 65536)
@@ -87,7 +90,7 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     n += wf_arena_cost(halo * sizeof(float));
     n += 4 * wf_arena_cost(halo * sizeof(double));
     n += wf_arena_cost(tile * sizeof(float));
-    n += wf_arena_cost(4 * (size_t)cfg->ncols * sizeof(uint32_t));
+    n += wf_arena_cost(4 * (size_t)words_blocks(cfg, clock) * (size_t)cfg->ncols * sizeof(uint32_t));
     n += wf_arena_cost((size_t)cfg->ncols * sizeof(double));
     n += wf_arena_cost(tile * sizeof(double));
     if (cfg->mode == WF_MODE_RAMP)
@@ -137,7 +140,7 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     TAKE(ro->meas, halo, "measured charge");
     TAKE(ro->expm, halo, "Poisson inversion start");
     TAKE(ro->gauss, tile, "read-noise normals");
-    TAKE(ro->words, 4 * (size_t)cfg->ncols, "noise words");
+    TAKE(ro->words, 4 * (size_t)words_blocks(cfg, clock) * (size_t)cfg->ncols, "noise words");
     ro->noise_off = noise->kind == WF_NOISE_OFF;
     TAKE(ro->row, cfg->ncols, "IPC row");
     TAKE(ro->sum, tile, "resultant sums");
@@ -206,20 +209,21 @@ static void expected_per_frame(wf_readout *ro, int npix)
 /* Each (pixel, read) has one stream. Its first block, computed a row at a time by
  * wf_noise_block_row, serves the common case: word 0 is the read-noise normal, words 1-3
  * the uniforms of Poisson draws by inversion. Draws that need more (PTRS above a mean of
- * 10, photon placement) continue the same stream from block 1, created on first use. */
+ * 10) continue the same stream after the blocks the batch took, created on first use. */
 typedef struct more_noise {
     wf_rng rng;
     int ready;
     const wf_noise *noise;
     uint32_t pixel, read;
     wf_purpose purpose;
+    uint32_t first_block; /* the blocks before it were taken by the row batch */
 } more_noise;
 
 static inline wf_rng *more(more_noise *m)
 {
     if (!m->ready) {
         wf_rng_init(&m->rng, m->noise, m->pixel, m->read, m->purpose);
-        wf_rng_seek(&m->rng, 1);
+        wf_rng_seek(&m->rng, m->first_block ? m->first_block : 1);
         m->ready = 1;
     }
     return &m->rng;
@@ -252,14 +256,17 @@ static inline double poisson_word(uint32_t w, const uint32_t *w2, double mean, d
     return k;
 }
 
-/* Fills the noise words of row y for (read, purpose) and, for tile rows, the normals. */
-static void row_noise(wf_readout *ro, int y, uint32_t read, wf_purpose purpose, float *z)
+/* Fills the first `blocks` noise blocks of row y for (read, purpose), word k of column x at
+ * words[k * ncols + x], and for tile rows the normals from word 0. */
+static void row_noise(wf_readout *ro, int y, uint32_t read, wf_purpose purpose, int blocks, float *z)
 {
-    int nc = ro->cfg.ncols;
-    uint32_t *w = ro->words;
-    wf_noise_block_row(&ro->noise, (uint32_t)y * (uint32_t)nc, nc, read, purpose, w, w + nc,
-                       w + 2 * nc, w + 3 * nc);
-    if (z) wf_norm_from_u32(w, nc, z);
+    size_t nc = (size_t)ro->cfg.ncols;
+    for (int b = 0; b < blocks; b++) {
+        uint32_t *w = ro->words + 4 * (size_t)b * nc;
+        wf_noise_block_row(&ro->noise, (uint32_t)y * (uint32_t)nc, (int)nc, read, purpose, (uint32_t)b,
+                           w, w + nc, w + 2 * nc, w + 3 * nc);
+    }
+    if (z) wf_norm_from_u32(ro->words, (int)nc, z);
 }
 
 /* Full well and nonlinearity: what the read-out would measure from the charge. */
@@ -333,7 +340,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
             float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
             int photons = d->on.photon_noise && !ro->noise_off;
             if (photons || (z && d->on.read_noise && !ro->noise_off)) {
-                row_noise(ro, y, (uint32_t)k, WF_PURPOSE_PHOTON, z && d->on.read_noise ? z : NULL);
+                row_noise(ro, y, (uint32_t)k, WF_PURPOSE_PHOTON, 1, z && d->on.read_noise ? z : NULL);
             } else if (z) {
                 memset(z, 0, (size_t)nc * sizeof *z);
             }
@@ -381,32 +388,27 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
 
 /* ---- up-the-ramp, resultants drawn directly -------------------------------------------- */
 
-/* Weighted sum of the photons collected between the group's first and last reads: a photon
- * arriving between reads j-1 and j (0-based, of n) is seen by the n - j reads from j on, so
- * it adds (n - j)/n to the group's average. */
-static double group_placement(wf_rng *rng, double photons, const int *reads, int n)
+/* Words for direct sampling come from the first blocks of the (pixel, resultant) stream:
+ * word 0 is the read-noise normal, then one word per Poisson draw by inversion (two for
+ * the first PTRS attempt above a mean of 10). A group of n reads needs at most 2n + 1. */
+static int direct_blocks(const wf_ma_table *ma)
 {
-    if (n < 2 || photons <= 0.0) return 0.0;
-    double span = reads[n - 1] - reads[0];
-    if (photons <= WF_DIRECT_EXACT_MAX) {
-        double s = 0.0;
-        for (int p = 0; p < (int)photons; p++) {
-            double u = wf_rng_uniform(rng) * span; /* arrival, in frames after reads[0] */
-            int j = 1;
-            while (j < n - 1 && reads[j] - reads[0] < u) j++;
-            s += (double)(n - j) / n;
-        }
-        return s;
+    int nmax = 1;
+    for (int r = 0; r < ma->nresultants; r++)
+        if (ma->first[r + 1] - ma->first[r] > nmax) nmax = ma->first[r + 1] - ma->first[r];
+    return (2 * nmax + 1 + 3) / 4;
+}
+
+/* Poisson draw from the row's words at cursor *c (advanced), for one pixel column x. */
+static inline double draw_at(const uint32_t *words, size_t nc, int x, int *c, double mean,
+                             double expm, more_noise *mn)
+{
+    if (mean >= 10.0) {
+        double k = poisson_word(words[(size_t)*c * nc + x], &words[(size_t)(*c + 1) * nc + x], mean, expm, mn);
+        *c += 2;
+        return k;
     }
-    double m1 = 0.0, m2 = 0.0;
-    for (int j = 1; j < n; j++) {
-        double p = (reads[j] - reads[j - 1]) / span, w = (double)(n - j) / n;
-        m1 += p * w;
-        m2 += p * w * w;
-    }
-    double sd = sqrt(photons * (m2 - m1 * m1));
-    double v = photons * m1 + sd * wf_norm_ppf(wf_rng_uniform(rng));
-    return v < 0.0 ? 0.0 : (v > photons ? photons : v);
+    return poisson_word(words[(size_t)(*c)++ * nc + x], NULL, mean, expm, mn);
 }
 
 static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
@@ -415,6 +417,7 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
     const wf_ma_table *ma = &ro->clock.ma;
     const int nc = ro->cfg.ncols, rows = y1 - y0, hn = (h1 - h0) * nc;
     const size_t plane = (size_t)rows * nc;
+    const int nblocks = direct_blocks(ma);
     double *avg = ro->meas; /* reused: average charge of the group, then measured */
     int next_dep = 0, prev_read = -1;
     for (int r = 0; r < ma->nresultants; r++) {
@@ -432,11 +435,11 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
             float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
             int photons = d->on.photon_noise && !ro->noise_off;
             if (photons || (z && d->on.read_noise && !ro->noise_off)) {
-                row_noise(ro, y, (uint32_t)r, WF_PURPOSE_RESULTANT, z && d->on.read_noise ? z : NULL);
+                row_noise(ro, y, (uint32_t)r, WF_PURPOSE_RESULTANT, photons ? nblocks : 1,
+                          z && d->on.read_noise ? z : NULL);
             } else if (z) {
                 memset(z, 0, (size_t)nc * sizeof *z);
             }
-            const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc, *w3 = ro->words + 3 * nc;
             for (int x = 0; x < nc; x++) {
                 if (!photons) {
                     q[x] += m[x] * lead;
@@ -445,13 +448,22 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
                     continue;
                 }
                 more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)r,
-                                 .purpose = WF_PURPOSE_RESULTANT};
-                /* word 3 is the second PTRS word of whichever draw needs it first */
-                double lm = m[x] * lead, sm = m[x] * span;
-                q[x] += poisson_word(w1[x], &w3[x], lm, lead == 1.0 ? em[x] : exp(-lm), &mn);
-                double inside = poisson_word(w2[x], lm < 10.0 ? &w3[x] : NULL, sm, exp(-sm), &mn);
-                a[x] = q[x] + (inside > 0.0 ? group_placement(more(&mn), inside, reads, n) : 0.0);
-                q[x] += inside;
+                                 .purpose = WF_PURPOSE_RESULTANT, .first_block = (uint32_t)nblocks};
+                /* Exact for a linear pixel: the charge before the group's first read, then
+                 * each interval's Poisson electrons, seen by the n - j reads from j on. */
+                int c = 1;
+                double lm = m[x] * lead;
+                q[x] += draw_at(ro->words, (size_t)nc, x, &c, lm, lead == 1.0 ? em[x] : exp(-lm), &mn);
+                double within = 0.0, total = 0.0;
+                for (int j = 1; j < n; j++) {
+                    int gap = reads[j] - reads[j - 1];
+                    double mj = m[x] * gap;
+                    double dj = draw_at(ro->words, (size_t)nc, x, &c, mj, gap == 1 ? em[x] : exp(-mj), &mn);
+                    within += dj * (double)(n - j);
+                    total += dj;
+                }
+                a[x] = q[x] + within / n;
+                q[x] += total;
             }
         }
         if (ro->cosmic_on)
@@ -505,7 +517,7 @@ static wf_status single_frame(wf_readout *ro, int y0, int y1, int h0, int h1)
         float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
         int photons = d->on.photon_noise && !ro->noise_off;
         if (photons || (z && d->on.read_noise && !ro->noise_off)) {
-            row_noise(ro, y, 0, WF_PURPOSE_PHOTON, z && d->on.read_noise ? z : NULL);
+            row_noise(ro, y, 0, WF_PURPOSE_PHOTON, 1, z && d->on.read_noise ? z : NULL);
         } else if (z) {
             memset(z, 0, (size_t)nc * sizeof *z);
         }

@@ -27,11 +27,12 @@
 
 typedef enum { WF_MODE_RAMP = 0, WF_MODE_SINGLE = 1 } wf_mode;
 
-/* Per-read: every read drawn and digitised. Direct: each resultant drawn at once from the
- * exact distribution of a linear pixel (Poisson total per interval, exact within-group
- * placement for small counts, exact-moment Gaussian above WF_DIRECT_EXACT_MAX); used only
- * for what it is exact for: with nonlinearity or cosmic rays on it still draws, but the
- * nonlinearity is applied to resultant means (error measured in docs/BENCHMARKS.md). */
+/* Per-read: every read drawn and digitised. Direct: each resultant drawn at once, exact in
+ * distribution for a linear pixel (the Poisson electrons of each read interval, weighted by
+ * the reads of the group that see them, and the group's mean read noise N(0, sigma^2/n));
+ * it skips the per-read nonlinearity, IPC and ADC, so with nonlinearity on it applies it to
+ * the group's mean charge (error measured in docs/BENCHMARKS.md), and reads are not
+ * quantised one by one. */
 typedef enum { WF_SAMPLE_PER_READ = 0, WF_SAMPLE_DIRECT = 1 } wf_sampling;
 
 typedef struct wf_readout_config {

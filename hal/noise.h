@@ -60,10 +60,11 @@ double wf_rng_poisson(wf_rng *rng, double mean);
  * the first block from wf_noise_block_row continue the same stream. */
 void wf_rng_seek(wf_rng *rng, uint32_t block);
 
-/* The first block (4 words) of the streams of pixels pixel0 .. pixel0+n-1 at one read, for
- * one purpose: identical to wf_rng_init + 4 x wf_rng_u32, computed a row at a time. */
+/* Block `block` (4 words) of the streams of pixels pixel0 .. pixel0+n-1 at one read, for one
+ * purpose: identical to wf_rng_init + wf_rng_seek(block) + 4 x wf_rng_u32, a row at a time. */
 void wf_noise_block_row(const wf_noise *noise, uint32_t pixel0, int n, uint32_t read,
-                        wf_purpose purpose, uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3);
+                        wf_purpose purpose, uint32_t block, uint32_t *w0, uint32_t *w1,
+                        uint32_t *w2, uint32_t *w3);
 
 /* Standard normals from 32-bit words: wf_norm_ppf((w + 0.5) / 2^32), rounded to float. */
 void wf_norm_from_u32(const uint32_t *w, int n, float *out);

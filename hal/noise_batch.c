@@ -14,11 +14,13 @@
 
 WF_CLONES
 void wf_noise_block_row(const wf_noise *noise, uint32_t pixel0, int n, uint32_t read,
-                        wf_purpose purpose, uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3)
+                        wf_purpose purpose, uint32_t block, uint32_t *w0, uint32_t *w1,
+                        uint32_t *w2, uint32_t *w3)
 {
     const uint32_t key0 = (uint32_t)noise->seed, key1 = (uint32_t)(noise->seed >> 32);
     const uint32_t c2in = noise->exposure;
-    const uint32_t c3in = ((noise->sca & 0xffu) << 24) | (((uint32_t)purpose & 0xffu) << 16);
+    const uint32_t c3in = ((noise->sca & 0xffu) << 24) | (((uint32_t)purpose & 0xffu) << 16) |
+                          (block & 0xffffu);
     for (int i = 0; i < n; i++) {
         uint32_t c0 = pixel0 + (uint32_t)i, c1 = read, c2 = c2in, c3 = c3in;
         uint32_t k0 = key0, k1 = key1;

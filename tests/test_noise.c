@@ -460,7 +460,7 @@ START_TEST(test_batch_matches_scalar)
     enum { N = 1029 };
     static uint32_t w[4][N];
     static float z[N];
-    wf_noise_block_row(&noise, 4088u * 100u + 3u, N, 41, WF_PURPOSE_PHOTON, w[0], w[1], w[2], w[3]);
+    wf_noise_block_row(&noise, 4088u * 100u + 3u, N, 41, WF_PURPOSE_PHOTON, 0, w[0], w[1], w[2], w[3]);
     for (int i = 0; i < N; i++) {
         wf_rng rng;
         wf_rng_init(&rng, &noise, 4088u * 100u + 3u + (uint32_t)i, 41, WF_PURPOSE_PHOTON);
@@ -470,6 +470,14 @@ START_TEST(test_batch_matches_scalar)
         wf_rng_init(&again, &noise, 4088u * 100u + 3u + (uint32_t)i, 41, WF_PURPOSE_PHOTON);
         wf_rng_seek(&again, 1);
         ck_assert_uint_eq(wf_rng_u32(&again), wf_rng_u32(&rng));
+    }
+    /* a later block of the row batch is that block of each stream */
+    wf_noise_block_row(&noise, 17u, N, 3, WF_PURPOSE_RESULTANT, 5, w[0], w[1], w[2], w[3]);
+    for (int i = 0; i < N; i++) {
+        wf_rng rng;
+        wf_rng_init(&rng, &noise, 17u + (uint32_t)i, 3, WF_PURPOSE_RESULTANT);
+        wf_rng_seek(&rng, 5);
+        for (int k = 0; k < 4; k++) ck_assert_uint_eq(w[k][i], wf_rng_u32(&rng));
     }
     wf_norm_from_u32(w[0], N, z);
     for (int i = 0; i < N; i++)
