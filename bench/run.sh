@@ -43,8 +43,8 @@ done
 for t in 16 64 256; do
   row_readout "direct, ${t}-row tiles, 2 threads" $N $N $t direct 6 2
 done
-row_readout "per-read, 64-row tiles, 1 thread" $N $N 64 per-read 6 1
-row_readout "direct, MA table 11 (900 s), 64-row tiles, 2 threads" $N $N 64 direct 11 2
+row_readout "per-read, MA table 11 (977 s), 64-row tiles, 2 threads" $N $N 64 per-read 11 2
+row_readout "direct, MA table 11 (977 s), 64-row tiles, 2 threads" $N $N 64 direct 11 2
 {
   echo
   echo "## Error of direct-resultant sampling (knob: exposure.sampling)"

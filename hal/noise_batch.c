@@ -5,6 +5,7 @@
  * for the normals the same double-precision formula, rounded to float). */
 #pragma GCC optimize("O3")
 #include "hal/noise.h"
+#include "hal/philox.h"
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
 #define WF_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
@@ -23,20 +24,7 @@ void wf_noise_block_row(const wf_noise *noise, uint32_t pixel0, int n, uint32_t 
                           (block & 0xffffu);
     for (int i = 0; i < n; i++) {
         uint32_t c0 = pixel0 + (uint32_t)i, c1 = read, c2 = c2in, c3 = c3in;
-        uint32_t k0 = key0, k1 = key1;
-#pragma GCC unroll 10
-        for (int round = 0; round < 10; round++) {
-            uint64_t p0 = (uint64_t)0xD2511F53u * c0;
-            uint64_t p1 = (uint64_t)0xCD9E8D57u * c2;
-            uint32_t n0 = (uint32_t)(p1 >> 32) ^ c1 ^ k0;
-            uint32_t n2 = (uint32_t)(p0 >> 32) ^ c3 ^ k1;
-            c1 = (uint32_t)p1;
-            c3 = (uint32_t)p0;
-            c0 = n0;
-            c2 = n2;
-            k0 += 0x9E3779B9u;
-            k1 += 0xBB67AE85u;
-        }
+        wf_philox_rounds(&c0, &c1, &c2, &c3, key0, key1);
         w0[i] = c0;
         w1[i] = c1;
         w2[i] = c2;
