@@ -26,11 +26,20 @@ static double now(void)
     return ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
+/* Instance i takes a contiguous run of tiles, so a scene renderer behind it draws an object
+ * spanning several tiles once, not once per thread. */
+static void tile_range(int ntiles, int threads, int i, int *first, int *end)
+{
+    *first = (int)((long)ntiles * i / threads);
+    *end = (int)((long)ntiles * (i + 1) / threads);
+}
+
 static void *work(void *arg)
 {
     worker *w = arg;
-    int ntiles = wf_readout_tile_count(w->ro);
-    for (int t = w->index; t < ntiles && !atomic_load(w->failed); t += w->job->threads) {
+    int first, end;
+    tile_range(wf_readout_tile_count(w->ro), w->job->threads, w->index, &first, &end);
+    for (int t = first; t < end && !atomic_load(w->failed); t++) {
         w->status = wf_readout_run_tile(w->ro, t);
         if (w->status) {
             snprintf(w->message, sizeof w->message, "%s", wf_error_message());
@@ -91,8 +100,9 @@ wf_status wf_expose_run(wf_expose_job *job)
     }
     if (job->progress && created == T - 1) {
         /* the main thread runs instance 0 and reports between its tiles */
-        int ntiles = wf_readout_tile_count(ws[0].ro);
-        for (int t = 0; t < ntiles && !atomic_load(&failed); t += T) {
+        int first, end;
+        tile_range(wf_readout_tile_count(ws[0].ro), T, 0, &first, &end);
+        for (int t = first; t < end && !atomic_load(&failed); t++) {
             ws[0].status = wf_readout_run_tile(ws[0].ro, t);
             if (ws[0].status) {
                 snprintf(ws[0].message, sizeof ws[0].message, "%s", wf_error_message());
