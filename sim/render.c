@@ -1,0 +1,224 @@
+#include "sim/render.h"
+
+#include <limits.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define NO_STAMP ((size_t)-1)
+
+struct wf_renderer {
+    wf_renderer_config cfg;
+    wf_render_object *objs; /* on-SCA objects sorted by (y0, id) */
+    size_t n;
+    wf_draw_fn draw;
+    void *draw_ctx;
+    size_t *stamp_off;      /* per object: offset of its whole stamp in the pool, or NO_STAMP */
+    size_t *active;         /* objects admitted and not yet passed, in sorted order */
+    size_t nactive;
+    size_t next;            /* first object not yet admitted */
+    int last_start;
+    unsigned char *pool;
+    size_t pool_used;
+    double *acc, *piece, *skyrow;
+    size_t acc_cap, piece_cap;
+    wf_renderer_stats stats;
+};
+
+static int by_row(const void *a, const void *b)
+{
+    const wf_render_object *p = a, *q = b;
+    if (p->y0 != q->y0) return p->y0 < q->y0 ? -1 : 1;
+    return p->id < q->id ? -1 : p->id > q->id;
+}
+
+static size_t stamp_bytes(const wf_render_object *o)
+{
+    return (size_t)o->nx * (size_t)o->ny * sizeof(double);
+}
+
+wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_object *objs,
+                             size_t n, wf_draw_fn draw, void *draw_ctx, wf_renderer **out)
+{
+    *out = NULL;
+    if (cfg->ncols < 1 || cfg->nrows < 1)
+        return wf_error(WF_ERR_RANGE, "renderer: SCA of %d x %d pixels", cfg->ncols, cfg->nrows);
+    wf_renderer *r = calloc(1, sizeof *r);
+    if (!r) return wf_error(WF_ERR_NOMEM, "renderer: out of memory");
+    r->cfg = *cfg;
+    if (!r->cfg.max_row_bytes) r->cfg.max_row_bytes = cfg->pool_bytes / 4 + (1u << 20);
+    r->draw = draw;
+    r->draw_ctx = draw_ctx;
+    r->last_start = INT_MIN;
+    r->objs = malloc((n ? n : 1) * sizeof *r->objs);
+    r->stamp_off = malloc((n ? n : 1) * sizeof *r->stamp_off);
+    r->active = malloc((n ? n : 1) * sizeof *r->active);
+    r->pool = cfg->pool_bytes ? malloc(cfg->pool_bytes) : NULL;
+    r->skyrow = malloc((size_t)cfg->ncols * sizeof *r->skyrow);
+    if (!r->objs || !r->stamp_off || !r->active || (cfg->pool_bytes && !r->pool) || !r->skyrow) {
+        wf_renderer_destroy(r);
+        return wf_error(WF_ERR_NOMEM, "renderer: cannot reserve %zu objects and a %zu-byte pool", n,
+                        cfg->pool_bytes);
+    }
+    for (size_t i = 0; i < n; i++) {
+        const wf_render_object *o = &objs[i];
+        if (o->nx < 1 || o->ny < 1) {
+            wf_renderer_destroy(r);
+            return wf_error(WF_ERR_INPUT, "renderer: object %llu has an empty stamp (%d x %d)",
+                            (unsigned long long)o->id, o->nx, o->ny);
+        }
+        int off = o->x0 >= cfg->ncols || (long)o->x0 + o->nx <= 0 || o->y0 >= cfg->nrows ||
+                  (long)o->y0 + o->ny <= 0;
+        if (off) { r->stats.objects_skipped++; continue; }
+        r->objs[r->n++] = *o;
+    }
+    r->stats.objects_kept = (long)r->n;
+    qsort(r->objs, r->n, sizeof *r->objs, by_row);
+    for (size_t i = 0; i < r->n; i++) r->stamp_off[i] = NO_STAMP;
+    *out = r;
+    return WF_OK;
+}
+
+void wf_renderer_destroy(wf_renderer *r)
+{
+    if (!r) return;
+    free(r->objs);
+    free(r->stamp_off);
+    free(r->active);
+    free(r->pool);
+    free(r->acc);
+    free(r->piece);
+    free(r->skyrow);
+    free(r);
+}
+
+void wf_renderer_get_stats(const wf_renderer *r, wf_renderer_stats *out) { *out = r->stats; }
+
+static wf_status grow(double **buf, size_t *cap, size_t count, const char *what)
+{
+    if (count <= *cap) return WF_OK;
+    double *p = realloc(*buf, count * sizeof *p);
+    if (!p) return wf_error(WF_ERR_NOMEM, "renderer: cannot grow the %s to %zu values", what, count);
+    *buf = p;
+    *cap = count;
+    return WF_OK;
+}
+
+/* Moves the live stamps to the front of the pool (they are plain arrays: offsets change,
+ * contents do not). Live stamps belong to active objects only. */
+static void compact(wf_renderer *r)
+{
+    size_t used = 0;
+    for (;;) { /* take live stamps in offset order */
+        size_t best = r->nactive, best_off = NO_STAMP;
+        for (size_t a = 0; a < r->nactive; a++) {
+            size_t off = r->stamp_off[r->active[a]];
+            if (off != NO_STAMP && off >= used && (best_off == NO_STAMP || off < best_off)) {
+                best = a;
+                best_off = off;
+            }
+        }
+        if (best == r->nactive) break;
+        size_t obj = r->active[best], bytes = stamp_bytes(&r->objs[obj]);
+        if (best_off != used) memmove(r->pool + used, r->pool + best_off, bytes);
+        r->stamp_off[obj] = used;
+        used += bytes;
+    }
+    r->pool_used = used;
+}
+
+/* A pointer to rows [ya, yb) of object i's stamp: the cached whole stamp when it fits the
+ * pool, else a piece drawn now. */
+static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const double **rows)
+{
+    const wf_render_object *o = &r->objs[i];
+    size_t bytes = stamp_bytes(o);
+    if (r->stamp_off[i] == NO_STAMP && bytes <= r->cfg.pool_bytes) {
+        if (r->pool_used + bytes > r->cfg.pool_bytes) compact(r);
+        if (r->pool_used + bytes <= r->cfg.pool_bytes) {
+            double *dst = (double *)(void *)(r->pool + r->pool_used);
+            wf_status st = r->draw(r->draw_ctx, o, o->y0, o->y0 + o->ny, dst);
+            if (st) return st;
+            r->stamp_off[i] = r->pool_used;
+            r->pool_used += bytes;
+            if (r->pool_used > r->stats.pool_high_water) r->stats.pool_high_water = r->pool_used;
+            r->stats.stamps_drawn++;
+        }
+    }
+    if (r->stamp_off[i] != NO_STAMP) {
+        *rows = (const double *)(const void *)(r->pool + r->stamp_off[i]) + (size_t)(ya - o->y0) * o->nx;
+        return WF_OK;
+    }
+    size_t need = (size_t)(yb - ya) * (size_t)o->nx;
+    if (need * sizeof(double) > r->cfg.max_row_bytes)
+        return wf_error(WF_ERR_NOMEM, "renderer: object %llu needs %zu bytes for %d rows, above the "
+                        "piece limit of %zu", (unsigned long long)o->id, need * sizeof(double), yb - ya,
+                        r->cfg.max_row_bytes);
+    wf_status st = grow(&r->piece, &r->piece_cap, need, "piece buffer");
+    if (st) return st;
+    if ((st = r->draw(r->draw_ctx, o, ya, yb, r->piece))) return st;
+    r->stats.pieces_drawn++;
+    *rows = r->piece;
+    return WF_OK;
+}
+
+static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
+{
+    wf_renderer *r = ctx;
+    if (ncols != r->cfg.ncols || y0 < 0 || y1 > r->cfg.nrows || y1 < y0)
+        return wf_error(WF_ERR_INTERNAL, "renderer: asked for rows %d-%d of %d x %d", y0, y1,
+                        ncols, r->cfg.nrows);
+    if (y0 < r->last_start) { /* went backwards: start the scan again */
+        for (size_t a = 0; a < r->nactive; a++) r->stamp_off[r->active[a]] = NO_STAMP;
+        r->nactive = 0;
+        r->next = 0;
+        r->pool_used = 0;
+    }
+    r->last_start = y0;
+    /* retire objects that end above this request, then admit those that start before its end */
+    size_t keep = 0;
+    for (size_t a = 0; a < r->nactive; a++) {
+        const wf_render_object *o = &r->objs[r->active[a]];
+        if (o->y0 + o->ny <= y0) r->stamp_off[r->active[a]] = NO_STAMP;
+        else r->active[keep++] = r->active[a];
+    }
+    r->nactive = keep;
+    while (r->next < r->n && r->objs[r->next].y0 < y1) {
+        const wf_render_object *o = &r->objs[r->next];
+        if (o->y0 + o->ny > y0) r->active[r->nactive++] = r->next;
+        r->next++;
+    }
+    size_t rows = (size_t)(y1 - y0);
+    wf_status st = grow(&r->acc, &r->acc_cap, rows * (size_t)ncols, "row accumulator");
+    if (st) return st;
+    for (int y = y0; y < y1; y++) {
+        double *acc = r->acc + (size_t)(y - y0) * ncols;
+        if (r->cfg.sky_fn) {
+            if ((st = r->cfg.sky_fn(r->cfg.sky_ctx, y, ncols, acc))) return st;
+        } else {
+            for (int x = 0; x < ncols; x++) acc[x] = r->cfg.sky;
+        }
+    }
+    for (size_t a = 0; a < r->nactive; a++) {
+        size_t i = r->active[a];
+        const wf_render_object *o = &r->objs[i];
+        int ya = o->y0 > y0 ? o->y0 : y0, yb = o->y0 + o->ny < y1 ? o->y0 + o->ny : y1;
+        if (ya >= yb) continue;
+        const double *src = NULL;
+        if ((st = stamp_rows(r, i, ya, yb, &src))) return st;
+        int xa = o->x0 > 0 ? o->x0 : 0, xb = o->x0 + o->nx < ncols ? o->x0 + o->nx : ncols;
+        for (int y = ya; y < yb; y++) {
+            const double *s = src + (size_t)(y - ya) * o->nx - o->x0;
+            double *acc = r->acc + (size_t)(y - y0) * ncols;
+            for (int x = xa; x < xb; x++) acc[x] += s[x];
+        }
+    }
+    for (size_t k = 0; k < rows * (size_t)ncols; k++) rate[k] = (float)r->acc[k];
+    return WF_OK;
+}
+
+void wf_renderer_source(wf_renderer *r, wf_scene_source *out)
+{
+    out->ctx = r;
+    out->fill_rate = fill;
+    out->rows_empty = NULL;
+}

@@ -1,0 +1,61 @@
+/* Tile renderer: the scene source behind the firmware (hal/scene.h) when the scene is a list
+ * of objects. Objects are sorted by their first row; an object's stamp is drawn once, when
+ * the first tile that touches it asks, its rows are added to every tile it overlaps, and it
+ * is dropped once the tiles have passed it. Stamps live in a pool of fixed size; an object
+ * whose stamp does not fit is drawn in pieces (the rows a tile needs), never dropped.
+ * Objects entirely off the SCA are never drawn. The rate of a pixel is the sky plus the
+ * objects in (first row, id) order, summed in double, so it does not depend on how the rows
+ * are split into tiles. */
+#ifndef WF_RENDER_H
+#define WF_RENDER_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include "hal/scene.h"
+
+typedef struct wf_render_object {
+    uint64_t id;
+    int x0, y0, nx, ny; /* stamp footprint in SCA pixels (0-based), may reach past the edges */
+    const void *data;   /* the drawing function's description of the object */
+} wf_render_object;
+
+/* Draws rows [ya, yb) (absolute SCA rows inside the footprint) of the object's stamp, in
+ * e-/s per pixel, into out[(y - ya) * nx + i] for columns x0 + i. A row must come out the
+ * same whether it is drawn with the whole stamp or in a piece. */
+typedef wf_status (*wf_draw_fn)(void *ctx, const wf_render_object *obj, int ya, int yb,
+                                double *out);
+
+/* Sky rate of row y, written into out[ncols]: lets the sky follow the pixel area. NULL
+ * sky function: constant `sky` e-/pixel/s. */
+typedef wf_status (*wf_sky_fn)(void *ctx, int y, int ncols, double *out);
+
+typedef struct wf_renderer_config {
+    int ncols, nrows;
+    double sky;             /* e-/pixel/s when sky_fn is NULL */
+    wf_sky_fn sky_fn;
+    void *sky_ctx;
+    size_t pool_bytes;      /* stamp pool; a stamp larger than it is drawn in pieces */
+    size_t max_row_bytes;   /* piece buffer: the most rows x width a piece may hold [pool/4] */
+} wf_renderer_config;
+
+typedef struct wf_renderer_stats {
+    long stamps_drawn;      /* whole stamps drawn */
+    long pieces_drawn;      /* partial draws of stamps too large for the pool */
+    long objects_kept;      /* objects on (or reaching onto) the SCA */
+    long objects_skipped;   /* objects entirely off the SCA */
+    size_t pool_high_water; /* most pool bytes in use */
+} wf_renderer_stats;
+
+typedef struct wf_renderer wf_renderer;
+
+/* Copies the object list (the `data` pointers must outlive the renderer). */
+wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_object *objs,
+                             size_t n, wf_draw_fn draw, void *draw_ctx, wf_renderer **out);
+void wf_renderer_destroy(wf_renderer *r);
+
+/* The HAL scene source reading this renderer (one renderer per readout thread). */
+void wf_renderer_source(wf_renderer *r, wf_scene_source *out);
+
+void wf_renderer_get_stats(const wf_renderer *r, wf_renderer_stats *out);
+
+#endif

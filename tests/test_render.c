@@ -1,0 +1,191 @@
+/* The tile renderer with an analytic Gaussian stamp: output independent of tile height and
+ * pool size, flux conserved, objects off the SCA never drawn, crowded and empty tiles. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sim/render.h"
+#include "tests/testutil.h"
+
+typedef struct gauss { double x, y, sigma, flux; } gauss;
+typedef struct counter { long calls; long rows; } counter;
+
+static double frac(int i, double c, double s)
+{
+    double k = 1.0 / (M_SQRT2 * s);
+    return 0.5 * (erf((i + 0.5 - c) * k) - erf((i - 0.5 - c) * k));
+}
+
+static wf_status draw_gauss(void *ctx, const wf_render_object *o, int ya, int yb, double *out)
+{
+    counter *c = ctx;
+    const gauss *g = o->data;
+    c->calls++;
+    c->rows += yb - ya;
+    for (int y = ya; y < yb; y++) {
+        double fy = g->flux * frac(y, g->y, g->sigma);
+        for (int i = 0; i < o->nx; i++) out[(size_t)(y - ya) * o->nx + i] = fy * frac(o->x0 + i, g->x, g->sigma);
+    }
+    return WF_OK;
+}
+
+static void make_objects(int n, int ncols, int nrows, gauss *g, wf_render_object *o, unsigned seed)
+{
+    srand(seed);
+    for (int i = 0; i < n; i++) {
+        g[i].x = -20.0 + (ncols + 40.0) * rand() / (double)RAND_MAX; /* some off the edges */
+        g[i].y = -20.0 + (nrows + 40.0) * rand() / (double)RAND_MAX;
+        g[i].sigma = 0.5 + 4.0 * rand() / (double)RAND_MAX;
+        g[i].flux = 10.0 + 1000.0 * rand() / (double)RAND_MAX;
+        int h = (int)ceil(6 * g[i].sigma);
+        o[i] = (wf_render_object){(uint64_t)i, (int)floor(g[i].x) - h, (int)floor(g[i].y) - h, 2 * h + 2, 2 * h + 2, &g[i]};
+    }
+}
+
+/* Rates for the whole SCA, asked for as the firmware does: tiles with one halo row. */
+static float *render_all(const wf_renderer_config *cfg, const wf_render_object *o, int n, int tile,
+                         counter *c)
+{
+    wf_renderer *r;
+    ck_assert_int_eq(wf_renderer_create(cfg, o, (size_t)n, draw_gauss, c, &r), WF_OK);
+    wf_scene_source src;
+    wf_renderer_source(r, &src);
+    float *img = calloc((size_t)cfg->ncols * cfg->nrows, sizeof *img);
+    float *buf = malloc((size_t)(tile + 2) * cfg->ncols * sizeof *buf);
+    for (int y0 = 0; y0 < cfg->nrows; y0 += tile) {
+        int y1 = y0 + tile < cfg->nrows ? y0 + tile : cfg->nrows;
+        int h0 = y0 ? y0 - 1 : 0, h1 = y1 < cfg->nrows ? y1 + 1 : y1;
+        ck_assert_int_eq(wf_scene_fill(&src, h0, h1, cfg->ncols, buf), WF_OK);
+        for (int y = h0; y < h1; y++) {
+            float *row = img + (size_t)y * cfg->ncols, *got = buf + (size_t)(y - h0) * cfg->ncols;
+            if (y >= y0 && y < y1) memcpy(row, got, (size_t)cfg->ncols * sizeof *row);
+            else ck_assert_msg(!memcmp(row, got, (size_t)cfg->ncols * sizeof *row) || y >= y1,
+                               "halo row %d differs between tiles", y);
+        }
+    }
+    free(buf);
+    wf_renderer_destroy(r);
+    return img;
+}
+
+START_TEST(tile_height_and_pool_do_not_matter)
+{
+    enum { N = 400, W = 120, H = 150 };
+    static gauss g[N];
+    static wf_render_object o[N];
+    make_objects(N, W, H, g, o, 7);
+    wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0};
+    counter c = {0, 0};
+    float *ref = render_all(&cfg, o, N, H, &c);
+    const int tiles[] = {1, 7, 64};
+    for (int t = 0; t < 3; t++) {
+        float *img = render_all(&cfg, o, N, tiles[t], &c);
+        ck_assert_msg(!memcmp(ref, img, sizeof(float) * W * H), "tile height %d changes the rates", tiles[t]);
+        free(img);
+    }
+    /* a pool too small for most stamps: drawn in pieces, same numbers */
+    cfg.pool_bytes = 2000;
+    float *small = render_all(&cfg, o, N, 7, &c);
+    ck_assert_msg(!memcmp(ref, small, sizeof(float) * W * H), "piecewise drawing changes the rates");
+    free(small);
+    free(ref);
+}
+END_TEST
+
+START_TEST(flux_conserved_and_off_sca_skipped)
+{
+    enum { N = 300, W = 100, H = 90 };
+    static gauss g[N];
+    static wf_render_object o[N];
+    make_objects(N, W, H, g, o, 11);
+    /* three objects entirely off the SCA */
+    o[0].x0 = W + 5;
+    o[1].y0 = -o[1].ny - 3;
+    o[2].x0 = -o[2].nx;
+    wf_renderer_config cfg = {W, H, 0.25, NULL, NULL, 1u << 22, 0};
+    counter c = {0, 0};
+    wf_renderer *r;
+    ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
+    wf_renderer_stats st;
+    wf_renderer_get_stats(r, &st);
+    int expect_skipped = 3;
+    for (int i = 3; i < N; i++)
+        if (o[i].x0 >= W || o[i].x0 + o[i].nx <= 0 || o[i].y0 >= H || o[i].y0 + o[i].ny <= 0) expect_skipped++;
+    ck_assert_int_eq(st.objects_skipped, expect_skipped);
+    wf_renderer_destroy(r);
+    float *img = render_all(&cfg, o, N, 16, &c);
+    double sum = 0, expect = 0.25 * W * H;
+    for (int i = 0; i < W * H; i++) sum += img[i];
+    for (int i = 3; i < N; i++) {
+        if (o[i].x0 >= W || o[i].x0 + o[i].nx <= 0 || o[i].y0 >= H || o[i].y0 + o[i].ny <= 0) continue;
+        double fx = 0, fy = 0; /* the part of the stamp that lies on the SCA */
+        for (int x = o[i].x0 > 0 ? o[i].x0 : 0; x < o[i].x0 + o[i].nx && x < W; x++) fx += frac(x, g[i].x, g[i].sigma);
+        for (int y = o[i].y0 > 0 ? o[i].y0 : 0; y < o[i].y0 + o[i].ny && y < H; y++) fy += frac(y, g[i].y, g[i].sigma);
+        expect += g[i].flux * fx * fy;
+    }
+    ck_assert_msg(fabs(sum - expect) < 1e-6 * expect, "sum %.6f, expected %.6f", sum, expect);
+    free(img);
+}
+END_TEST
+
+START_TEST(crowded_tile_and_empty_scene)
+{
+    enum { N = 10000, W = 256, H = 64 };
+    gauss *g = malloc(N * sizeof *g);
+    wf_render_object *o = malloc(N * sizeof *o);
+    make_objects(N, W, 8, g, o, 3); /* 10,000 objects on the first rows */
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0};
+    counter c = {0, 0};
+    float *img = render_all(&cfg, o, N, 64, &c);
+    double sum = 0;
+    for (int i = 0; i < W * H; i++) {
+        ck_assert(isfinite(img[i]) && img[i] >= 0.0f);
+        sum += img[i];
+    }
+    ck_assert(sum > 0);
+    ck_assert_msg(c.calls <= N, "%ld draws for %d objects", c.calls, N);
+    free(img);
+    /* empty: the sky and nothing else */
+    wf_renderer_config e = {W, H, 1.5, NULL, NULL, 0, 0};
+    float *sky = render_all(&e, NULL, 0, 16, &c);
+    for (int i = 0; i < W * H; i++) ck_assert(sky[i] == 1.5f);
+    free(sky);
+    free(g);
+    free(o);
+}
+END_TEST
+
+START_TEST(each_stamp_drawn_once)
+{
+    enum { N = 200, W = 80, H = 200 };
+    static gauss g[N];
+    static wf_render_object o[N];
+    make_objects(N, W, H, g, o, 5);
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0};
+    counter c = {0, 0};
+    wf_renderer *r;
+    ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
+    wf_renderer_stats st;
+    wf_renderer_get_stats(r, &st);
+    wf_renderer_destroy(r);
+    c.calls = 0;
+    float *img = render_all(&cfg, o, N, 4, &c);
+    ck_assert_msg(c.calls == st.objects_kept, "%ld draws for %ld objects on the SCA", c.calls, st.objects_kept);
+    free(img);
+}
+END_TEST
+
+static Suite *suite(void)
+{
+    Suite *s = suite_create("render");
+    TCase *tc = tcase_create("render");
+    tcase_set_timeout(tc, 120);
+    tcase_add_test(tc, tile_height_and_pool_do_not_matter);
+    tcase_add_test(tc, flux_conserved_and_off_sca_skipped);
+    tcase_add_test(tc, crowded_tile_and_empty_scene);
+    tcase_add_test(tc, each_stamp_drawn_once);
+    suite_add_tcase(s, tc);
+    return s;
+}
+
+int main(void) { return wf_test_main(suite()); }
