@@ -1,0 +1,164 @@
+#include "tools/surveycmd.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "sim/survey.h"
+#include "sim/wcs.h"
+#include "tools/config.h"
+
+static const char *survey_usage =
+    "usage: wfisim survey plan [--config FILE] [--data DIR] [--set survey.KEY=VALUE ...]\n"
+    "                          [--quiet] --out plan.fits\n"
+    "       wfisim survey keys\n"
+    "\n"
+    "  plan   the deep-tier observation plan (SPEC 6) as FITS tables PLAN and POINTINGS, and\n"
+    "         the coverage map per filter next to it (plan.fits -> plan_coverage.fits)\n"
+    "  keys   the survey.* keys, their defaults and meaning\n"
+    "\n"
+    "  --data DIR   focal plane from DIR/roman/ (GalSim's files); default paths.data, else the\n"
+    "               built-in table\n";
+
+static int fail(wf_status st)
+{
+    const char *m = wf_error_message();
+    fprintf(stderr, "wfisim survey: %s\n", m[0] ? m : wf_status_name(st));
+    return st == WF_ERR_INPUT || st == WF_ERR_RANGE ? 2 : 1;
+}
+
+static int usage_error(const char *fmt, const char *arg)
+{
+    fprintf(stderr, "wfisim survey: ");
+    fprintf(stderr, fmt, arg);
+    fprintf(stderr, "\n\n%s", survey_usage);
+    return 2;
+}
+
+/* plan.fits -> plan_coverage.fits; any other name gets the suffix appended. */
+static int coverage_path(const char *out, char *buf, size_t size)
+{
+    size_t len = strlen(out);
+    int n;
+    if (len > 5 && !strcmp(out + len - 5, ".fits"))
+        n = snprintf(buf, size, "%.*s_coverage.fits", (int)(len - 5), out);
+    else
+        n = snprintf(buf, size, "%s_coverage.fits", out);
+    return n >= 0 && (size_t)n < size;
+}
+
+static void report(const wf_survey_plan *plan, const wf_survey_overlap *ov,
+                   const wf_survey_coverage *cov, const wf_focal_plane *fp, const char *out,
+                   const char *cov_out)
+{
+    const wf_survey_params *p = &plan->par;
+    const wf_exposure *last = &plan->exp[plan->nexp - 1];
+    printf("survey plan: %d visits x %d pointings x %d filters = %zu exposures, %d orients, "
+           "MJD %.4f .. %.4f\n", p->visits, plan->npointings, p->nfilters, plan->nexp,
+           plan->norients, plan->exp[0].mjd_start, last->mjd_start + last->exptime / 86400.0);
+    printf("focal plane: %s\n", fp->source);
+    printf("snake overlap check: %d orients, %ld SCA pairs tested, %ld overlapping, smallest gap "
+           "between pointings %.2f arcsec\n", ov->orients, ov->pairs_checked, ov->overlapping,
+           ov->min_gap);
+    for (int f = 0; f < cov->nfilters; f++) {
+        printf("coverage %-6s:", cov->filters[f]);
+        for (int t = 0; t < WF_SURVEY_NTHRESH; t++)
+            printf("  >=%d: %.3f deg2", cov->threshold[t], cov->area[f][t]);
+        printf("  (max %d)\n", cov->max_count[f]);
+    }
+    printf("wrote %s and %s\n", out, cov_out);
+}
+
+static int cmd_plan(int argc, char **argv)
+{
+    wf_config *cfg = malloc(sizeof *cfg);
+    if (!cfg) return fail(wf_error(WF_ERR_NOMEM, "out of memory"));
+    wf_config_defaults(cfg);
+    wf_survey_params par;
+    wf_survey_defaults(&par);
+    const char *out = NULL, *data = NULL;
+    int quiet = 0, rc = 0;
+    wf_status st;
+    /* The configuration file first, wherever it stands, so that flags override it. */
+    for (int i = 0; i < argc && !rc; i++)
+        if (!strcmp(argv[i], "--config")) {
+            if (i + 1 >= argc) rc = usage_error("%s needs a file", "--config");
+            else if ((st = wf_config_load(cfg, argv[i + 1]))) rc = fail(st);
+        }
+    for (int i = 0; i < argc && !rc; i++) {
+        const char *a = argv[i], *val = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--quiet")) {
+            quiet = 1;
+            continue;
+        }
+        if (strcmp(a, "--config") && strcmp(a, "--data") && strcmp(a, "--out") &&
+            strcmp(a, "--set")) {
+            rc = usage_error("unknown option '%s'", a);
+            break;
+        }
+        if (!val) {
+            rc = usage_error("%s needs a value", a);
+            break;
+        }
+        i++;
+        if (!strcmp(a, "--data")) data = val;
+        else if (!strcmp(a, "--out")) out = val;
+        else if (!strcmp(a, "--set")) {
+            st = wf_survey_is_key(val) ? wf_survey_set(&par, val, "--set")
+                                       : wf_config_set(cfg, val, "--set");
+            if (st) rc = fail(st);
+        }
+    }
+    if (!rc && !out) rc = usage_error("%s is required", "--out FILE");
+    if (!data) data = cfg->data_dir;
+    char cov_out[WF_PATH_MAX + 32];
+    if (!rc && !coverage_path(out, cov_out, sizeof cov_out))
+        rc = usage_error("output name '%s' is too long", out);
+    wf_focal_plane *fp = NULL;
+    wf_survey_plan plan = {0};
+    wf_survey_coverage cov = {0};
+    wf_survey_overlap ov = {0};
+    if (!rc) {
+        /* Parameters first: a bad value is bad input whatever the data directory holds. */
+        st = wf_survey_check(&par);
+        fp = st ? NULL : malloc(sizeof *fp);
+        if (!st) st = fp ? wf_wcs_focal_plane(data, fp) : wf_error(WF_ERR_NOMEM, "out of memory");
+        if (!st) st = wf_survey_plan_make(&par, fp, &plan);
+        if (!st) st = wf_survey_check_overlap(&plan, fp, &ov);
+        if (!st) st = wf_survey_coverage_make(&plan, fp, &cov);
+        if (!st) st = wf_survey_write_plan(&plan, &ov, out);
+        if (!st) {
+            st = wf_survey_write_coverage(&cov, cov_out);
+            if (st) unlink(out); /* both products or neither */
+        }
+        if (st) rc = fail(st);
+    }
+    if (!rc) {
+        if (ov.overlapping)
+            fprintf(stderr, "wfisim survey: warning: %ld SCA pairs of one snake overlap (largest "
+                    "%.1f arcsec2, orient %d); a supernova there is seen twice per filter and "
+                    "visit\n", ov.overlapping, ov.max_overlap, ov.worst_orient);
+        if (!quiet) report(&plan, &ov, &cov, fp, out, cov_out);
+    }
+    wf_survey_coverage_free(&cov);
+    wf_survey_plan_free(&plan);
+    free(fp);
+    free(cfg);
+    return rc;
+}
+
+int wf_cmd_survey(int argc, char **argv)
+{
+    if (argc < 1) return usage_error("%s", "which survey command?");
+    if (!strcmp(argv[0], "--help") || !strcmp(argv[0], "-h") || !strcmp(argv[0], "help")) {
+        fputs(survey_usage, stdout);
+        return 0;
+    }
+    if (!strcmp(argv[0], "keys")) {
+        wf_survey_write_doc(stdout);
+        return 0;
+    }
+    if (!strcmp(argv[0], "plan")) return cmd_plan(argc - 1, argv + 1);
+    return usage_error("unknown survey command '%s'", argv[0]);
+}
