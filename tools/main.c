@@ -14,6 +14,7 @@
 #include "tools/assemble.h"
 #include "tools/config.h"
 #include "tools/expose.h"
+#include "tools/psfcmd.h"
 #include "tools/surveycmd.h"
 
 #define WFISIM_VERSION "0.1.0"
@@ -26,6 +27,7 @@ static const char *usage_text =
     "  expose               one exposure of the configured scene (--stream FILE|- for packets)\n"
     "  assemble FILE|-      packet stream -> FITS (SCI, ERR, DQ, RESULTANTS)\n"
     "  record --rates FILE  write the scene's rate rows to a replay file\n"
+    "  psf --filter F --sca N --out F   a Roman PSF image (see wfisim psf --help)\n"
     "  survey plan --out F  the deep-tier observation plan and its coverage map (docs/SURVEY.md)\n"
     "  config doc           print the reference of every configuration key (docs/CONFIG.md)\n"
     "  config check FILE    load a configuration file and report the first problem\n"
@@ -276,6 +278,7 @@ int main(int argc, char **argv)
     if (!strcmp(cmd, "--help") || !strcmp(cmd, "-h") || !strcmp(cmd, "help")) { fputs(usage_text, stdout); return 0; }
     if (!strcmp(cmd, "--version")) { puts("wfisim " WFISIM_VERSION); return 0; }
     if (!strcmp(cmd, "survey")) return wf_cmd_survey(argc - 2, argv + 2);
+    if (!strcmp(cmd, "psf")) return wf_cmd_psf(argc - 2, argv + 2);
     if (!strcmp(cmd, "config")) {
         if (argc >= 3 && !strcmp(argv[2], "doc")) { wf_config_write_doc(stdout); return 0; }
         if (argc >= 4 && !strcmp(argv[2], "check")) {
