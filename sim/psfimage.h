@@ -22,6 +22,12 @@ typedef struct wf_psf_image {
     int n;               /* n x n samples, n >= 2 */
     double scale_arcsec; /* sample spacing */
     const double *pix;   /* row-major, n * n, owned by the caller */
+    double band_limit;   /* rad/arcsec beyond which the PSF has no power: 2 pi D / lambda
+                            (lambda the shortest wavelength drawn; 67.85 for Y106 at 1.0595 um
+                            and D = 2.36 m). 0: unknown, the image's transform is used out to
+                            where it falls below 1e-7, which keeps any resampling artifacts
+                            the image holds above the optical cut-off (GalSim's OVER4 images
+                            hold ~3% there) and costs up to 5x the time per draw. */
 } wf_psf_image;
 
 #endif

@@ -8,7 +8,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "tools/fitsout.h"
+#include "sim/fitsout.h"
 
 #define DEG (M_PI / 180.0)
 #define DAY 86400.0

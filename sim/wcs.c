@@ -6,7 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "tools/fitsout.h"
+#include "sim/fitsout.h"
 
 #define DEG (M_PI / 180.0)
 #define NEWTON_TOL 1e-9     /* pixels */

@@ -11,7 +11,7 @@
 
 #include "tests/testutil.h"
 
-#define SMALL "--quiet --set readout.ncols=96 --set readout.nrows=80 --set readout.ma_table=4 " \
+#define SMALL "--quiet --set scene.kind=grid --set readout.ncols=96 --set readout.nrows=80 --set readout.ma_table=4 " \
               "--set detector.cr_rate=500 --set scene.grid.spacing=20 --set scene.grid.flux=2e4"
 
 static char *slurp(const char *path, size_t *len)
@@ -172,7 +172,7 @@ static void flat_sky_unbiased(const char *mode, double sky)
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
-    ck_assert_int_eq(run("%s expose --quiet --mode %s --set readout.ncols=128 --set readout.nrows=128 "
+    ck_assert_int_eq(run("%s expose --quiet --mode %s --set scene.kind=grid --set readout.ncols=128 --set readout.nrows=128 "
                          "--set detector.effects.cosmic_rays=false --set scene.grid.flux=0 "
                          "--set scene.sky_rate=%g --out %s", bin, mode, sky, d), 0);
     char path[4200];
@@ -209,6 +209,30 @@ END_TEST
 START_TEST(flat_sky_single) { flat_sky_unbiased("single", 0.3953); }
 END_TEST
 
+/* The object scene (synthetic field, PSF, stamps, renderer) through the whole chain: tile
+ * height and thread count change no byte of the image or the truth. */
+START_TEST(object_scene_deterministic)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+#define OBJ "--quiet --set scene.kind=synthetic --set readout.ncols=160 --set readout.nrows=144 " \
+            "--set readout.ma_table=4 --set psf.pupil_bin=8"
+    ck_assert_int_eq(run("%s expose " OBJ " --tile-rows 144 --out %s/ref", bin, d), 0);
+    ck_assert_int_eq(run("%s expose " OBJ " --tile-rows 7 --threads 2 --out %s/t7", bin, d), 0);
+    ck_assert_int_eq(run("%s expose " OBJ " --tile-rows 64 --threads 2 --out %s/t64", bin, d), 0);
+    const char *names[] = {FITS, "wfisim_e000001_sca01_truth.fits"};
+    for (int k = 0; k < 2; k++) {
+        char a[4200], b[4200], c[4200];
+        snprintf(a, sizeof a, "%s/ref/%s", d, names[k]);
+        snprintf(b, sizeof b, "%s/t7/%s", d, names[k]);
+        snprintf(c, sizeof c, "%s/t64/%s", d, names[k]);
+        assert_same_file(a, b);
+        assert_same_file(a, c);
+    }
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("program");
@@ -222,6 +246,7 @@ static Suite *suite(void)
     tcase_add_test(tc, flat_sky_ramp);
     tcase_add_test(tc, flat_sky_ramp_bright);
     tcase_add_test(tc, flat_sky_single);
+    tcase_add_test(tc, object_scene_deterministic);
     suite_add_tcase(s, tc);
     return s;
 }

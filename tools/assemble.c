@@ -12,7 +12,7 @@
 
 #include "hal/clock.h"
 #include "hal/packet.h"
-#include "tools/fitsout.h"
+#include "sim/fitsout.h"
 #include "tools/rampfit.h"
 
 /* Per-row bookkeeping: which payloads have covered the row. Rows, not tiles, are the unit,
@@ -43,6 +43,8 @@ typedef struct meta {
     wf_clock clock;
     hdr_line *hdr;
     int nhdr;
+    hdr_line *img; /* "img.KEY = value" lines: cards for every image HDU (the WCS) */
+    int nimg;
 } meta;
 
 /* A SATURATION payload whose rows still wait for their resultants. */
@@ -337,7 +339,8 @@ static wf_status parse_meta(const assembler *a, const char *payload, size_t len,
     for (size_t i = 0; i < len; i++) nlines += m->text[i] == '\n';
     kv *t = calloc(nlines, sizeof *t);
     m->hdr = calloc(nlines, sizeof *m->hdr);
-    if (!t || !m->hdr) {
+    m->img = calloc(nlines, sizeof *m->img);
+    if (!t || !m->hdr || !m->img) {
         free(t);
         return fail(a, WF_ERR_NOMEM, "cannot parse META of %zu lines", nlines);
     }
@@ -356,6 +359,18 @@ static wf_status parse_meta(const assembler *a, const char *payload, size_t len,
         }
         *eq = '\0';
         char *key = trim(line), *value = eq + 1;
+        if (!strncmp(key, "img.", 4)) {
+            hdr_line *h = &m->img[m->nimg];
+            if ((st = parse_hdr_line(a, key + 4, value, lineno, h))) goto out;
+            for (int i = 0; i < m->nimg; i++)
+                if (!strcmp(m->img[i].key, h->key)) {
+                    st = fail(a, WF_ERR_INPUT, "META line %d: img.%s given twice (also line %d)",
+                              lineno, h->key, m->img[i].line);
+                    goto out;
+                }
+            m->nimg++;
+            continue;
+        }
         if (!strncmp(key, "hdr.", 4)) {
             hdr_line *h = &m->hdr[m->nhdr];
             if ((st = parse_hdr_line(a, key + 4, value, lineno, h))) goto out;
@@ -452,6 +467,7 @@ static void meta_free(meta *m)
 {
     free(m->text);
     free(m->hdr);
+    free(m->img);
     memset(m, 0, sizeof *m);
 }
 
@@ -542,12 +558,16 @@ static int write_primary(fitsfile *f, const meta *m, int *status)
     return *status;
 }
 
+static int write_host_line(fitsfile *f, const hdr_line *h, int *status);
+
+/* The image HDUs share their pixel grid, so each carries the host's img. cards (the WCS). */
 static int create_image(fitsfile *f, int bitpix, int naxis, long *naxes, const char *extname,
-                        const char *bunit, const char *comment, int *status)
+                        const char *bunit, const char *comment, const meta *m, int *status)
 {
     fits_create_img(f, bitpix, naxis, naxes, status);
     fits_write_key_str(f, "EXTNAME", extname, comment, status);
     if (bunit) fits_write_key_str(f, "BUNIT", bunit, "physical unit of the data", status);
+    for (int i = 0; i < m->nimg && !*status; i++) write_host_line(f, &m->img[i], status);
     return *status;
 }
 
@@ -647,25 +667,25 @@ static wf_status exposure_open(assembler *a, const void *payload, exposure **out
     }
     if ((st = reserve(a, e, "primary header"))) goto bad;
     if (create_image(e->f, FLOAT_IMG, 2, naxes, "SCI", "electron/s",
-                     m->ramp ? "count rate from the ramp fit" : "count rate", &status)) {
+                     m->ramp ? "count rate from the ramp fit" : "count rate", m, &status)) {
         st = fail_fits(a, e, status, "creating SCI");
         goto bad;
     }
     if ((st = reserve(a, e, "SCI header"))) goto bad;
     if (create_image(e->f, FLOAT_IMG, 2, naxes, "ERR", "electron/s",
-                     "1-sigma uncertainty: read and Poisson", &status)) {
+                     "1-sigma uncertainty: read and Poisson", m, &status)) {
         st = fail_fits(a, e, status, "creating ERR");
         goto bad;
     }
     if ((st = reserve(a, e, "ERR header"))) goto bad;
-    if (create_image(e->f, ULONG_IMG, 2, naxes, "DQ", NULL, "data quality: 1 DO_NOT_USE, 2 SATURATED, 4 JUMP_DET", &status)) {
+    if (create_image(e->f, ULONG_IMG, 2, naxes, "DQ", NULL, "data quality: 1 DO_NOT_USE, 2 SATURATED, 4 JUMP_DET", m, &status)) {
         st = fail_fits(a, e, status, "creating DQ");
         goto bad;
     }
     if ((st = reserve(a, e, "DQ header"))) goto bad;
     if (m->ramp) {
         if (create_image(e->f, USHORT_IMG, 3, naxes, "RESULTANTS", "adu",
-                         "averaged reads [resultant][y][x]", &status)) {
+                         "averaged reads [resultant][y][x]", m, &status)) {
             st = fail_fits(a, e, status, "creating RESULTANTS");
             goto bad;
         }

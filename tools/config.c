@@ -70,6 +70,9 @@ static const char *const filters[] = {"R062", "Z087", "Y106", "J129", "H158",
 static const char *const modes[] = {"ramp", "single", NULL};
 static const char *const samplings[] = {"per-read", "direct", NULL};
 
+static const char *const scene_kinds[] = {"synthetic", "catalog", "grid", "galsim", NULL};
+static const char *const pupil_bins[] = {"1", "2", "4", "8", NULL};
+
 static const key_desc keys[] = {
     {.name = "seed", .type = KT_UINT, .unit = "", .def = "1", FIELD(seed),
      .doc = "Seed of every random number; products are bit-identical for a given seed."},
@@ -177,9 +180,32 @@ static const key_desc keys[] = {
     {.name = "detector.effects.cosmic_rays", .type = KT_BOOL, .unit = "",
      FIELD(ro.det.on.cosmic_rays), .doc = "Cosmic-ray hits."},
 
+    {.name = "pointing.ra", .type = KT_DOUBLE, .unit = "deg", .def = "71", MIN(0), MAX(360),
+     FIELD(ra), .doc = "Boresight right ascension (deep field centre by default)."},
+    {.name = "pointing.dec", .type = KT_DOUBLE, .unit = "deg", .def = "-53", MIN(-89.999), MAX(89.999),
+     FIELD(dec), .doc = "Boresight declination."},
+    {.name = "pointing.pa", .type = KT_DOUBLE, .unit = "deg", .def = "30", MIN(-360), MAX(360),
+     FIELD(pa), .doc = "Observatory position angle, as galsim.roman.getWCS(world_pos, PA=...)."},
+    {.name = "exposure.mjd", .type = KT_DOUBLE, .unit = "d", .def = "61420", MIN(15021), MAX(88069),
+     FIELD(mjd), .doc = "Exposure mid-time (MJD, 1900-2100): sky level and supernova epochs."},
+    {.name = "scene.kind", .type = KT_ENUM, .unit = "", .def = "synthetic", .choices = scene_kinds,
+     FIELD(scene_kind),
+     .doc = "`synthetic`: galaxies and stars generated from the seed around the pointing; "
+            "`catalog`: scene.catalog and scene.stars; `galsim`: a GalSim benchmark scene CSV in "
+            "scene.catalog; `grid`: sky plus a grid of Gaussian sources (scene.grid.*)."},
+    {.name = "scene.catalog", .type = KT_STRING, .unit = "", .def = "", FIELD(catalog),
+     .doc = "Galaxy catalog (FITS table or CSV, docs/CATALOGS.md), or the GalSim scene CSV."},
+    {.name = "scene.stars", .type = KT_STRING, .unit = "", .def = "", FIELD(stars),
+     .doc = "Star catalog (FITS table or CSV); empty: no stars for scene.kind catalog."},
+    {.name = "scene.flux_fraction", .type = KT_DOUBLE, .unit = "", .def = "0.995", ABOVE(0.5), MAX(0.99999),
+     FIELD(flux_fraction), .doc = "Each stamp holds at least this fraction of its object's flux."},
+    {.name = "psf.pupil_bin", .type = KT_ENUM, .unit = "", .def = "8", .choices = pupil_bins,
+     FIELD(pupil_bin), .doc = "Pupil-plane binning, as GalSim's pupil_bin (8 fast, 4 or 2 for bright stars)."},
+    {.name = "psf.oversample", .type = KT_INT, .unit = "", .def = "4", MIN(2), MAX(8),
+     FIELD(psf_oversample), .doc = "PSF image sampling: 0.11 / oversample arcsec."},
     {.name = "scene.sky_rate", .type = KT_DOUBLE, .unit = "e-/pixel/s", MIN(0),
      FIELD(sky_rate),
-     .doc = "Uniform sky. Default: Y106 zodiacal light at the deep field, 29.7 e-/s/arcsec^2, "
+     .doc = "Uniform sky of the grid scene (the others use the sky model). Default: Y106 zodiacal light at the deep field, 29.7 e-/s/arcsec^2, "
             "x 0.11^2 arcsec^2 x (1 + 0.1 stray light), + 0 thermal; it does not follow "
             "exposure.filter."},
     {.name = "scene.grid.flux", .type = KT_DOUBLE, .unit = "e-/s", .def = "1000", MIN(0),

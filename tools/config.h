@@ -27,6 +27,15 @@ typedef struct wf_config {
     double grid_flux;              /* scene.grid.flux, e-/s per source */
     double grid_sigma;             /* scene.grid.sigma, pixels */
     int grid_spacing;              /* scene.grid.spacing, pixels */
+    /* Pointing and scene (pointing.*, scene.*, psf.*) */
+    double ra, dec, pa;            /* pointing.ra/dec/pa, degrees [71, -53, 30] */
+    double mjd;                    /* exposure.mjd, exposure mid-time [61420] */
+    int scene_kind;                /* scene.kind: 0 synthetic, 1 catalog, 2 grid, 3 galsim [synthetic] */
+    char catalog[WF_PATH_MAX];     /* scene.catalog: galaxies (FITS/CSV), or a GalSim scene CSV */
+    char stars[WF_PATH_MAX];       /* scene.stars: stars (FITS/CSV) */
+    int pupil_bin;                 /* psf.pupil_bin [8] */
+    int psf_oversample;            /* psf.oversample [4] */
+    double flux_fraction;          /* scene.flux_fraction [0.995] */
     char data_dir[WF_PATH_MAX];    /* paths.data [$WFISIM_DATA or ""] */
     char reference_dir[WF_PATH_MAX]; /* paths.reference [$WFISIM_REFERENCE or ""] */
 } wf_config;

@@ -11,6 +11,11 @@
 
 #include "hal/link.h"
 #include "hal/scene.h"
+#include "sim/catalog.h"
+#include "sim/scene.h"
+#include "sim/skyindex.h"
+#include "sim/synth.h"
+#include "sim/wcs.h"
 #include "tools/assemble.h"
 #include "tools/config.h"
 #include "tools/expose.h"
@@ -136,6 +141,65 @@ static void grid_from_config(const wf_config *cfg, wf_scene_grid *g)
     g->spacing = cfg->grid_spacing;
 }
 
+/* Catalogs of the scene: a synthetic field around the SCA, files, or a GalSim scene. */
+typedef struct scene_inputs {
+    wf_catalog gal, stars, sne;
+    int have_gal, have_stars, have_sne;
+} scene_inputs;
+
+static void scene_inputs_free(scene_inputs *in)
+{
+    if (in->have_gal) wf_catalog_free(&in->gal);
+    if (in->have_stars) wf_catalog_free(&in->stars);
+    if (in->have_sne) wf_catalog_free(&in->sne);
+}
+
+static wf_status load_catalogs(const wf_config *cfg, scene_inputs *in)
+{
+    memset(in, 0, sizeof *in);
+    wf_status st = WF_OK;
+    if (cfg->scene_kind == 0) { /* synthetic: only the cells the SCA (and stamps reaching it) see */
+        wf_focal_plane fp;
+        wf_wcs w;
+        if ((st = wf_wcs_focal_plane(cfg->data_dir[0] ? cfg->data_dir : NULL, &fp)) ||
+            (st = wf_wcs_for_sca(&fp, cfg->ra, cfg->dec, cfg->pa, (int)cfg->ro.sca, &w)))
+            return st;
+        double ra[4], dec[4];
+        const double cx[4] = {-0.5, cfg->ro.ncols - 0.5, cfg->ro.ncols - 0.5, -0.5};
+        const double cy[4] = {-0.5, -0.5, cfg->ro.nrows - 0.5, cfg->ro.nrows - 0.5};
+        for (int k = 0; k < 4; k++)
+            if ((st = wf_wcs_pix2world(&w, cx[k], cy[k], &ra[k], &dec[k]))) return st;
+        wf_skyregion reg;
+        if ((st = wf_skyindex_polygon(ra, dec, 4, 70.0, &reg))) return st;
+        wf_synth_config sc;
+        wf_synth *syn;
+        wf_synth_defaults(&sc);
+        sc.seed = cfg->seed;
+        if ((st = wf_synth_create(&sc, &syn))) return st;
+        st = wf_synth_select(syn, &reg, &in->gal, &in->stars);
+        wf_synth_free(syn);
+        if (!st) in->have_gal = in->have_stars = 1;
+        return st;
+    }
+    if (cfg->scene_kind == 3) {
+        if (!cfg->catalog[0]) return wf_error(WF_ERR_INPUT, "scene.kind galsim needs scene.catalog");
+        st = wf_catalog_read_galsim_scene(cfg->catalog, &in->gal, &in->stars, &in->sne);
+        if (!st) in->have_gal = in->have_stars = in->have_sne = 1;
+        return st;
+    }
+    if (!cfg->catalog[0] && !cfg->stars[0])
+        return wf_error(WF_ERR_INPUT, "scene.kind catalog needs scene.catalog and/or scene.stars");
+    if (cfg->catalog[0]) {
+        if ((st = wf_catalog_read_galaxies(cfg->catalog, &in->gal))) return st;
+        in->have_gal = 1;
+    }
+    if (cfg->stars[0]) {
+        if ((st = wf_catalog_read_stars(cfg->stars, &in->stars))) return st;
+        in->have_stars = 1;
+    }
+    return WF_OK;
+}
+
 typedef struct assembler_thread {
     FILE *in;
     wf_assemble_options opt;
@@ -164,10 +228,45 @@ static int run_exposure(cli *c, int demo)
     wf_scene_grid grid;
     wf_status st = WF_OK;
     int rc = 0, opened = 0;
-    if (!scenes || !replays) { st = wf_error(WF_ERR_NOMEM, "out of memory"); goto done; }
+    scene_inputs inputs;
+    memset(&inputs, 0, sizeof inputs);
+    wf_scene *objscene = NULL;
+    char *extra = NULL;
+    const size_t extra_cap = 64 * 1024;
+    if (!scenes || !replays || !(extra = malloc(extra_cap))) { st = wf_error(WF_ERR_NOMEM, "out of memory"); goto done; }
     grid_from_config(cfg, &grid);
+    int objects = !c->replay && cfg->scene_kind != 2;
+    if (objects) {
+        if ((st = load_catalogs(cfg, &inputs))) goto done;
+        wf_scene_setup ss;
+        wf_scene_setup_default(&ss);
+        ss.ra = cfg->ra;
+        ss.dec = cfg->dec;
+        ss.pa = cfg->pa;
+        ss.sca = (int)cfg->ro.sca;
+        snprintf(ss.filter, sizeof ss.filter, "%s", cfg->filter);
+        ss.mjd = cfg->mjd;
+        snprintf(ss.data_dir, sizeof ss.data_dir, "%s", cfg->data_dir);
+        ss.ncols = cfg->ro.ncols;
+        ss.nrows = cfg->ro.nrows;
+        ss.pupil_bin = 1 << cfg->pupil_bin;
+        ss.psf_oversample = cfg->psf_oversample;
+        ss.flux_fraction = cfg->flux_fraction;
+        ss.threads = T;
+        if ((st = wf_scene_create(&ss, inputs.have_gal ? &inputs.gal : NULL,
+                                  inputs.have_stars ? &inputs.stars : NULL, &objscene)))
+            goto done;
+        wf_scene_stats sst;
+        wf_scene_get_stats(objscene, &sst);
+        if (!cfg->quiet)
+            fprintf(stderr, "wfisim: scene of %ld galaxies and %ld stars on SCA %u in %s, sky %.4f-%.4f "
+                    "e-/pixel/s, PSF at %.1f nm, built in %.2f s\n", sst.galaxies, sst.stars, cfg->ro.sca,
+                    cfg->filter, sst.sky_min, sst.sky_max, sst.psf_lambda_nm, sst.build_seconds);
+    }
     for (int i = 0; i < T; i++) {
-        if (c->replay) {
+        if (objects) {
+            if ((st = wf_scene_source_for(objscene, i, &scenes[i]))) goto done;
+        } else if (c->replay) {
             if ((st = wf_scene_replay_open(&replays[i], c->replay, &scenes[i]))) goto done;
             opened = i + 1;
             if (replays[i].ncols != cfg->ro.ncols || replays[i].nrows != cfg->ro.nrows) {
@@ -177,14 +276,25 @@ static int run_exposure(cli *c, int demo)
             }
         } else if ((st = wf_scene_grid_source(&grid, &scenes[i]))) goto done;
     }
-    char extra[1024];
-    snprintf(extra, sizeof extra,
-             "hdr.FILTER = %s / optical element\n"
-             "hdr.SCENE = %s / scene source\n"
-             "hdr.SKYRATE = %.9g / sky rate of the built-in scene, e-/pixel/s\n"
-             "hdr.ORIGIN = wfisim %s / software\n",
-             cfg->filter, c->replay ? "replay" : (demo ? "built-in demo grid" : "built-in grid"),
-             cfg->sky_rate, WFISIM_VERSION);
+    static const char *const kinds[] = {"synthetic", "catalog", "grid", "galsim"};
+    int len = snprintf(extra, extra_cap,
+                       "hdr.FILTER = %s / optical element\n"
+                       "hdr.SCENE = %s / scene source\n"
+                       "hdr.ORIGIN = wfisim %s / software\n",
+                       cfg->filter, c->replay ? "replay" : kinds[cfg->scene_kind], WFISIM_VERSION);
+    if (objects) {
+        len += snprintf(extra + len, extra_cap - (size_t)len,
+                        "hdr.RA_PNT = %.10f / [deg] boresight right ascension\n"
+                        "hdr.DEC_PNT = %.10f / [deg] boresight declination\n"
+                        "hdr.PA_PNT = %.10f / [deg] observatory position angle (GalSim getWCS PA)\n"
+                        "hdr.MJD-OBS = %.8f / [d] exposure mid-time\n",
+                        cfg->ra, cfg->dec, cfg->pa, cfg->mjd);
+        if ((st = wf_scene_wcs_meta(objscene, extra + len, extra_cap - (size_t)len))) goto done;
+    } else {
+        snprintf(extra + len, extra_cap - (size_t)len,
+                 "hdr.SKYRATE = %.9g / sky rate of the grid scene, e-/pixel/s\n", cfg->sky_rate);
+    }
+    (void)demo;
 
     wf_expose_job job = {0};
     job.ro = cfg->ro;
@@ -235,6 +345,16 @@ static int run_exposure(cli *c, int demo)
         fprintf(stderr, "wfisim: wrote %s (arena %.1f MiB per readout instance, %.1f MiB used)\n",
                 at.path, job.arena_bytes / 1048576.0, job.arena_high_water / 1048576.0);
 done:
+    if (!st && objscene) { /* truth of what was drawn, beside the image */
+        char tpath[WF_PATH_MAX + 64];
+        snprintf(tpath, sizeof tpath, "%s/wfisim_e%06u_sca%02u_truth.fits", cfg->out_dir, cfg->ro.exposure,
+                 cfg->ro.sca);
+        if (!(c->stream && (st = make_dir(cfg->out_dir)))) st = wf_scene_write_truth(objscene, tpath);
+        if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s\n", tpath);
+    }
+    wf_scene_destroy(objscene);
+    scene_inputs_free(&inputs);
+    free(extra);
     for (int i = 0; i < opened; i++) wf_scene_replay_close(&replays[i]);
     free(scenes);
     free(replays);

@@ -10,7 +10,7 @@
 
 #include "sim/bandpass.h"
 #include "sim/psf.h"
-#include "tools/fitsout.h"
+#include "sim/fitsout.h"
 
 static const char *usage =
     "usage: wfisim psf --filter F --sca N [--pupil-bin 1|2|4|8] [--oversample K]\n"

@@ -1,4 +1,4 @@
-#include "tools/fitsout.h"
+#include "sim/fitsout.h"
 
 #include <stdio.h>
 #include <stdlib.h>

@@ -1,4 +1,4 @@
-/* cfitsio helpers shared by the host tools that write products.
+/* cfitsio helpers shared by everything on the host side that writes products (sim/, tools/).
  * Products must be byte-identical for the same input (SPEC §9), but cfitsio's own
  * fits_write_chksum stamps the wall-clock time into the CHECKSUM and DATASUM comments; the
  * checksum helpers here write the same values with fixed comments instead. */

@@ -1,0 +1,180 @@
+/* Object profiles drawn into pixel stamps (SPEC §4.2, issue 3 item 4): galaxies made of a
+ * de Vaucouleurs bulge, an exponential disk and star-forming knots, and point sources; each
+ * convolved with the PSF and the 0.11" square pixel.
+ *
+ * Method (measurements in docs/OPTICS.md "Profiles").
+ *  - With a PSF, in Fourier space. The product profile(k) x PSF(k) x pixel(k) x shift(k) is
+ *    evaluated analytically (exponential: (1 + k^2 r0^2)^-3/2; de Vaucouleurs: its Hankel
+ *    transform, tabulated once; knots: sums of phases; PSF x pixel: a table made once per
+ *    PSF image) on the fine k grid of the FFT box out to the PSF's band limit, folded into
+ *    the box's Nyquist band (which samples the pixel-convolved image exactly although
+ *    Roman's PSF is undersampled by 0.11" pixels), and inverse-FFT'd once (FFTW). Flux,
+ *    sub-pixel position and shear are exact; the errors are the light from beyond the FFT
+ *    box that wraps in (knob folding_threshold) and the Fourier modes dropped below
+ *    kvalue_accuracy.
+ *  - Without a PSF (psf NULL: tests, the GalSim no-PSF references), in real space: each
+ *    pixel is the exact integral of the profile over it (polar fans around the cusp,
+ *    Gauss-Legendre elsewhere), ~1e-10 of the flux; a Fourier series of the bare cusp would
+ *    converge as k^-2.25 and ring.
+ *
+ * Coordinates: SCA pixels, 0-based, pixel (i, j) centred at (i, j) and covering
+ * [i - 1/2, i + 1/2) x [j - 1/2, j + 1/2); x along columns, y along rows. Add -1 to GalSim's
+ * 1-based FITS positions. Angles and sizes are in arcsec in the same x, y axes (the caller
+ * rotates sky-frame shapes by the local WCS; see wf_galaxy.rotation).
+ *
+ * Memory: every buffer comes from an arena the caller owns (hal/arena.h); FFTW plans are
+ * made once in wf_profile_work_init (the only call that takes a process-wide lock, because
+ * FFTW's planner is not thread-safe) and executed with new arrays, which FFTW allows from
+ * any thread. One wf_profile_work per thread; wf_profile_psf is read-only once made and may
+ * be shared by threads. */
+#ifndef WF_PROFILE_H
+#define WF_PROFILE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "hal/arena.h"
+#include "hal/status.h"
+#include "sim/psfimage.h"
+
+#define WF_PROFILE_PIXEL_SCALE 0.11 /* arcsec, Roman WFI */
+#define WF_PROFILE_MAX_KNOTS 1024
+#define WF_PROFILE_MAX_KNOT_FRAC 0.25 /* SPEC §4.2: knots hold at most 25% of the disk */
+
+/* Accuracy knobs; wf_profile_accuracy_default gives the values in brackets. */
+typedef struct wf_profile_accuracy {
+    double pixel_scale;       /* arcsec [0.11] */
+    double flux_fraction;     /* the stamp holds at least this fraction of the flux [0.995] */
+    double folding_threshold; /* flux allowed outside the FFT box, which wraps in [5e-3] */
+    double kvalue_accuracy;   /* Fourier modes below this fraction of the flux are dropped [1e-5] */
+    int min_fft;              /* smallest FFT side [16] */
+    int max_fft;              /* largest FFT side: bounds memory and time per object [1024] */
+    int psf_table_fft;        /* FFT sides dividing this read the PSF table exactly, others
+                                 interpolate it (bicubic) [192] */
+} wf_profile_accuracy;
+
+void wf_profile_accuracy_default(wf_profile_accuracy *acc);
+
+/* A galaxy: bulge (de Vaucouleurs) + disk (exponential) whose disk light is split between a
+ * smooth part and knots. Sizes are half-light radii of the round profiles before the shear;
+ * the shear preserves area (GalSim's shear), so they stay the geometric-mean radii. */
+typedef struct wf_galaxy {
+    uint32_t id;          /* object id: keys the knot stream together with knot_seed */
+    double flux;          /* total flux (any unit; the stamp is in that unit per pixel) */
+    double bulge_frac;    /* [0, 1] */
+    double hlr_bulge;     /* arcsec, > 0 when bulge_frac > 0 */
+    double hlr_disk;      /* arcsec, > 0 when bulge_frac < 1 */
+    double knot_frac;     /* fraction of the disk flux in knots, [0, 0.25] */
+    int n_knots;          /* [0, WF_PROFILE_MAX_KNOTS]; 0 puts all the disk light in the disk */
+    uint64_t knot_seed;   /* knot positions = f(knot_seed, id) only: the same in every
+                             exposure, SCA and tile */
+    const double *knot_xy; /* NULL: knots from the seed; else n_knots (x, y) pairs in arcsec,
+                              before shear and rotation (as GalSim's RandomKnots.points) */
+    double e1, e2;        /* distortion e = (a^2 - b^2) / (a^2 + b^2), |e| < 1; e1 along x */
+    double rotation;      /* radians counter-clockwise (x towards y), after the shear */
+} wf_galaxy;
+
+/* A stamp in SCA pixel coordinates. The bounds are set by wf_profile_*_bounds or by the
+ * caller; pix is the caller's (nx * ny doubles, row-major: pix[(y - y0) * nx + (x - x0)]). */
+typedef struct wf_stamp {
+    int x0, y0, nx, ny;
+    double *pix;
+    /* written by the draw: */
+    double sum;     /* sum of pix */
+    double clipped; /* negative ringing set to zero (sum of the magnitudes; ~1e-7 of flux) */
+    int fft;        /* FFT side used */
+} wf_stamp;
+
+/* A PSF prepared for drawing: its Fourier transform times the pixel's, once. */
+typedef struct wf_profile_psf {
+    double pixel_scale, scale; /* stamp pixel and PSF sample spacing, arcsec */
+    double flux;               /* sum of the PSF image */
+    int table_fft;             /* the table's k spacing is 2 pi / (table_fft * pixel_scale) */
+    int kr;                    /* the table holds |kx|, |ky| <= kr steps */
+    float *re, *im;            /* (2 kr + 1)^2, row (ky) major, k = 0 at [kr][kr] */
+    double kmax;               /* rad/arcsec beyond which |PSF(k) pixel(k)| < 1e-7 flux */
+    int nee;                   /* encircled energy of the image, for stamp sizes: */
+    double ee_dr;              /* radius step, arcsec */
+    double *ee;                /* ee[i]: fraction of the image's flux within (i + 1) ee_dr */
+    double *env;               /* env[i]: max |PSF(k) pixel(k)| over |k| >= i table steps, for
+                                  cutting each draw where object x PSF < kvalue_accuracy */
+} wf_profile_psf;
+
+struct wf_sersic_table;
+
+/* Per-thread drawing state (opaque in use; fields are for the implementation). */
+typedef struct wf_profile_work {
+    wf_profile_accuracy acc;
+    int nsizes;
+    int sizes[48];         /* FFT sides, ascending (see wf_profile_work_init) */
+    void *plans[48];       /* fftw_plan: in-place complex-to-real, one per side */
+    double *fft;           /* in-place buffer for the largest side */
+    double *ex, *ey;       /* per-draw phase lines, complex interleaved, cap_line entries */
+    int cap_line;
+    double *kx, *ky;       /* knot phase lines: WF_PROFILE_KNOT_BLOCK x cap_line entries */
+    int *ix, *iy;          /* bicubic taps for FFT sides that do not divide psf_table_fft */
+    double *wx, *wy;       /* their weights, 4 per entry */
+    double *run;           /* one alias run of a row: complex, max_fft / 2 + 1 entries */
+    double *knot_pos;      /* 2 x WF_PROFILE_MAX_KNOTS, arcsec after shear and rotation */
+    double *knot_box;      /* the knots of one draw that lie inside its FFT box */
+    const struct wf_sersic_table *sersic;
+} wf_profile_work;
+#define WF_PROFILE_KNOT_BLOCK 16
+
+/* Bytes the work buffers take from an arena for these knobs (12.9 MB at the defaults,
+ * most of it the max_fft^2 FFT buffer). FFT sides are 2^a and 3 * 2^a from min_fft to
+ * max_fft; with a PSF, sides up to psf_table_fft are used only if they divide it. */
+wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes);
+wf_status wf_profile_work_init(wf_profile_work *work, const wf_profile_accuracy *acc,
+                               wf_arena *arena);
+/* Destroys the FFTW plans; the arena memory is the caller's to release. */
+void wf_profile_work_free(wf_profile_work *work);
+/* Changes the per-object knobs between draws (e.g. looser for faint objects, a larger
+ * flux_fraction for bright stars); the others fix the buffers and stay. */
+wf_status wf_profile_work_tune(wf_profile_work *work, double flux_fraction,
+                               double folding_threshold, double kvalue_accuracy);
+
+/* Bytes wf_profile_psf_init keeps (*bytes) and the scratch it needs while running (*scratch). */
+wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy *acc,
+                              size_t *bytes, size_t *scratch);
+/* Tabulates the PSF's transform times the pixel's. Scratch is taken from the arena and given
+ * back (LIFO), so call it before reserving anything that must outlive it. */
+wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
+                              const wf_profile_accuracy *acc, wf_arena *arena);
+
+/* Stamp bounds around (x, y) holding acc.flux_fraction of the object's light (the PSF image's
+ * sum counting as the whole PSF); psf NULL means no PSF (pixel response only). Stamps are
+ * odd-sized and centred on the nearest pixel; when the light needs more than max_fft pixels
+ * the stamp is max_fft - 1 wide and *fraction says how much it holds. fraction may be NULL. */
+wf_status wf_profile_galaxy_bounds(wf_profile_work *work, const wf_galaxy *g,
+                                   const wf_profile_psf *psf, double x, double y,
+                                   wf_stamp *stamp, double *fraction);
+wf_status wf_profile_point_bounds(const wf_profile_work *work, const wf_profile_psf *psf,
+                                  double x, double y, wf_stamp *stamp, double *fraction);
+
+/* Draw into stamp->pix over the stamp's bounds (overwritten, not added), in flux per pixel.
+ * The object is centred at (x, y); the bounds may be anything within max_fft / 2 pixels of
+ * it. The FFT side depends on the object and the knobs only, so a piece of a stamp (say
+ * some of its rows) comes out bit-identical to the same pixels of the whole. Negative
+ * ringing is set to zero and its magnitude returned in stamp->clipped. */
+wf_status wf_profile_draw_galaxy(wf_profile_work *work, const wf_galaxy *g,
+                                 const wf_profile_psf *psf, double x, double y,
+                                 wf_stamp *stamp);
+wf_status wf_profile_draw_point(wf_profile_work *work, const wf_profile_psf *psf, double flux,
+                                double x, double y, wf_stamp *stamp);
+
+/* Knot positions (x, y) in arcsec before shear and rotation, as the draw uses them: from
+ * g->knot_xy when given, else from the counter-based stream (knot_seed, id,
+ * WF_PURPOSE_SCENE); radii follow the exponential disk of hlr_disk, angles are uniform. */
+wf_status wf_profile_knots(const wf_galaxy *g, double *xy);
+
+/* Shapes and sizes. */
+/* GalSim's reduced shear g for a distortion e: g = e / (1 + sqrt(1 - |e|^2)). */
+wf_status wf_profile_shear_from_distortion(double e1, double e2, double *g1, double *g2);
+/* Half-light radius of the round exponential (n = 1) or de Vaucouleurs (n = 4) profile with
+ * this full width at half maximum. */
+wf_status wf_profile_hlr_from_fwhm(int sersic_n, double fwhm, double *hlr);
+/* Fraction of a round profile's flux within radius r (arcsec) for half-light radius hlr. */
+double wf_profile_enclosed(int sersic_n, double hlr, double r);
+
+#endif

@@ -1,0 +1,82 @@
+/* Internals shared by sim/profile*.c; not part of the public interface (sim/profile.h). */
+#ifndef WF_PROFILE_INT_H
+#define WF_PROFILE_INT_H
+
+#include <stdint.h>
+#include <string.h>
+
+#include "hal/status.h"
+
+/* The de Vaucouleurs (Sersic n = 4) profile I(r) ~ exp(-b (r / Re)^(1/4)) has no closed-form
+ * Fourier transform. F(q), q = k Re, normalised to F(0) = 1, is tabulated once against
+ * w = q^2 (so that callers never take a square root): WF_SERSIC_SUB points per octave of w,
+ * octaves 2^WF_SERSIC_EMIN .. 2^WF_SERSIC_EMAX, each row holding nodes i = -1 .. SUB + 1 at
+ * w = 2^e (1 + i / SUB) so that a 4-point Lagrange interpolation never leaves its row.
+ * Below the table 1 - F = w <r^2> / 4 (exact to 1e-12 there); above it the convergent
+ * large-q series is summed directly (slow, reached only by extreme no-PSF draws). */
+#define WF_SERSIC_SUB 16
+#define WF_SERSIC_EMIN (-26)
+#define WF_SERSIC_EMAX 40
+#define WF_SERSIC_ROW (WF_SERSIC_SUB + 3)
+
+typedef struct wf_sersic_table {
+    double b;        /* exp(-b (r/Re)^(1/4)) holds half the light inside Re */
+    double b1;       /* the same for n = 1: half-light radius / scale radius of exp(-r/r0) */
+    double dev_norm; /* unit-flux surface brightness at r = 0 times Re^2: b^8 / (8 pi 7!) */
+    double r2;       /* <r^2> / Re^2 of the untruncated profile */
+    double v[(WF_SERSIC_EMAX - WF_SERSIC_EMIN) * WF_SERSIC_ROW];
+} wf_sersic_table;
+
+/* Built once per process (about 10 ms) and read-only afterwards; thread-safe. */
+const wf_sersic_table *wf_sersic4_table(void);
+
+/* F(q) from the numerical Hankel transform (slow; used to build and to check the table). */
+double wf_sersic4_hankel_direct(double q);
+/* F(q) from the large-q series (converges for all q > 0 but loses digits below q ~ 3). */
+double wf_sersic4_hankel_series(double q);
+double wf_sersic4_eval_slow(const wf_sersic_table *t, double w);
+
+/* F at w = (k Re)^2. */
+static inline double wf_sersic4_eval(const wf_sersic_table *t, double w)
+{
+    uint64_t bits;
+    memcpy(&bits, &w, sizeof bits);
+    int e = (int)((bits >> 52) & 0x7ff) - 1023;
+    if (e < WF_SERSIC_EMIN || e >= WF_SERSIC_EMAX) return wf_sersic4_eval_slow(t, w);
+    double m = (double)(bits & 0xfffffffffffffull) * (WF_SERSIC_SUB / 4503599627370496.0);
+    int i = (int)m;
+    double f = m - i;
+    const double *c = t->v + (size_t)(e - WF_SERSIC_EMIN) * WF_SERSIC_ROW + i; /* node i-1 */
+    double fm1 = f - 1.0, fm2 = f - 2.0, fp1 = f + 1.0;
+    return (-c[0] * f * fm1 * fm2 + c[3] * fp1 * f * fm1) * (1.0 / 6.0) +
+           (c[1] * fp1 * fm1 * fm2 - c[2] * fp1 * f * fm2) * 0.5;
+}
+
+/* PSF transforms are cut at 8 pixel Nyquist frequencies (8 pi / p): the optical cut-off
+ * 2 pi D / lambda stays below it for every lambda > 0.3 um. */
+#define WF_PSF_BAND_NYQ 8.0
+
+/* FFTW's planner is not thread-safe: every plan made or destroyed in sim/profile*.c holds
+ * this process-wide lock. */
+void wf_profile_fftw_lock(void);
+void wf_profile_fftw_unlock(void);
+
+/* Geometry of a sheared, rotated profile: x_sky = A x_round, A = R(rotation) S(g), with
+ * GalSim's area-preserving shear S = [[1 + g1, g2], [g2, 1 - g1]] / sqrt(1 - g^2). The
+ * transform of the sheared profile at k is the round one's at A^T k, |A^T k|^2 = k^T Q k. */
+typedef struct wf_shape {
+    double a[2][2];
+    double ainv[2][2];
+    double qxx, qxy, qyy; /* Q = A A^T */
+    double smax, smin;    /* singular values of A: (1 +- |g|) / sqrt(1 - g^2) */
+} wf_shape;
+
+wf_status wf_profile_shape(double e1, double e2, double rotation, wf_shape *out);
+
+/* Regularised lower incomplete gamma P(a, x) for integer a >= 1. */
+double wf_gamma_p_int(int a, double x);
+
+/* Half-light radius over scale radius: P(2n, b) = 1/2. */
+double wf_sersic_b(int n);
+
+#endif

@@ -1,0 +1,105 @@
+/* Star-forming knots, shapes and sizes.
+ *
+ * Knots follow the disk: GalSim's RandomKnots shoots its points from the profile it is given,
+ * so points from the exponential disk have radii r = r0 x with x ~ Gamma(2) (density x e^-x,
+ * the sum of two unit exponentials) and uniform angles. Each knot takes three uniforms from a
+ * Philox stream keyed by (knot_seed, object id, purpose SCENE) and nothing else: a galaxy has
+ * the same knots in every exposure, SCA, tile and thread. GalSim's own Mersenne-Twister
+ * stream cannot be reproduced, so comparisons with GalSim pass its positions in knot_xy. */
+#include <math.h>
+
+#include "hal/noise.h"
+#include "sim/profile.h"
+#include "sim/profile_int.h"
+
+wf_status wf_profile_knots(const wf_galaxy *g, double *xy)
+{
+    if (!g || !xy) return wf_error(WF_ERR_INPUT, "profile: knots: no galaxy or output");
+    if (g->n_knots < 0 || g->n_knots > WF_PROFILE_MAX_KNOTS)
+        return wf_error(WF_ERR_RANGE, "profile: galaxy %u: %d knots outside [0, %d]", g->id,
+                        g->n_knots, WF_PROFILE_MAX_KNOTS);
+    if (g->knot_xy) {
+        for (int j = 0; j < 2 * g->n_knots; j++) {
+            if (!isfinite(g->knot_xy[j]))
+                return wf_error(WF_ERR_INPUT, "profile: galaxy %u: knot %d is not finite",
+                                g->id, j / 2);
+            xy[j] = g->knot_xy[j];
+        }
+        return WF_OK;
+    }
+    if (g->n_knots > 0 && !(g->hlr_disk > 0.0))
+        return wf_error(WF_ERR_RANGE, "profile: galaxy %u: knots need a disk (hlr_disk %g)",
+                        g->id, g->hlr_disk);
+    double r0 = g->hlr_disk / wf_sersic4_table()->b1;
+    wf_noise stream = {.kind = WF_NOISE_PHILOX, .seed = g->knot_seed, .exposure = 0, .sca = 0};
+    wf_rng rng;
+    wf_rng_init(&rng, &stream, g->id, 0, WF_PURPOSE_SCENE);
+    for (int j = 0; j < g->n_knots; j++) {
+        double u1 = wf_rng_uniform53(&rng), u2 = wf_rng_uniform53(&rng);
+        double phi = 2.0 * M_PI * wf_rng_uniform53(&rng);
+        double r = -r0 * log(u1 * u2);
+        xy[2 * j] = r * cos(phi);
+        xy[2 * j + 1] = r * sin(phi);
+    }
+    return WF_OK;
+}
+
+wf_status wf_profile_shear_from_distortion(double e1, double e2, double *g1, double *g2)
+{
+    double e = hypot(e1, e2);
+    if (!(e < 1.0))
+        return wf_error(WF_ERR_RANGE, "profile: distortion |e| = %g is not below 1", e);
+    double f = 1.0 / (1.0 + sqrt(1.0 - e * e));
+    *g1 = e1 * f;
+    *g2 = e2 * f;
+    return WF_OK;
+}
+
+wf_status wf_profile_shape(double e1, double e2, double rotation, wf_shape *out)
+{
+    double g1, g2;
+    if (!isfinite(rotation))
+        return wf_error(WF_ERR_INPUT, "profile: rotation %g is not finite", rotation);
+    wf_status st = wf_profile_shear_from_distortion(e1, e2, &g1, &g2);
+    if (st) return st;
+    double g = hypot(g1, g2), n = 1.0 / sqrt((1.0 - g) * (1.0 + g));
+    double s[2][2] = {{(1.0 + g1) * n, g2 * n}, {g2 * n, (1.0 - g1) * n}};
+    double c = cos(rotation), sn = sin(rotation);
+    double r[2][2] = {{c, -sn}, {sn, c}};
+    for (int i = 0; i < 2; i++)
+        for (int j = 0; j < 2; j++) out->a[i][j] = r[i][0] * s[0][j] + r[i][1] * s[1][j];
+    /* A^-1 = S^-1 R^T, and S^-1 is S with g -> -g (det S = 1) */
+    double si[2][2] = {{(1.0 - g1) * n, -g2 * n}, {-g2 * n, (1.0 + g1) * n}};
+    for (int i = 0; i < 2; i++)
+        for (int j = 0; j < 2; j++) out->ainv[i][j] = si[i][0] * r[j][0] + si[i][1] * r[j][1];
+    out->qxx = out->a[0][0] * out->a[0][0] + out->a[0][1] * out->a[0][1];
+    out->qxy = out->a[0][0] * out->a[1][0] + out->a[0][1] * out->a[1][1];
+    out->qyy = out->a[1][0] * out->a[1][0] + out->a[1][1] * out->a[1][1];
+    out->smax = (1.0 + g) * n;
+    out->smin = (1.0 - g) * n;
+    return WF_OK;
+}
+
+wf_status wf_profile_hlr_from_fwhm(int sersic_n, double fwhm, double *hlr)
+{
+    if (!(fwhm > 0.0) || !isfinite(fwhm))
+        return wf_error(WF_ERR_RANGE, "profile: FWHM %g is not a positive size", fwhm);
+    const wf_sersic_table *t = wf_sersic4_table();
+    /* I(r) = exp(-b (r / hlr)^(1/n)) is at half its peak where b (r / hlr)^(1/n) = ln 2 */
+    if (sersic_n == 1) *hlr = 0.5 * fwhm * t->b1 / M_LN2;
+    else if (sersic_n == 4) *hlr = 0.5 * fwhm * pow(t->b / M_LN2, 4.0);
+    else return wf_error(WF_ERR_RANGE, "profile: Sersic index %d (only 1 and 4)", sersic_n);
+    return WF_OK;
+}
+
+double wf_profile_enclosed(int sersic_n, double hlr, double r)
+{
+    if (!(r > 0.0)) return 0.0;
+    if (!(hlr > 0.0)) return 1.0;
+    const wf_sersic_table *t = wf_sersic4_table();
+    if (sersic_n == 1) {
+        double x = r / hlr * t->b1;
+        return -expm1(-x) - x * exp(-x);
+    }
+    return wf_gamma_p_int(8, t->b * pow(r / hlr, 0.25));
+}

@@ -1,0 +1,336 @@
+/* The PSF image's Fourier transform times the pixel's, tabulated once per PSF.
+ *
+ * The table's k spacing is dk_t = 2 pi / (table_fft * pixel): an FFT box of M pixels with M
+ * dividing table_fft reads it at every (table_fft / M)-th entry, exactly. Sampling the
+ * transform at dk_t is the same as periodising the image with period table_fft * pixel, so
+ * the samples are exact whatever the image's size: with the image sampled at pixel / os
+ * (integer os), one real FFT of side os * table_fft of the image folded onto that period
+ * gives them (the fast path); any other sampling uses a direct separable DFT (slow, once).
+ *
+ * The table stops at the image's band_limit (the optical transform is zero beyond 2 pi D /
+ * lambda; what an image holds beyond is resampling artifact, truncation ripple and float32
+ * rounding) or, without one, where |PSF(k) pixel(k)| falls below WF_PSF_KFLOOR of the flux. */
+#include <fftw3.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sim/profile.h"
+#include "sim/profile_int.h"
+
+#define WF_PSF_KFLOOR 1e-7
+#define WF_PSF_TAPER 0.1
+
+/* 1 below (1 - WF_PSF_TAPER) band, 0 beyond band, a raised cosine between. A hard cut where
+ * an image's transform still holds ~1e-3 (GalSim's OVER4: resampling artifacts) rings at
+ * ~1e-6 of the peak across the stamp, and clipping that ringing adds 2e-4 (63^2 stamp) to
+ * 1e-3 (511^2) of the flux; the taper brings it to 7e-5 .. 1e-4 and moves the comparison
+ * with GalSim's stamps by < 1e-4 of the peak. */
+static double band_taper(double k, double band)
+{
+    double k1 = (1.0 - WF_PSF_TAPER) * band;
+    if (k <= k1) return 1.0;
+    if (k >= band) return 0.0;
+    return 0.5 * (1.0 + cos(M_PI * (k - k1) / (band - k1)));
+}
+
+static double sinc(double x) { return fabs(x) < 1e-4 ? 1.0 - x * x / 6.0 : sin(x) / x; }
+
+/* os when the image is sampled at pixel / os for an integer os, else 0. */
+static int integer_oversampling(double pixel, double scale)
+{
+    double os = pixel / scale;
+    double r = round(os);
+    return r >= 1.0 && fabs(os - r) < 1e-9 * os && r <= 64.0 ? (int)r : 0;
+}
+
+static wf_status check_image(const wf_psf_image *img, double *sum)
+{
+    if (!img || !img->pix)
+        return wf_error(WF_ERR_INPUT, "profile: no PSF image given");
+    if (img->n < 2 || img->n > 16384)
+        return wf_error(WF_ERR_RANGE, "profile: PSF image side %d outside [2, 16384]", img->n);
+    if (!(img->band_limit >= 0.0) || !isfinite(img->band_limit))
+        return wf_error(WF_ERR_RANGE, "profile: PSF band limit %g is not >= 0", img->band_limit);
+    if (!(img->scale_arcsec > 0.0) || !isfinite(img->scale_arcsec))
+        return wf_error(WF_ERR_RANGE, "profile: PSF sample spacing %g arcsec is not positive",
+                        img->scale_arcsec);
+    double s = 0.0;
+    size_t nn = (size_t)img->n * (size_t)img->n;
+    for (size_t i = 0; i < nn; i++) {
+        if (!isfinite(img->pix[i]))
+            return wf_error(WF_ERR_INPUT, "profile: PSF image sample %zu is not finite", i);
+        s += img->pix[i];
+    }
+    if (!(s > 0.0))
+        return wf_error(WF_ERR_INPUT, "profile: PSF image sums to %g, not a positive flux", s);
+    *sum = s;
+    return WF_OK;
+}
+
+/* Half-width of the raw transform the sampling supports, in table steps. */
+static int sampling_kr(const wf_psf_image *img, const wf_profile_accuracy *acc)
+{
+    double dkt = 2.0 * M_PI / (acc->psf_table_fft * acc->pixel_scale);
+    double knyq = M_PI / img->scale_arcsec;
+    double kcap = WF_PSF_BAND_NYQ * M_PI / acc->pixel_scale; /* what the draws can use */
+    int kr = (int)floor(fmin(knyq, kcap) / dkt);
+    int os = integer_oversampling(acc->pixel_scale, img->scale_arcsec);
+    if (os) {
+        int half = os * acc->psf_table_fft / 2 - 1;
+        if (kr > half) kr = half;
+    }
+    return kr;
+}
+
+static size_t ee_count(const wf_psf_image *img)
+{
+    return (size_t)(0.5 * img->n * 1.4142135623730951 * 2.0) + 4; /* bins of scale / 2 */
+}
+
+wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy *acc,
+                              size_t *bytes, size_t *scratch)
+{
+    double sum;
+    wf_status st = check_image(img, &sum);
+    if (st) return st;
+    int kr = sampling_kr(img, acc);
+    size_t side = 2 * (size_t)kr + 1;
+    /* an upper bound: the table is trimmed to the PSF's band once it is known */
+    *bytes = 2 * wf_arena_cost(side * side * sizeof(float)) +
+             wf_arena_cost(ee_count(img) * sizeof(double)) +
+             wf_arena_cost(((size_t)kr + 2) * sizeof(double));
+    *scratch = wf_arena_cost(side * side * 2 * sizeof(double));
+    int os = integer_oversampling(acc->pixel_scale, img->scale_arcsec);
+    if (os) {
+        size_t np = (size_t)os * (size_t)acc->psf_table_fft;
+        *scratch += wf_arena_cost(np * 2 * (np / 2 + 1) * sizeof(double));
+    } else {
+        *scratch += wf_arena_cost((size_t)img->n * side * 2 * sizeof(double)) +
+                    wf_arena_cost(side * 2 * sizeof(double));
+    }
+    return WF_OK;
+}
+
+/* Raw transform R[v][u] (complex, side x side, centred) by one FFT of the folded image. */
+static wf_status transform_fft(const wf_psf_image *img, int os, int table_fft, int kr,
+                               wf_arena *arena, double *out)
+{
+    int np = os * table_fft;
+    size_t rowlen = 2 * ((size_t)np / 2 + 1);
+    double *buf;
+    wf_status st = wf_arena_calloc(arena, (size_t)np * rowlen, sizeof(double),
+                                   "PSF transform scratch", (void **)&buf);
+    if (st) return st;
+    for (int j = 0; j < img->n; j++)
+        for (int i = 0; i < img->n; i++)
+            buf[(size_t)(j % np) * rowlen + (size_t)(i % np)] += img->pix[(size_t)j * img->n + i];
+    wf_profile_fftw_lock();
+    fftw_plan plan = fftw_plan_dft_r2c_2d(np, np, buf, (fftw_complex *)buf, FFTW_ESTIMATE);
+    wf_profile_fftw_unlock();
+    if (!plan) return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", np);
+    fftw_execute(plan);
+    wf_profile_fftw_lock();
+    fftw_destroy_plan(plan);
+    wf_profile_fftw_unlock();
+    /* The DFT puts sample i at i * scale; the image centre c = (n-1)/2 is the PSF's origin,
+     * so multiply by exp(+i k c scale). k = m dk_t and scale = pixel / os, so the phase per
+     * step is 2 pi c / (os table_fft) = 2 pi c / np. */
+    double c = 0.5 * (img->n - 1);
+    size_t side = 2 * (size_t)kr + 1;
+    const fftw_complex *f = (const fftw_complex *)buf;
+    size_t half = (size_t)np / 2 + 1;
+    for (int v = -kr; v <= kr; v++) {
+        for (int u = -kr; u <= kr; u++) {
+            /* Hermitian: only u >= 0 is stored; F(-u, -v) = conj F(u, v) */
+            int uu = u, vv = v;
+            double sgn = 1.0;
+            if (uu < 0) {
+                uu = -uu;
+                vv = -vv;
+                sgn = -1.0;
+            }
+            size_t row = (size_t)((vv % np + np) % np);
+            double re = f[row * half + (size_t)uu][0], im = sgn * f[row * half + (size_t)uu][1];
+            double ph = 2.0 * M_PI * c * (u + v) / np;
+            double cr = cos(ph), ci = sin(ph);
+            double *o = out + 2 * ((size_t)(v + kr) * side + (size_t)(u + kr));
+            o[0] = re * cr - im * ci;
+            o[1] = re * ci + im * cr;
+        }
+    }
+    return WF_OK;
+}
+
+/* The same by a direct separable DFT: any sampling, O(n^2 side + n side^2). */
+static wf_status transform_direct(const wf_psf_image *img, double dkt, int kr, wf_arena *arena,
+                                  double *out)
+{
+    int n = img->n;
+    size_t side = 2 * (size_t)kr + 1;
+    double *a, *ph;
+    wf_status st = wf_arena_calloc(arena, (size_t)n * side * 2, sizeof(double), "PSF DFT rows",
+                                   (void **)&a);
+    if (st) return st;
+    st = wf_arena_calloc(arena, side * 2, sizeof(double), "PSF DFT phases", (void **)&ph);
+    if (st) return st;
+    double c = 0.5 * (n - 1), s = img->scale_arcsec;
+    for (int i = 0; i < n; i++) {
+        for (int u = -kr; u <= kr; u++) {
+            double p = -u * dkt * (i - c) * s;
+            ph[2 * (u + kr)] = cos(p);
+            ph[2 * (u + kr) + 1] = sin(p);
+        }
+        for (int j = 0; j < n; j++) {
+            double w = img->pix[(size_t)j * n + i];
+            if (w == 0.0) continue;
+            double *row = a + (size_t)j * side * 2;
+            for (size_t k = 0; k < side; k++) {
+                row[2 * k] += w * ph[2 * k];
+                row[2 * k + 1] += w * ph[2 * k + 1];
+            }
+        }
+    }
+    memset(out, 0, side * side * 2 * sizeof(double));
+    for (int j = 0; j < n; j++) {
+        const double *row = a + (size_t)j * side * 2;
+        for (int v = -kr; v <= kr; v++) {
+            double p = -v * dkt * (j - c) * s;
+            double cr = cos(p), ci = sin(p);
+            double *o = out + (size_t)(v + kr) * side * 2;
+            for (size_t k = 0; k < side; k++) {
+                o[2 * k] += cr * row[2 * k] - ci * row[2 * k + 1];
+                o[2 * k + 1] += cr * row[2 * k + 1] + ci * row[2 * k];
+            }
+        }
+    }
+    return WF_OK;
+}
+
+/* The raw transform times the pixel's, in scratch at the arena's top: side_s^2 complex. */
+static wf_status pixel_transform(const wf_psf_image *img, const wf_profile_accuracy *acc,
+                                 int kr_s, wf_arena *arena, double **out)
+{
+    size_t side_s = 2 * (size_t)kr_s + 1;
+    double dkt = 2.0 * M_PI / (acc->psf_table_fft * acc->pixel_scale);
+    double *raw;
+    wf_status st = wf_arena_calloc(arena, side_s * side_s * 2, sizeof(double), "PSF transform",
+                                   (void **)&raw);
+    if (st) return st;
+    int os = integer_oversampling(acc->pixel_scale, img->scale_arcsec);
+    st = os ? transform_fft(img, os, acc->psf_table_fft, kr_s, arena, raw)
+            : transform_direct(img, dkt, kr_s, arena, raw);
+    if (st) return st;
+    double p = acc->pixel_scale;
+    for (int v = -kr_s; v <= kr_s; v++) {
+        double sy = sinc(0.5 * v * dkt * p);
+        for (int u = -kr_s; u <= kr_s; u++) {
+            double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
+            double w = sy * sinc(0.5 * u * dkt * p);
+            o[0] *= w;
+            o[1] *= w;
+        }
+    }
+    *out = raw;
+    return WF_OK;
+}
+
+wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
+                              const wf_profile_accuracy *acc, wf_arena *arena)
+{
+    memset(psf, 0, sizeof *psf);
+    double sum;
+    wf_status st = check_image(img, &sum);
+    if (st) return st;
+    if (img->scale_arcsec > 0.5 * acc->pixel_scale)
+        return wf_error(WF_ERR_RANGE,
+                        "profile: PSF sampled at %g arcsec, coarser than half the %g arcsec "
+                        "pixel; an undersampled PSF image cannot be resampled",
+                        img->scale_arcsec, acc->pixel_scale);
+    int kr_s = sampling_kr(img, acc);
+    size_t side_s = 2 * (size_t)kr_s + 1;
+    double dkt = 2.0 * M_PI / (acc->psf_table_fft * acc->pixel_scale);
+
+    /* The band is known only after the transform, and the arena frees only from the top: so
+     * transform once in scratch to find the band, reserve the trimmed table, and transform
+     * again above it (an FFT of the PSF costs ~10 ms; the untrimmed table would cost up to
+     * 3x the memory for as long as the PSF lives). */
+    size_t mark = wf_arena_mark(arena);
+    double *raw;
+    if ((st = pixel_transform(img, acc, kr_s, arena, &raw))) {
+        wf_arena_release(arena, mark);
+        return st;
+    }
+    int kr = 0;
+    double kmax = 0.0;
+    double band = img->band_limit > 0.0 ? img->band_limit : INFINITY;
+    for (int v = -kr_s; v <= kr_s; v++)
+        for (int u = -kr_s; u <= kr_s; u++) {
+            const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
+            if (dkt * hypot(u, v) <= band && hypot(o[0], o[1]) >= WF_PSF_KFLOOR * sum) {
+                int r = abs(u) > abs(v) ? abs(u) : abs(v);
+                if (r > kr) kr = r;
+                if (dkt * hypot(u, v) > kmax) kmax = dkt * hypot(u, v);
+            }
+        }
+    wf_arena_release(arena, mark);
+    kr += 2; /* room for the bicubic interpolation's outer taps */
+    if (kr > kr_s) kr = kr_s;
+    size_t side = 2 * (size_t)kr + 1;
+
+    float *re, *im;
+    double *ee, *env;
+    size_t nee = ee_count(img);
+    if ((st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&re)) ||
+        (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&im)) ||
+        (st = wf_arena_calloc(arena, nee, sizeof(double), "PSF encircled energy", (void **)&ee)) ||
+        (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF envelope",
+                              (void **)&env)))
+        return st;
+    mark = wf_arena_mark(arena);
+    if ((st = pixel_transform(img, acc, kr_s, arena, &raw))) {
+        wf_arena_release(arena, mark);
+        return st;
+    }
+    for (int v = -kr; v <= kr; v++)
+        for (int u = -kr; u <= kr; u++) {
+            const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
+            size_t at = (size_t)(v + kr) * side + (size_t)(u + kr);
+            double wt = band_taper(dkt * hypot(u, v), band);
+            re[at] = (float)(wt * o[0]);
+            im[at] = (float)(wt * o[1]);
+            int ring = (int)hypot(u, v);
+            if (ring <= kr) env[ring] = fmax(env[ring], wt * hypot(o[0], o[1]));
+        }
+    for (int i = kr; i > 0; i--) env[i - 1] = fmax(env[i - 1], env[i]);
+    wf_arena_release(arena, mark);
+
+    /* encircled energy about the image centre, for stamp sizes */
+    double c = 0.5 * (img->n - 1), dr = 0.5 * img->scale_arcsec;
+    for (int j = 0; j < img->n; j++)
+        for (int i = 0; i < img->n; i++) {
+            double r = hypot(i - c, j - c) * img->scale_arcsec;
+            size_t b = (size_t)(r / dr);
+            if (b >= nee) b = nee - 1;
+            ee[b] += img->pix[(size_t)j * img->n + i];
+        }
+    double run = 0.0;
+    for (size_t b = 0; b < nee; b++) {
+        run += ee[b];
+        ee[b] = run / sum;
+    }
+
+    psf->pixel_scale = acc->pixel_scale;
+    psf->scale = img->scale_arcsec;
+    psf->flux = sum;
+    psf->table_fft = acc->psf_table_fft;
+    psf->kr = kr;
+    psf->re = re;
+    psf->im = im;
+    psf->kmax = kmax + dkt;
+    psf->nee = (int)nee;
+    psf->ee_dr = dr;
+    psf->ee = ee;
+    psf->env = env;
+    return WF_OK;
+}

@@ -1,0 +1,504 @@
+#include "sim/scene.h"
+
+#include <fitsio.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "hal/arena.h"
+#include "sim/bandpass.h"
+#include "sim/fitsout.h"
+#include "sim/profile.h"
+#include "sim/psf.h"
+#include "sim/render.h"
+#include "sim/sky.h"
+#include "sim/wcs.h"
+
+#define SKY_GRID 64 /* pixel-area samples every 64 pixels, bilinear between: the area varies
+                       by ~3% across the SCA, smoothly, so the interpolation error is ~1e-6 */
+#define STRAY_LIGHT 0.1
+
+typedef enum { OBJ_GALAXY = 0, OBJ_STAR = 1 } obj_kind;
+
+typedef struct object {
+    obj_kind kind;
+    size_t row;       /* catalog row */
+    double x, y;      /* 0-based pixel */
+    double ra, dec, mag, flux;
+    wf_galaxy g;      /* galaxies: pixel-frame shape */
+} object;
+
+typedef struct thread_state {
+    wf_scene *scene;
+    void *memory;
+    wf_arena arena;
+    wf_profile_work work;
+    int work_ready;
+    double *stamp;    /* the largest stamp, for objects asked for in pieces */
+    size_t stamp_cap;
+    wf_renderer *renderer;
+} thread_state;
+
+struct wf_scene {
+    wf_scene_setup setup;
+    wf_filter filter;
+    wf_focal_plane fp;
+    wf_wcs wcs;
+    wf_bandpass *bp;
+    double zodi;             /* e-/s/arcsec^2 */
+    double thermal;          /* e-/pixel/s */
+    int gx, gy;              /* pixel-area grid */
+    double *area;            /* arcsec^2, (gy x gx) */
+    wf_psf *psf;
+    double *psf_pix;
+    wf_psf_image psf_image;
+    void *psf_memory;
+    wf_arena psf_arena;
+    wf_profile_psf ppsf;
+    wf_profile_accuracy acc;
+    object *obj;
+    size_t nobj;
+    wf_render_object *robj;
+    thread_state *ts;
+    const wf_catalog *gal, *stars;
+    wf_scene_stats stats;
+};
+
+void wf_scene_setup_default(wf_scene_setup *s)
+{
+    memset(s, 0, sizeof *s);
+    s->ra = 71.0;
+    s->dec = -53.0;
+    s->pa = 0.0;
+    s->sca = 1;
+    snprintf(s->filter, sizeof s->filter, "Y106");
+    s->mjd = 61420.0;
+    s->ncols = s->nrows = 4088;
+    s->pupil_bin = 8;
+    s->psf_oversample = 4;
+    s->psf_size = 512;
+    s->flux_fraction = 0.995;
+    s->pool_bytes = (size_t)64 << 20;
+    s->threads = 1;
+    s->sky_on = 1;
+}
+
+static double now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec + 1e-9 * t.tv_nsec;
+}
+
+/* Pixel area in arcsec^2 at 0-based (x, y), from the WCS by central differences. */
+static wf_status pixel_area(const wf_wcs *w, double x, double y, double *area)
+{
+    double r[4], d[4];
+    const double h = 0.5;
+    wf_status st;
+    if ((st = wf_wcs_pix2world(w, x - h, y, &r[0], &d[0])) || (st = wf_wcs_pix2world(w, x + h, y, &r[1], &d[1])) ||
+        (st = wf_wcs_pix2world(w, x, y - h, &r[2], &d[2])) || (st = wf_wcs_pix2world(w, x, y + h, &r[3], &d[3])))
+        return st;
+    double c = cos(d[0] * M_PI / 180.0);
+    double dra_x = r[1] - r[0], dra_y = r[3] - r[2];
+    if (dra_x > 180) dra_x -= 360;
+    if (dra_x < -180) dra_x += 360;
+    if (dra_y > 180) dra_y -= 360;
+    if (dra_y < -180) dra_y += 360;
+    double ax = dra_x * c * 3600.0, bx = (d[1] - d[0]) * 3600.0;
+    double ay = dra_y * c * 3600.0, by = (d[3] - d[2]) * 3600.0;
+    *area = fabs(ax * by - ay * bx);
+    return WF_OK;
+}
+
+static wf_status sky_row(void *ctx, int y, int ncols, double *out)
+{
+    const wf_scene *s = ctx;
+    if (!s->setup.sky_on) {
+        for (int x = 0; x < ncols; x++) out[x] = 0.0;
+        return WF_OK;
+    }
+    double fy = (double)y / SKY_GRID;
+    int j = (int)fy;
+    if (j > s->gy - 2) j = s->gy - 2;
+    double ty = fy - j;
+    const double *a0 = s->area + (size_t)j * s->gx, *a1 = a0 + s->gx;
+    double zodi = s->zodi * (1.0 + STRAY_LIGHT);
+    for (int x = 0; x < ncols; x++) {
+        double fx = (double)x / SKY_GRID;
+        int i = (int)fx;
+        if (i > s->gx - 2) i = s->gx - 2;
+        double tx = fx - i;
+        double a = (1 - ty) * ((1 - tx) * a0[i] + tx * a0[i + 1]) + ty * ((1 - tx) * a1[i] + tx * a1[i + 1]);
+        out[x] = zodi * a + s->thermal;
+    }
+    return WF_OK;
+}
+
+/* Sky-frame shape (u west, v north, arcsec) to the pixel frame the drawer uses (arcsec along
+ * x and y at the nominal 0.11" scale): the second-moment matrix C of the sheared, rotated
+ * round profile goes through the local Jacobian T; its determinant gives the size scale and
+ * its trace-free part the pixel-frame distortion. */
+static wf_status pixel_shape(const wf_scene *s, double x, double y, double e1, double e2,
+                             double pa_deg, double *pe1, double *pe2, double *scale)
+{
+    double ra0, dec0, xu, yu, xv, yv;
+    const double step = 1.0 / 3600.0; /* one arcsec */
+    wf_status st;
+    if ((st = wf_wcs_pix2world(&s->wcs, x, y, &ra0, &dec0))) return st;
+    double c = cos(dec0 * M_PI / 180.0);
+    /* +u is west: decreasing RA */
+    if ((st = wf_wcs_world2pix(&s->wcs, ra0 - step / c, dec0, &xu, &yu))) return st;
+    if ((st = wf_wcs_world2pix(&s->wcs, ra0, dec0 + step, &xv, &yv))) return st;
+    double t[2][2] = {{(xu - x) * WF_PROFILE_PIXEL_SCALE, (xv - x) * WF_PROFILE_PIXEL_SCALE},
+                      {(yu - y) * WF_PROFILE_PIXEL_SCALE, (yv - y) * WF_PROFILE_PIXEL_SCALE}};
+    double e = sqrt(e1 * e1 + e2 * e2);
+    double norm = e < 1.0 ? 1.0 / sqrt(1.0 - e * e) : 1.0;
+    double cw[2][2] = {{(1 + e1) * norm, e2 * norm}, {e2 * norm, (1 - e1) * norm}};
+    double th = pa_deg * M_PI / 180.0, cs = cos(th), sn = sin(th);
+    double r[2][2] = {{cs, -sn}, {sn, cs}};
+    double m[2][2], cr[2][2], cp[2][2];
+    /* cr = R cw R^T */
+    for (int i = 0; i < 2; i++)
+        for (int j = 0; j < 2; j++) m[i][j] = r[i][0] * cw[0][j] + r[i][1] * cw[1][j];
+    for (int i = 0; i < 2; i++)
+        for (int j = 0; j < 2; j++) cr[i][j] = m[i][0] * r[j][0] + m[i][1] * r[j][1];
+    /* cp = T cr T^T */
+    for (int i = 0; i < 2; i++)
+        for (int j = 0; j < 2; j++) m[i][j] = t[i][0] * cr[0][j] + t[i][1] * cr[1][j];
+    for (int i = 0; i < 2; i++)
+        for (int j = 0; j < 2; j++) cp[i][j] = m[i][0] * t[j][0] + m[i][1] * t[j][1];
+    double tr = cp[0][0] + cp[1][1];
+    *pe1 = (cp[0][0] - cp[1][1]) / tr;
+    *pe2 = 2.0 * cp[0][1] / tr;
+    *scale = sqrt(fabs(t[0][0] * t[1][1] - t[0][1] * t[1][0]));
+    return WF_OK;
+}
+
+static wf_status draw_object(void *ctx, const wf_render_object *ro, int ya, int yb, double *out)
+{
+    thread_state *ts = ctx;
+    const object *o = ro->data;
+    size_t whole = (size_t)ro->nx * ro->ny;
+    int full = ya == ro->y0 && yb == ro->y0 + ro->ny;
+    double *buf = out;
+    if (!full) {
+        if (whole > ts->stamp_cap) {
+            double *p = realloc(ts->stamp, whole * sizeof *p);
+            if (!p) return wf_error(WF_ERR_NOMEM, "scene: cannot hold a %d x %d stamp", ro->nx, ro->ny);
+            ts->stamp = p;
+            ts->stamp_cap = whole;
+        }
+        buf = ts->stamp;
+    }
+    wf_stamp st = {ro->x0, ro->y0, ro->nx, ro->ny, buf, 0, 0, 0};
+    wf_status s = o->kind == OBJ_GALAXY
+                      ? wf_profile_draw_galaxy(&ts->work, &o->g, &ts->scene->ppsf, o->x, o->y, &st)
+                      : wf_profile_draw_point(&ts->work, &ts->scene->ppsf, o->flux, o->x, o->y, &st);
+    if (s) return s;
+    if (!full) memcpy(out, buf + (size_t)(ya - ro->y0) * ro->nx, (size_t)(yb - ya) * ro->nx * sizeof *out);
+    return WF_OK;
+}
+
+static wf_status add_objects(wf_scene *s, const wf_catalog *cat, obj_kind kind, size_t *cap)
+{
+    if (!cat || !cat->n) return WF_OK;
+    int band;
+    wf_status st = wf_catalog_band(cat, s->setup.filter, &band);
+    if (st) return wf_error(st, "%s: no magnitude column for filter %s", cat->source, s->setup.filter);
+    const double margin = 600.0; /* pixels: the largest stamp half-width the drawer allows */
+    for (size_t i = 0; i < cat->n; i++) {
+        double x, y;
+        if (wf_wcs_world2pix(&s->wcs, cat->ra[i], cat->dec[i], &x, &y) != WF_OK) continue;
+        if (x < -margin || y < -margin || x > s->setup.ncols + margin || y > s->setup.nrows + margin) continue;
+        if (s->nobj == *cap) {
+            size_t nc = *cap ? 2 * *cap : 1024;
+            object *p = realloc(s->obj, nc * sizeof *p);
+            if (!p) return wf_error(WF_ERR_NOMEM, "scene: cannot hold %zu objects", nc);
+            s->obj = p;
+            *cap = nc;
+        }
+        object *o = &s->obj[s->nobj];
+        memset(o, 0, sizeof *o);
+        o->kind = kind;
+        o->row = i;
+        o->x = x;
+        o->y = y;
+        o->ra = cat->ra[i];
+        o->dec = cat->dec[i];
+        o->mag = cat->mag[band][i];
+        o->flux = wf_bandpass_countrate_ab(s->bp, o->mag);
+        if (kind == OBJ_GALAXY) {
+            double pe1, pe2, scale;
+            if ((st = pixel_shape(s, x, y, cat->e1[i], cat->e2[i], cat->pa[i], &pe1, &pe2, &scale))) return st;
+            wf_galaxy *g = &o->g;
+            /* the knot stream is keyed by a 32-bit id: fold the catalog's 64 bits */
+            g->id = (uint32_t)((uint64_t)cat->id[i] ^ ((uint64_t)cat->id[i] >> 32));
+            g->flux = o->flux;
+            g->bulge_frac = cat->bulge_frac[i];
+            g->hlr_bulge = cat->hlr_bulge[i] * scale;
+            g->hlr_disk = cat->hlr_disk[i] * scale;
+            g->knot_frac = cat->knot_frac[i];
+            g->n_knots = g->knot_frac > 0 ? 100 : 0;
+            g->knot_seed = (uint64_t)cat->id[i];
+            g->e1 = pe1;
+            g->e2 = pe2;
+            g->rotation = 0.0;
+        }
+        s->nobj++;
+    }
+    return WF_OK;
+}
+
+wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
+                          const wf_catalog *stars, wf_scene **out)
+{
+    *out = NULL;
+    double t0 = now();
+    wf_scene *s = calloc(1, sizeof *s);
+    if (!s) return wf_error(WF_ERR_NOMEM, "scene: out of memory");
+    s->setup = *setup;
+    s->gal = gal;
+    s->stars = stars;
+    const char *data = setup->data_dir[0] ? setup->data_dir : NULL;
+    wf_status st;
+    wf_sky_model *sky = NULL;
+    if (setup->threads < 1) { st = wf_error(WF_ERR_RANGE, "scene: %d threads", setup->threads); goto bad; }
+    if ((st = wf_filter_parse(setup->filter, &s->filter))) goto bad;
+    if ((st = wf_wcs_focal_plane(data, &s->fp))) goto bad;
+    if ((st = wf_wcs_for_sca(&s->fp, setup->ra, setup->dec, setup->pa, setup->sca, &s->wcs))) goto bad;
+    if (!(s->bp = malloc(sizeof *s->bp)) || !(sky = malloc(sizeof *sky))) {
+        st = wf_error(WF_ERR_NOMEM, "scene: out of memory");
+        goto bad;
+    }
+    if ((st = wf_bandpass_load(s->filter, data, s->bp))) goto bad;
+    /* sky: zodiacal level at the SCA centre (it varies by < 0.1% across 8'), thermal */
+    if ((st = data ? wf_sky_load(data, sky) : wf_sky_builtin(sky))) goto bad;
+    double rac, decc;
+    if ((st = wf_wcs_pix2world(&s->wcs, (setup->ncols - 1) / 2.0, (setup->nrows - 1) / 2.0, &rac, &decc))) goto bad;
+    if ((st = wf_sky_zodiacal(sky, s->filter, rac, decc, setup->mjd, &s->zodi))) goto bad;
+    if ((st = wf_sky_thermal(s->filter, &s->thermal))) goto bad;
+    s->gx = setup->ncols / SKY_GRID + 2;
+    s->gy = setup->nrows / SKY_GRID + 2;
+    if (!(s->area = malloc((size_t)s->gx * s->gy * sizeof *s->area))) { st = wf_error(WF_ERR_NOMEM, "scene: sky grid"); goto bad; }
+    s->stats.sky_min = INFINITY;
+    s->stats.sky_max = -INFINITY;
+    for (int j = 0; j < s->gy; j++)
+        for (int i = 0; i < s->gx; i++) {
+            if ((st = pixel_area(&s->wcs, i * SKY_GRID, j * SKY_GRID, &s->area[j * s->gx + i]))) goto bad;
+            double v = s->zodi * (1 + STRAY_LIGHT) * s->area[j * s->gx + i] + s->thermal;
+            if (v < s->stats.sky_min) s->stats.sky_min = v;
+            if (v > s->stats.sky_max) s->stats.sky_max = v;
+        }
+    s->stats.zodi = s->zodi;
+    /* PSF: this SCA and filter only, achromatic at the band's effective wavelength */
+    wf_psf_optics optics;
+    wf_psf_optics_default(&optics);
+    optics.sca = setup->sca;
+    optics.pupil_bin = setup->pupil_bin;
+    if ((st = wf_pupil_group_of_filter(setup->filter, &optics.group))) goto bad;
+    snprintf(optics.data_dir, sizeof optics.data_dir, "%s", data ? data : "");
+    double lam = s->bp->lambda_eff_nm, w = 1.0;
+    if ((st = wf_psf_build_optics(&optics, &lam, &w, 1, &s->psf))) goto bad;
+    s->stats.psf_lambda_nm = lam;
+    int n = setup->psf_size;
+    if (!(s->psf_pix = malloc((size_t)n * n * sizeof *s->psf_pix))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF image"); goto bad; }
+    wf_psf_draw_opts d;
+    wf_psf_draw_opts_default(&d);
+    d.nx = d.ny = n;
+    d.scale = WF_PSF_PIXEL_SCALE / setup->psf_oversample;
+    d.cx = d.cy = (n - 1) / 2.0;
+    d.pixel = 0; /* the drawer applies the pixel */
+    if ((st = wf_psf_draw(s->psf, &d, s->psf_pix))) goto bad;
+    /* the pupil's cut-off 2 pi D / lambda in rad/arcsec: D = 2.36 m (SPEC §2) */
+    double band_limit = 2.0 * M_PI * 2.36 / (lam * 1e-9) * (M_PI / (180.0 * 3600.0));
+    s->psf_image = (wf_psf_image){n, d.scale, s->psf_pix, band_limit};
+    wf_profile_accuracy_default(&s->acc);
+    s->acc.flux_fraction = setup->flux_fraction;
+    size_t keep, scratch;
+    if ((st = wf_profile_psf_need(&s->psf_image, &s->acc, &keep, &scratch))) goto bad;
+    size_t pbytes = keep + scratch + 4096;
+    if (!(s->psf_memory = malloc(pbytes))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF table"); goto bad; }
+    wf_arena_init(&s->psf_arena, s->psf_memory, pbytes, "scene PSF arena");
+    if ((st = wf_profile_psf_init(&s->ppsf, &s->psf_image, &s->acc, &s->psf_arena))) goto bad;
+    /* objects */
+    size_t cap = 0;
+    if ((st = add_objects(s, gal, OBJ_GALAXY, &cap)) || (st = add_objects(s, stars, OBJ_STAR, &cap))) goto bad;
+    if (!(s->robj = malloc((s->nobj ? s->nobj : 1) * sizeof *s->robj)) ||
+        !(s->ts = calloc((size_t)setup->threads, sizeof *s->ts))) {
+        st = wf_error(WF_ERR_NOMEM, "scene: out of memory");
+        goto bad;
+    }
+    /* each thread: drawing work from its own arena, and a renderer */
+    size_t wneed;
+    if ((st = wf_profile_work_need(&s->acc, &wneed))) goto bad;
+    for (int t = 0; t < setup->threads; t++) {
+        thread_state *ts = &s->ts[t];
+        ts->scene = s;
+        if (!(ts->memory = malloc(wneed + 4096))) { st = wf_error(WF_ERR_NOMEM, "scene: drawing arena"); goto bad; }
+        wf_arena_init(&ts->arena, ts->memory, wneed + 4096, "drawing arena");
+        if ((st = wf_profile_work_init(&ts->work, &s->acc, &ts->arena))) goto bad;
+        ts->work_ready = 1;
+    }
+    long kept = 0;
+    for (size_t i = 0; i < s->nobj; i++) {
+        object *o = &s->obj[i];
+        wf_stamp b;
+        st = o->kind == OBJ_GALAXY ? wf_profile_galaxy_bounds(&s->ts[0].work, &o->g, &s->ppsf, o->x, o->y, &b, NULL)
+                                   : wf_profile_point_bounds(&s->ts[0].work, &s->ppsf, o->x, o->y, &b, NULL);
+        if (st) goto bad;
+        uint64_t id = (uint64_t)(o->kind == OBJ_GALAXY ? gal->id[o->row] : stars->id[o->row]);
+        s->robj[kept++] = (wf_render_object){id * 2u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o};
+        if (b.x0 < setup->ncols && b.x0 + b.nx > 0 && b.y0 < setup->nrows && b.y0 + b.ny > 0) {
+            if (o->kind == OBJ_GALAXY) s->stats.galaxies++;
+            else s->stats.stars++;
+        }
+    }
+    wf_renderer_config rc = {setup->ncols, setup->nrows, 0.0, sky_row, s, setup->pool_bytes, 0};
+    for (int t = 0; t < setup->threads; t++)
+        if ((st = wf_renderer_create(&rc, s->robj, (size_t)kept, draw_object, &s->ts[t], &s->ts[t].renderer))) goto bad;
+    free(sky);
+    s->stats.build_seconds = now() - t0;
+    *out = s;
+    return WF_OK;
+bad:
+    free(sky);
+    wf_scene_destroy(s);
+    return st;
+}
+
+void wf_scene_destroy(wf_scene *s)
+{
+    if (!s) return;
+    if (s->ts)
+        for (int t = 0; t < s->setup.threads; t++) {
+            wf_renderer_destroy(s->ts[t].renderer);
+            if (s->ts[t].work_ready) wf_profile_work_free(&s->ts[t].work);
+            free(s->ts[t].memory);
+            free(s->ts[t].stamp);
+        }
+    free(s->ts);
+    free(s->robj);
+    free(s->obj);
+    free(s->psf_memory);
+    free(s->psf_pix);
+    wf_psf_free(s->psf);
+    free(s->area);
+    free(s->bp);
+    free(s);
+}
+
+wf_status wf_scene_source_for(wf_scene *s, int t, wf_scene_source *out)
+{
+    if (t < 0 || t >= s->setup.threads)
+        return wf_error(WF_ERR_RANGE, "scene: thread %d of %d", t, s->setup.threads);
+    wf_renderer_source(s->ts[t].renderer, out);
+    return WF_OK;
+}
+
+void wf_scene_get_stats(const wf_scene *s, wf_scene_stats *out) { *out = s->stats; }
+
+static int on_sca(const wf_scene *s, const object *o)
+{
+    return o->x >= -0.5 && o->y >= -0.5 && o->x < s->setup.ncols - 0.5 && o->y < s->setup.nrows - 0.5;
+}
+
+static int write_table(fitsfile *f, const wf_scene *s, obj_kind kind, const char *name, int *status)
+{
+    char *ttype[] = {"ID", "RA", "DEC", "X", "Y", "MAG", "FLUX"};
+    char *tform[] = {"1K", "1D", "1D", "1D", "1D", "1E", "1E"};
+    char *tunit[] = {"", "deg", "deg", "pixel", "pixel", "mag(AB)", "electron/s"};
+    fits_create_tbl(f, BINARY_TBL, 0, 7, ttype, tform, tunit, name, status);
+    fits_write_key_str(f, "FILTER", s->setup.filter, "magnitudes and fluxes in this filter", status);
+    fits_write_key_str(f, "PIXCONV", "FITS", "X, Y: 1-based pixel centres, as the image WCS", status);
+    long row = 1;
+    for (size_t i = 0; i < s->nobj && !*status; i++) {
+        const object *o = &s->obj[i];
+        if (o->kind != kind || !on_sca(s, o)) continue;
+        long long id = (long long)(kind == OBJ_GALAXY ? s->gal->id[o->row] : s->stars->id[o->row]);
+        double x = o->x + 1.0, y = o->y + 1.0, ra = o->ra, dec = o->dec;
+        float mag = (float)o->mag, flux = (float)o->flux;
+        fits_write_col(f, TLONGLONG, 1, row, 1, 1, &id, status);
+        fits_write_col(f, TDOUBLE, 2, row, 1, 1, &ra, status);
+        fits_write_col(f, TDOUBLE, 3, row, 1, 1, &dec, status);
+        fits_write_col(f, TDOUBLE, 4, row, 1, 1, &x, status);
+        fits_write_col(f, TDOUBLE, 5, row, 1, 1, &y, status);
+        fits_write_col(f, TFLOAT, 6, row, 1, 1, &mag, status);
+        fits_write_col(f, TFLOAT, 7, row, 1, 1, &flux, status);
+        row++;
+    }
+    return *status;
+}
+
+wf_status wf_scene_write_truth(const wf_scene *s, const char *path)
+{
+    char tmp[2048];
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    remove(tmp);
+    fitsfile *f;
+    int status = 0;
+    if (fits_create_diskfile(&f, tmp, &status)) return wf_error(WF_ERR_IO, "%s: cannot create", tmp);
+    fits_create_img(f, BYTE_IMG, 0, NULL, &status);
+    fits_write_key_str(f, "FILTER", s->setup.filter, "optical element", &status);
+    fits_write_key_dbl(f, "MJD-OBS", s->setup.mjd, 9, "exposure mid-time", &status);
+    fits_write_key_lng(f, "SCA", s->setup.sca, "sensor chip assembly", &status);
+    write_table(f, s, OBJ_GALAXY, "GALAXIES", &status);
+    write_table(f, s, OBJ_STAR, "STARS", &status);
+    /* checksums with fixed comments: the truth is byte-identical run to run */
+    wf_status cst = status ? WF_OK : wf_fits_checksum_all(f, tmp);
+    int close_status = 0;
+    fits_close_file(f, &close_status);
+    if (cst) {
+        remove(tmp);
+        return cst;
+    }
+    if (status || close_status) {
+        char msg[FLEN_STATUS];
+        fits_get_errstatus(status ? status : close_status, msg);
+        remove(tmp);
+        return wf_error(WF_ERR_IO, "%s: writing truth: %s", path, msg);
+    }
+    if (rename(tmp, path) != 0) {
+        remove(tmp);
+        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
+    }
+    return WF_OK;
+}
+
+wf_status wf_scene_wcs_meta(const wf_scene *s, char *buf, size_t cap)
+{
+    fitsfile *f;
+    int status = 0;
+    void *mem = NULL;
+    size_t memsize = 0;
+    if (fits_create_memfile(&f, &mem, &memsize, 0, realloc, &status))
+        return wf_error(WF_ERR_INTERNAL, "scene: cannot open an in-memory FITS file");
+    long naxes[2] = {s->setup.ncols, s->setup.nrows};
+    fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+    wf_status st = status ? WF_ERR_INTERNAL : wf_wcs_write_header(&s->wcs, f, "in-memory header");
+    size_t len = 0;
+    int nkeys = 0;
+    fits_get_hdrspace(f, &nkeys, NULL, &status);
+    len += (size_t)snprintf(buf, cap, "img.WCSAXES = 2 / WCS applies to the image plane\n");
+    for (int k = 1; k <= nkeys && !status && !st; k++) {
+        char card[FLEN_CARD], key[FLEN_KEYWORD], value[FLEN_VALUE], comment[FLEN_COMMENT];
+        int kl = 0;
+        fits_read_record(f, k, card, &status);
+        fits_get_keyname(card, key, &kl, &status);
+        if (!strcmp(key, "SIMPLE") || !strcmp(key, "BITPIX") || !strncmp(key, "NAXIS", 5) ||
+            !strcmp(key, "EXTEND") || !strcmp(key, "COMMENT") || !strcmp(key, "WCSAXES"))
+            continue;
+        fits_parse_value(card, value, comment, &status);
+        int n = snprintf(buf + len, len < cap ? cap - len : 0, "img.%s = %s%s%s\n", key, value,
+                         comment[0] ? " / " : "", comment);
+        if (n < 0 || len + (size_t)n >= cap) { st = wf_error(WF_ERR_RANGE, "scene: WCS cards exceed %zu bytes", cap); break; }
+        len += (size_t)n;
+    }
+    int cs = 0;
+    fits_close_file(f, &cs);
+    free(mem);
+    if (!st && status) st = wf_error(WF_ERR_INTERNAL, "scene: cfitsio status %d on the WCS header", status);
+    return st;
+}

@@ -1,0 +1,63 @@
+/* One SCA's scene for one exposure: what the renderer draws and what the truth records.
+ * From a pointing, an SCA, a filter and a date it builds the WCS, the bandpass, the sky (the
+ * zodiacal level at that position and date, times 1 + stray light, over each pixel's own
+ * area, plus thermal), the PSF of that SCA and filter (only this one), and one render object
+ * per catalog entry whose stamp reaches the SCA, with its flux from the bandpass and its
+ * shape carried from the sky frame (u west, v north, GalSim's) into the pixel frame through
+ * the local WCS. Each readout thread gets its own renderer and drawing state. */
+#ifndef WF_SCENE_BUILD_H
+#define WF_SCENE_BUILD_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include "hal/scene.h"
+#include "sim/catalog.h"
+
+typedef struct wf_scene_setup {
+    double ra, dec, pa;     /* boresight and observatory position angle, degrees */
+    int sca;                /* 1..18 */
+    char filter[16];
+    double mjd;             /* exposure mid-time (sky, supernova epochs) */
+    char data_dir[1024];    /* "" -> built-in pupil, focal plane, bandpass, sky */
+    int ncols, nrows;       /* active pixels simulated [4088] */
+    int pupil_bin;          /* [8] */
+    int psf_oversample;     /* PSF image sampling 0.11/K arcsec [4] */
+    int psf_size;           /* PSF image side in samples [512] */
+    double flux_fraction;   /* stamps hold at least this [0.995] */
+    size_t pool_bytes;      /* stamp pool per renderer [64 MiB] */
+    int threads;            /* renderers to prepare [1] */
+    int sky_on;             /* add the sky [1] */
+} wf_scene_setup;
+
+typedef struct wf_scene_stats {
+    long galaxies, stars;      /* drawn (reach the SCA) */
+    double sky_min, sky_max;   /* e-/pixel/s over the SCA */
+    double zodi;               /* e-/s/arcsec^2 at the SCA centre */
+    double psf_lambda_nm;
+    double build_seconds;
+} wf_scene_stats;
+
+typedef struct wf_scene wf_scene;
+
+void wf_scene_setup_default(wf_scene_setup *s);
+
+/* gal and stars may be NULL; they must outlive the scene. Magnitudes come from the column
+ * of the setup's filter. */
+wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
+                          const wf_catalog *stars, wf_scene **out);
+void wf_scene_destroy(wf_scene *scene);
+
+/* Scene source for readout thread t (0 <= t < setup.threads). */
+wf_status wf_scene_source_for(wf_scene *scene, int t, wf_scene_source *out);
+
+void wf_scene_get_stats(const wf_scene *scene, wf_scene_stats *out);
+
+/* Writes the truth of what was drawn: tables GALAXIES and STARS with ID, RA, DEC, X, Y
+ * (FITS 1-based pixel centres), MAG (this filter), FLUX (e-/s). Through a temporary file. */
+wf_status wf_scene_write_truth(const wf_scene *scene, const char *path);
+
+/* The pointing's WCS header cards, for the image HDUs: "KEY = value" lines as META hdr.
+ * lines would carry them (written into buf, NUL-terminated). */
+wf_status wf_scene_wcs_meta(const wf_scene *scene, char *buf, size_t cap);
+
+#endif

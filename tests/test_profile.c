@@ -1,0 +1,1527 @@
+/* Profiles (sim/profile*.c): galaxies (de Vaucouleurs bulge + exponential disk + knots) and
+ * point sources drawn with the PSF and the pixel.
+ *
+ * Against GalSim 2.8.4 (../shared/reference/galsim/, skipped when absent):
+ *  - the four reference galaxies without PSF (GalSim drew them in real space), and with the
+ *    Y106 SCA 1 pupil_bin 8 PSF; every parameter, the knot positions included, is read from
+ *    galaxy_stamps.json;
+ *  - the point source against GalSim's own pixel-convolved PSF image.
+ * Independent of GalSim:
+ *  - the de Vaucouleurs Fourier table against brute-force quadrature and its series;
+ *  - knots: radial distribution (Kolmogorov-Smirnov), uniform angles, reproducibility;
+ *  - flux: sums against exact pixel integrals of round profiles (computed here by a 1-D
+ *    angular quadrature of the enclosed-flux function, not by the code under test);
+ *  - centring, sheared and rotated ellipticity from unweighted moments;
+ *  - stiff cases: half-light radius 0.005" and 20", e = 0.7 at six angles, a magnitude-35
+ *    flux, the bulge cusp against exact pixel integrals, bad input;
+ *  - a stamp drawn in pieces equals the whole, bit for bit.
+ *
+ * The PSF input for the GalSim comparison. GalSim's galaxies were convolved with its own PSF
+ * object, of which the reference holds two images: OVER4 (0.0275", no pixel, a 3.52" box
+ * holding 97.8% of the light) and NATIVE (0.11", pixel included, 14.08" holding 99.4%). The
+ * input here is OVER4 in the centre and NATIVE's wings (each native pixel's light spread over
+ * its 4 x 4 sub-samples) out to 7.04" either side, so that the light the 7.04" stamps hold
+ * matches; the band limit is 2 pi D / lambda, which removes the ~3% resampling artifacts
+ * GalSim's OVER4 holds above the optical cut-off. The two GalSim images are not consistent
+ * with each other for Y106: within any box from 0.44" to 3.52" NATIVE holds 0.78% less
+ * light than OVER4 (0.04% for H158), a difference of GalSim's two drawing paths
+ * (interpolated real-space samples for no_pixel, k-space for the pixel), which no drawer
+ * fed with OVER4 can undo. The comparison therefore divides our stamps by the ratio of our
+ * point source to GalSim's NATIVE PSF in the same 64 x 64 box (0.99216): that ratio is a
+ * property of the PSF files, measured on a point source, not fitted to the galaxies.
+ *
+ * Image orientation: FITS files are read into pix[row * NAXIS1 + col], col = x - 1,
+ * row = y - 1 (1-based FITS pixel centres); our stamps use 0-based centres, so GalSim's
+ * "true centre 32.5 + offset" is our 31.5 + offset. */
+#include <fitsio.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "hal/arena.h"
+#include "sim/profile.h"
+#include "sim/profile_int.h"
+#include "tests/testutil.h"
+
+#define P 0.11
+
+/* ------------------------------------------------------------------------------ helpers */
+
+static double now_s(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec + 1e-9 * t.tv_nsec;
+}
+
+/* A work (and optionally a prepared PSF) in one malloc'd arena. */
+typedef struct ctx {
+    void *mem;
+    wf_arena arena;
+    wf_profile_work work;
+    wf_profile_psf psf;
+    int has_psf;
+} ctx;
+
+static void ctx_open(ctx *c, const wf_profile_accuracy *acc, const wf_psf_image *img)
+{
+    memset(c, 0, sizeof *c);
+    size_t need = 0, pneed = 0, pscratch = 0;
+    ck_assert_msg(wf_profile_work_need(acc, &need) == WF_OK, "%s", wf_error_message());
+    if (img)
+        ck_assert_msg(wf_profile_psf_need(img, acc, &pneed, &pscratch) == WF_OK, "%s",
+                      wf_error_message());
+    size_t cap = need + pneed + pscratch + 4096;
+    c->mem = malloc(cap);
+    ck_assert(c->mem != NULL);
+    wf_arena_init(&c->arena, c->mem, cap, "test");
+    if (img) {
+        ck_assert_msg(wf_profile_psf_init(&c->psf, img, acc, &c->arena) == WF_OK, "%s",
+                      wf_error_message());
+        c->has_psf = 1;
+    }
+    ck_assert_msg(wf_profile_work_init(&c->work, acc, &c->arena) == WF_OK, "%s",
+                  wf_error_message());
+    ck_assert_msg(c->arena.high_water <= cap, "arena need under-reported");
+}
+
+static void ctx_close(ctx *c)
+{
+    wf_profile_work_free(&c->work);
+    free(c->mem);
+}
+
+static wf_galaxy galaxy(double flux, double bf, double hlr_disk, double hlr_bulge, double e1,
+                        double e2)
+{
+    wf_galaxy g;
+    memset(&g, 0, sizeof g);
+    g.id = 7;
+    g.flux = flux;
+    g.bulge_frac = bf;
+    g.hlr_disk = hlr_disk;
+    g.hlr_bulge = hlr_bulge;
+    g.e1 = e1;
+    g.e2 = e2;
+    return g;
+}
+
+/* A stamp with its own pixels; bounds from the caller. */
+static wf_stamp stamp_new(int x0, int y0, int nx, int ny)
+{
+    wf_stamp s;
+    memset(&s, 0, sizeof s);
+    s.x0 = x0;
+    s.y0 = y0;
+    s.nx = nx;
+    s.ny = ny;
+    s.pix = calloc((size_t)nx * ny, sizeof(double));
+    ck_assert(s.pix != NULL);
+    return s;
+}
+
+static void check_finite_nonneg(const wf_stamp *s, const char *what)
+{
+    for (size_t i = 0; i < (size_t)s->nx * s->ny; i++)
+        ck_assert_msg(isfinite(s->pix[i]) && s->pix[i] >= 0.0, "%s: pixel %zu = %g", what, i,
+                      s->pix[i]);
+}
+
+/* Unweighted moments about (cx, cy) pixels (NAN: the centroid); returns e1, e2 and the
+ * centroid, with the pixel's own p^2/12 taken out of the second moments. */
+static void unweighted(const double *pix, int nx, int ny, double *cx, double *cy, double *e1,
+                       double *e2)
+{
+    double s = 0, sx = 0, sy = 0;
+    for (int j = 0; j < ny; j++)
+        for (int i = 0; i < nx; i++) {
+            double v = pix[(size_t)j * nx + i];
+            s += v;
+            sx += v * i;
+            sy += v * j;
+        }
+    double mx = sx / s, my = sy / s, qxx = 0, qyy = 0, qxy = 0;
+    for (int j = 0; j < ny; j++)
+        for (int i = 0; i < nx; i++) {
+            double v = pix[(size_t)j * nx + i], dx = i - mx, dy = j - my;
+            qxx += v * dx * dx;
+            qyy += v * dy * dy;
+            qxy += v * dx * dy;
+        }
+    qxx = qxx / s - 1.0 / 12.0;
+    qyy = qyy / s - 1.0 / 12.0;
+    qxy /= s;
+    *cx = mx;
+    *cy = my;
+    *e1 = (qxx - qyy) / (qxx + qyy);
+    *e2 = 2.0 * qxy / (qxx + qyy);
+}
+
+/* Adaptive (elliptical Gaussian weight matched to the image) moments, as GalSim's HSM and
+ * Bernstein & Jarvis (2002): size det(M)^(1/4) in pixels and distortion (e1, e2). The same
+ * estimator on both images makes the comparison like for like; unlike unweighted moments
+ * it is not dominated by the PSF's far wings. */
+static void adaptive(const double *im, int n, double *sig, double *e1, double *e2)
+{
+    double mxx = 4, myy = 4, mxy = 0, xc = 0.5 * (n - 1), yc = xc;
+    for (int it = 0; it < 300; it++) {
+        double det = mxx * myy - mxy * mxy, ixx = myy / det, iyy = mxx / det, ixy = -mxy / det;
+        double s = 0, sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0;
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                double dx = i - xc, dy = j - yc;
+                double r2 = ixx * dx * dx + 2 * ixy * dx * dy + iyy * dy * dy;
+                if (r2 > 60) continue;
+                double w = exp(-0.5 * r2) * im[j * n + i];
+                s += w;
+                sx += w * dx;
+                sy += w * dy;
+                sxx += w * dx * dx;
+                syy += w * dy * dy;
+                sxy += w * dx * dy;
+            }
+        double ddx = sx / s, ddy = sy / s;
+        xc += ddx;
+        yc += ddy;
+        double nxx = 2 * (sxx / s - ddx * ddx), nyy = 2 * (syy / s - ddy * ddy),
+               nxy = 2 * (sxy / s - ddx * ddy);
+        double ch = fabs(nxx - mxx) + fabs(nyy - myy) + fabs(nxy - mxy);
+        mxx = nxx;
+        myy = nyy;
+        mxy = nxy;
+        if (ch < 1e-12 && fabs(ddx) + fabs(ddy) < 1e-12) break;
+    }
+    *sig = pow(mxx * myy - mxy * mxy, 0.25);
+    *e1 = (mxx - myy) / (mxx + myy);
+    *e2 = 2 * mxy / (mxx + myy);
+}
+
+/* ---- exact pixel integrals of a round profile from its enclosed-flux function E(r):
+ * the light in [0, a] x [0, b] (centre at a corner) is
+ *   (1 / 2 pi) [ Int_0^tc E(a / cos t) dt + Int_tc^(pi/2) E(b / sin t) dt ],  tc = atan(b/a),
+ * smooth integrands whatever the cusp of the profile at r = 0. */
+typedef struct round_profile {
+    double fb, re, fd, hlr_d; /* fractions of the flux and half-light radii (arcsec) */
+} round_profile;
+
+static double enclosed(const round_profile *rp, double r)
+{
+    return rp->fb * wf_profile_enclosed(4, rp->re, r) + rp->fd * wf_profile_enclosed(1, rp->hlr_d, r);
+}
+
+static double gl_x[48], gl_w[48];
+
+static void gl_init(void)
+{
+    const int n = 48;
+    for (int i = 0; i < n; i++) {
+        double x = cos(M_PI * (i + 0.75) / (n + 0.5)), dp = 1;
+        for (int it = 0; it < 100; it++) {
+            double p0 = 1, p1 = x;
+            for (int k = 2; k <= n; k++) {
+                double p2 = ((2 * k - 1) * x * p1 - (k - 1) * p0) / k;
+                p0 = p1;
+                p1 = p2;
+            }
+            dp = n * (x * p1 - p0) / (x * x - 1);
+            double dx = p1 / dp;
+            x -= dx;
+            if (fabs(dx) < 1e-16) break;
+        }
+        gl_x[i] = x;
+        gl_w[i] = 2 / ((1 - x * x) * dp * dp);
+    }
+}
+
+static double corner_box(const round_profile *rp, double a, double b)
+{
+    if (a <= 0 || b <= 0) return 0.0;
+    double tc = atan2(b, a), sum = 0.0;
+    for (int part = 0; part < 4; part++) { /* 4 panels per side for safety */
+        double t0 = tc * part / 4, t1 = tc * (part + 1) / 4;
+        double u0 = tc + (M_PI / 2 - tc) * part / 4, u1 = tc + (M_PI / 2 - tc) * (part + 1) / 4;
+        for (int i = 0; i < 48; i++) {
+            double t = 0.5 * (t0 + t1) + 0.5 * (t1 - t0) * gl_x[i];
+            double u = 0.5 * (u0 + u1) + 0.5 * (u1 - u0) * gl_x[i];
+            sum += 0.5 * (t1 - t0) * gl_w[i] * enclosed(rp, a / cos(t));
+            sum += 0.5 * (u1 - u0) * gl_w[i] * enclosed(rp, b / sin(u));
+        }
+    }
+    return sum / (2 * M_PI);
+}
+
+static double signed_corner(const round_profile *rp, double x, double y)
+{
+    double s = (x < 0 ? -1 : 1) * (y < 0 ? -1 : 1);
+    return s * corner_box(rp, fabs(x), fabs(y));
+}
+
+/* Light of the round profile in [x0, x1] x [y0, y1] arcsec, the centre at the origin. */
+static double box_light(const round_profile *rp, double x0, double x1, double y0, double y1)
+{
+    return signed_corner(rp, x1, y1) - signed_corner(rp, x0, y1) - signed_corner(rp, x1, y0) +
+           signed_corner(rp, x0, y0);
+}
+
+/* A round Gaussian PSF image (sigma arcsec) at 0.0275", unit sum; smooth and band-limited
+ * enough for GalSim-independent tests. */
+static double *gaussian_psf(int n, double sigma, wf_psf_image *img)
+{
+    double *pix = malloc(sizeof(double) * n * n), s = 0, c = 0.5 * (n - 1), h = P / 4;
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            double r2 = ((i - c) * (i - c) + (j - c) * (j - c)) * h * h;
+            pix[j * n + i] = exp(-0.5 * r2 / (sigma * sigma));
+            s += pix[j * n + i];
+        }
+    for (int i = 0; i < n * n; i++) pix[i] /= s;
+    img->n = n;
+    img->scale_arcsec = h;
+    img->pix = pix;
+    img->band_limit = 0.0;
+    return pix;
+}
+
+/* ------------------------------------------------------------------- reference files */
+
+static double *load_fits(const char *file, const char *extname, long *nx, long *ny,
+                         double *lam_nm)
+{
+    const char *dir = wf_test_reference_dir();
+    if (!dir) return NULL;
+    char path[4200], ext[72];
+    snprintf(path, sizeof path, "%s/%s", dir, file);
+    snprintf(ext, sizeof ext, "%s", extname);
+    fitsfile *f = NULL;
+    int st = 0;
+    if (fits_open_file(&f, path, READONLY, &st)) return NULL;
+    fits_movnam_hdu(f, IMAGE_HDU, ext, 0, &st);
+    long n[2] = {0, 0};
+    fits_get_img_size(f, 2, n, &st);
+    if (lam_nm) {
+        int s2 = 0;
+        if (fits_read_key(f, TDOUBLE, "LAM_NM", lam_nm, NULL, &s2)) *lam_nm = NAN;
+    }
+    ck_assert_msg(st == 0, "%s[%s]: cfitsio status %d", path, ext, st);
+    double *a = malloc(sizeof(double) * n[0] * n[1]);
+    ck_assert(a != NULL);
+    fits_read_img(f, TDOUBLE, 1, n[0] * n[1], NULL, a, NULL, &st);
+    fits_close_file(f, &st);
+    ck_assert_msg(st == 0, "reading %s[%s]: cfitsio status %d", path, ext, st);
+    *nx = n[0];
+    *ny = n[1];
+    return a;
+}
+
+static char *slurp(const char *file)
+{
+    const char *dir = wf_test_reference_dir();
+    if (!dir) return NULL;
+    char path[4200];
+    snprintf(path, sizeof path, "%s/%s", dir, file);
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *s = malloc((size_t)n + 1);
+    ck_assert(s != NULL);
+    ck_assert(fread(s, 1, (size_t)n, f) == (size_t)n);
+    s[n] = 0;
+    fclose(f);
+    return s;
+}
+
+/* The value after "key": within [from, to); numbers only. */
+static double json_num(const char *from, const char *to, const char *key)
+{
+    char pat[80];
+    snprintf(pat, sizeof pat, "\"%s\":", key);
+    const char *at = strstr(from, pat);
+    ck_assert_msg(at && at < to, "galaxy_stamps.json: no %s", key);
+    return strtod(at + strlen(pat), NULL);
+}
+
+/* Up to cap numbers of the array after "key" (nested arrays flattened). */
+static int json_array(const char *from, const char *to, const char *key, double *out, int cap)
+{
+    char pat[80];
+    snprintf(pat, sizeof pat, "\"%s\":", key);
+    const char *at = strstr(from, pat);
+    if (!at || at >= to) return -1;
+    at = strchr(at, '[');
+    int depth = 0, n = 0;
+    for (const char *c = at; *c; c++) {
+        if (*c == '[') depth++;
+        else if (*c == ']') {
+            if (--depth == 0) break;
+        } else if (*c == '-' || (*c >= '0' && *c <= '9')) {
+            char *end;
+            double v = strtod(c, &end);
+            if (n < cap) out[n] = v;
+            n++;
+            c = end - 1;
+        }
+    }
+    return n;
+}
+
+typedef struct ref_galaxy {
+    char name[8];
+    wf_galaxy g;
+    double ox, oy;
+    double knots[2 * 64];
+} ref_galaxy;
+
+/* The four galaxies of galaxy_stamps.json; 0 when the reference is absent. */
+static int load_galaxies(ref_galaxy *out)
+{
+    char *js = slurp("galaxy_stamps.json");
+    if (!js) return 0;
+    for (int k = 0; k < 4; k++) {
+        char pat[32];
+        snprintf(pat, sizeof pat, "\"GAL%d\"", k + 1);
+        const char *a = strstr(js, pat);
+        ck_assert_msg(a != NULL, "galaxy_stamps.json: no %s", pat);
+        const char *b = strstr(a + 1, "\"name\"");
+        if (!b) b = a + strlen(a);
+        ref_galaxy *r = &out[k];
+        memset(r, 0, sizeof *r);
+        snprintf(r->name, sizeof r->name, "GAL%d", k + 1);
+        r->g = galaxy(1.0, json_num(a, b, "bulge_frac"), json_num(a, b, "hlr_disk"),
+                      json_num(a, b, "hlr_bulge"), json_num(a, b, "e1"), json_num(a, b, "e2"));
+        r->g.knot_frac = json_num(a, b, "knot_frac");
+        double off[2];
+        ck_assert(json_array(a, b, "offset", off, 2) == 2);
+        r->ox = off[0];
+        r->oy = off[1];
+        int nk = json_array(a, b, "knot_points_arcsec_preshear", r->knots, 128);
+        if (nk > 0) {
+            ck_assert(nk % 2 == 0 && nk <= 128);
+            r->g.n_knots = nk / 2;
+            r->g.knot_xy = r->knots;
+        }
+        /* the JSON's reduced shear must be GalSim's g for our distortion */
+        double g1, g2;
+        wf_profile_shear_from_distortion(r->g.e1, r->g.e2, &g1, &g2);
+        ck_assert_msg(fabs(g1 - json_num(a, b, "g1")) < 1e-12 &&
+                          fabs(g2 - json_num(a, b, "g2")) < 1e-12,
+                      "%s: shear convention differs from the JSON's", r->name);
+    }
+    free(js);
+    return 4;
+}
+
+typedef struct cmp {
+    double dflux, dpeak, dcore, dmax, dsig, de1, de2;
+} cmp;
+
+/* Our 64 x 64 stamp against GalSim's: relative flux, peak and worst pixel (of the 3 x 3 core
+ * around GalSim's peak, and of the whole stamp) in units of GalSim's peak, adaptive size
+ * (relative) and ellipticity (absolute). */
+static cmp compare(const double *ours, const double *ref)
+{
+    cmp c = {0};
+    double so = 0, sr = 0, pk = 0, po = 0;
+    int ip = 0;
+    for (int i = 0; i < 64 * 64; i++) {
+        so += ours[i];
+        sr += ref[i];
+        if (ref[i] > pk) {
+            pk = ref[i];
+            ip = i;
+        }
+        if (ours[i] > po) po = ours[i];
+        if (fabs(ours[i] - ref[i]) > c.dmax) c.dmax = fabs(ours[i] - ref[i]);
+    }
+    int px = ip % 64, py = ip / 64;
+    for (int dy = -1; dy <= 1; dy++)
+        for (int dx = -1; dx <= 1; dx++) {
+            int at = (py + dy) * 64 + px + dx;
+            double d = fabs(ours[at] - ref[at]);
+            if (d > c.dcore) c.dcore = d;
+        }
+    double s1, a1, b1, s2, a2, b2;
+    adaptive(ours, 64, &s1, &a1, &b1);
+    adaptive(ref, 64, &s2, &a2, &b2);
+    c.dflux = so / sr - 1;
+    c.dpeak = (po - pk) / pk;
+    c.dcore /= pk;
+    c.dmax /= pk;
+    c.dsig = s1 / s2 - 1;
+    c.de1 = a1 - a2;
+    c.de2 = b1 - b2;
+    return c;
+}
+
+static void print_cmp(const char *what, const cmp *c, int fft, double ms)
+{
+    printf("%-11s fft %4d %7.2f ms  flux %+.2e  peak %+.2e  3x3 %.2e  max %.2e  (of peak)  "
+           "size %+.2e  e1 %+.1e  e2 %+.1e\n",
+           what, fft, ms, c->dflux, c->dpeak, c->dcore, c->dmax, c->dsig, c->de1, c->de2);
+}
+
+/* The comparison PSF (see the header comment); NULL when the reference is absent. */
+static double *reference_psf(wf_psf_image *img, double **native)
+{
+    long n1, n2, m1, m2;
+    double lam;
+    double *over = load_fits("psf_sca01.fits.gz", "Y106_SCA01_PB8_OVER4", &n1, &n2, &lam);
+    if (!over) return NULL;
+    double *nat = load_fits("psf_sca01.fits.gz", "Y106_SCA01_PB8_NATIVE", &m1, &m2, NULL);
+    ck_assert(n1 == 128 && n2 == 128 && m1 == 128 && m2 == 128 && isfinite(lam));
+    const int np = 512; /* 14.08" at 0.0275" */
+    double *pix = calloc((size_t)np * np, sizeof(double));
+    for (int j = 0; j < 128; j++)
+        for (int i = 0; i < 128; i++)
+            for (int b = 0; b < 4; b++)
+                for (int a = 0; a < 4; a++)
+                    pix[(4 * j + b) * np + 4 * i + a] = nat[j * 128 + i] / 16.0;
+    /* both centres at their array's true centre: OVER4's 63.5 lands on 255.5 */
+    for (int j = 0; j < 128; j++)
+        for (int i = 0; i < 128; i++) pix[(j + 192) * np + i + 192] = over[j * 128 + i];
+    char *facts = slurp("facts.json");
+    double diam = facts ? json_num(facts, facts + strlen(facts), "diameter") : 2.36;
+    free(facts);
+    img->n = np;
+    img->scale_arcsec = P / 4;
+    img->pix = pix;
+    img->band_limit = 2 * M_PI * diam / (lam * 1e-9) * (M_PI / 180 / 3600);
+    free(over);
+    *native = nat;
+    return pix;
+}
+
+/* ------------------------------------------------------------ de Vaucouleurs transform */
+
+/* Plain composite Gauss-Legendre over panels of a quarter oscillation of J0, no
+ * extrapolation: slow and simple. The integrand is below 1e-12 of F(0) beyond s = 45. */
+static double hankel_brute(double q)
+{
+    const double b = wf_sersic4_table()->b;
+    double sum = 0.0, s = 0.0;
+    while (s < 45.0) {
+        double du = 4 * q * pow((s + 0.1) / b, 3) / b; /* d(q (s/b)^4)/ds, a little ahead */
+        double h = fmin(0.25, 0.25 * M_PI / fmax(du, 1e-9));
+        for (int i = 0; i < 48; i++) {
+            double x = s + 0.5 * h * (1 + gl_x[i]);
+            double y = x / b;
+            sum += 0.5 * h * gl_w[i] * exp(-x + 7 * log(x)) * j0(q * y * y * y * y);
+        }
+        s += h;
+    }
+    return sum / 5040.0;
+}
+
+START_TEST(test_sersic_transform)
+{
+    gl_init();
+    const wf_sersic_table *t = wf_sersic4_table();
+    ck_assert_msg(fabs(t->b - 7.669249442500803) < 1e-12, "b(4) = %.15f", t->b);
+    ck_assert_msg(fabs(t->b1 - 1.678346990016661) < 1e-12, "b(1) = %.15f", t->b1);
+    /* quadrature with Wynn extrapolation against brute force */
+    double worst = 0;
+    const double qs[] = {0.003, 0.05, 0.5, 2.0, 3.9};
+    for (int i = 0; i < 5; i++) {
+        double q = qs[i];
+        double d = fabs(wf_sersic4_hankel_direct(q) - hankel_brute(q));
+        if (d > worst) worst = d;
+    }
+    printf("de Vaucouleurs F(q): accelerated quadrature vs brute force: %.2e\n", worst);
+    ck_assert_msg(worst < 1e-11, "quadrature differs from brute force by %.3g", worst);
+    /* the two evaluations where they meet */
+    for (double q = 3.0; q <= 5.0; q += 0.5) {
+        double d = fabs(wf_sersic4_hankel_direct(q) - wf_sersic4_hankel_series(q));
+        ck_assert_msg(d < 1e-11, "series vs quadrature at q = %g: %.3g", q, d);
+    }
+    /* the table: interpolation error, monotone fall, small-q law */
+    double abs_err = 0, rel_err = 0, prev = 2.0;
+    for (int i = 0; i < 2000; i++) {
+        /* off the table's nodes: a sinusoidal jitter of 1.3% */
+        double q = pow(10.0, -3.5 + 8.0 * i / 2000.0) * (1 + 0.013 * sin(i));
+        double exact = q < 4 ? wf_sersic4_hankel_direct(q) : wf_sersic4_hankel_series(q);
+        double v = wf_sersic4_eval(t, q * q);
+        abs_err = fmax(abs_err, fabs(v - exact));
+        rel_err = fmax(rel_err, fabs(v - exact) / exact);
+    }
+    for (int i = 0; i < 20000; i++) { /* a positive mixture of Gaussians falls monotonically */
+        double q = pow(10.0, -4.0 + 9.0 * i / 20000.0), v = wf_sersic4_eval(t, q * q);
+        ck_assert_msg(v <= prev, "F not decreasing at q = %g", q);
+        prev = v;
+    }
+    printf("de Vaucouleurs table: max error %.2e of F(0), %.2e relative\n", abs_err, rel_err);
+    ck_assert_msg(abs_err < 1e-6 && rel_err < 1e-4, "table error %.3g abs, %.3g rel", abs_err,
+                  rel_err);
+    double q = 1e-3, slope = (1 - wf_sersic4_eval(t, q * q)) / (q * q);
+    ck_assert_msg(fabs(slope / (0.25 * t->r2) - 1) < 1e-3, "small-q slope %g vs <r^2>/4 = %g",
+                  slope, 0.25 * t->r2);
+}
+END_TEST
+
+/* ------------------------------------------------------------------ against GalSim */
+
+START_TEST(test_galsim_nopsf)
+{
+    ref_galaxy rg[4];
+    WF_SKIP_UNLESS(load_galaxies(rg), "GalSim reference galaxy_stamps.json");
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, NULL);
+    for (int k = 0; k < 4; k++) {
+        char ext[32];
+        snprintf(ext, sizeof ext, "GAL%d_NOPSF", k + 1);
+        long nx, ny;
+        double *ref = load_fits("galaxy_stamps.fits.gz", ext, &nx, &ny, NULL);
+        ck_assert(ref && nx == 64 && ny == 64);
+        wf_galaxy g = rg[k].g;
+        if (g.n_knots) {
+            /* GalSim drew these in real space, where its knots (delta functions) have no
+             * surface brightness: its stamp lacks their 20% (sum 0.789). Compare without. */
+            double knots = (1 - g.bulge_frac) * g.knot_frac;
+            g.bulge_frac /= 1 - knots;
+            g.flux = 1 - knots;
+            g.knot_frac = 0;
+            g.n_knots = 0;
+        }
+        wf_stamp s = stamp_new(0, 0, 64, 64);
+        double t0 = now_s();
+        ck_assert_msg(wf_profile_draw_galaxy(&c.work, &g, NULL, 31.5 + rg[k].ox,
+                                             31.5 + rg[k].oy, &s) == WF_OK,
+                      "%s", wf_error_message());
+        double ms = 1e3 * (now_s() - t0);
+        cmp d = compare(s.pix, ref);
+        print_cmp(ext, &d, s.fft, ms);
+        /* Both sides integrate the profile over the pixels in real space (GalSim to its
+         * realspace_relerr 1e-4): reached 1.4e-6 of the peak, flux 9e-8, moments 5e-7. The
+         * asserted 2e-5 is 50x tighter than issue 3 asks and still well above both
+         * quadratures' errors. */
+        ck_assert_msg(fabs(d.dflux) < 2e-5, "%s flux %+.3g", ext, d.dflux);
+        ck_assert_msg(d.dmax < 2e-5 && d.dcore < 2e-5, "%s pixels %.3g", ext, d.dmax);
+        ck_assert_msg(fabs(d.dsig) < 2e-5, "%s size %+.3g", ext, d.dsig);
+        ck_assert_msg(fabs(d.de1) < 2e-5 && fabs(d.de2) < 2e-5, "%s e %+.3g %+.3g", ext, d.de1,
+                      d.de2);
+        free(ref);
+        free(s.pix);
+    }
+    ctx_close(&c);
+}
+END_TEST
+
+START_TEST(test_galsim_psf)
+{
+    ref_galaxy rg[4];
+    WF_SKIP_UNLESS(load_galaxies(rg), "GalSim reference galaxy_stamps.json");
+    wf_psf_image img;
+    double *native = NULL;
+    double *psfpix = reference_psf(&img, &native);
+    WF_SKIP_UNLESS(psfpix, "GalSim reference psf_sca01.fits.gz");
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+
+    /* the PSF files' own discrepancy, measured on a point source in the 64 x 64 box */
+    wf_stamp pt = stamp_new(0, 0, 64, 64);
+    ck_assert(wf_profile_draw_point(&c.work, &c.psf, 1.0, 31.5, 31.5, &pt) == WF_OK);
+    double nsum = 0;
+    for (int j = 0; j < 64; j++)
+        for (int i = 0; i < 64; i++) nsum += native[(j + 32) * 128 + i + 32];
+    double norm = nsum / pt.sum;
+    printf("point source in 64x64: ours %.6f, GalSim NATIVE %.6f: PSF-file ratio %.5f\n",
+           pt.sum, nsum, norm);
+    ck_assert_msg(fabs(norm - 1) < 0.012, "PSF files differ by %.4f", norm - 1);
+
+    for (int k = 0; k < 4; k++) {
+        char ext[32];
+        snprintf(ext, sizeof ext, "GAL%d_PSF", k + 1);
+        long nx, ny;
+        double *ref = load_fits("galaxy_stamps.fits.gz", ext, &nx, &ny, NULL);
+        ck_assert(ref && nx == 64 && ny == 64);
+        wf_stamp s = stamp_new(0, 0, 64, 64);
+        double t0 = now_s();
+        ck_assert_msg(wf_profile_draw_galaxy(&c.work, &rg[k].g, &c.psf, 31.5 + rg[k].ox,
+                                             31.5 + rg[k].oy, &s) == WF_OK,
+                      "%s", wf_error_message());
+        double ms = 1e3 * (now_s() - t0);
+        cmp raw = compare(s.pix, ref);
+        for (int i = 0; i < 64 * 64; i++) s.pix[i] *= norm;
+        cmp d = compare(s.pix, ref);
+        print_cmp(ext, &d, s.fft, ms);
+        printf("%-11s before the PSF-file ratio: flux %+.2e peak %+.2e\n", "", raw.dflux,
+               raw.dpeak);
+        /* Reached: flux <= 1.7e-4, pixels <= 1.9e-3 of the peak (knots, being point sources,
+         * show the PSF files' core differences most), size <= 1.8e-3, e <= 3e-4. Required
+         * (issue 3): flux 1e-3, 3x3 core 1e-2 of the peak, moments 1e-2. */
+        ck_assert_msg(fabs(d.dflux) < 1e-3, "%s flux %+.3g", ext, d.dflux);
+        ck_assert_msg(d.dcore < 5e-3 && d.dmax < 5e-3 && fabs(d.dpeak) < 5e-3,
+                      "%s peak %+.3g core %.3g max %.3g", ext, d.dpeak, d.dcore, d.dmax);
+        ck_assert_msg(fabs(d.dsig) < 5e-3, "%s size %+.3g", ext, d.dsig);
+        ck_assert_msg(fabs(d.de1) < 1e-3 && fabs(d.de2) < 1e-3, "%s e %+.3g %+.3g", ext, d.de1,
+                      d.de2);
+        free(ref);
+        free(s.pix);
+    }
+    free(pt.pix);
+    ctx_close(&c);
+    free(psfpix);
+    free(native);
+}
+END_TEST
+
+/* Our point source (PSF x pixel at a sub-pixel position) against GalSim's NATIVE image. */
+START_TEST(test_galsim_point)
+{
+    wf_psf_image img;
+    double *native = NULL;
+    double *psfpix = reference_psf(&img, &native);
+    WF_SKIP_UNLESS(psfpix, "GalSim reference psf_sca01.fits.gz");
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    wf_stamp s = stamp_new(0, 0, 128, 128);
+    ck_assert(wf_profile_draw_point(&c.work, &c.psf, 1.0, 63.5, 63.5, &s) == WF_OK);
+    double so = 0, sn = 0, pk = 0, worst = 0;
+    for (int j = 32; j < 96; j++)
+        for (int i = 32; i < 96; i++) {
+            so += s.pix[j * 128 + i];
+            sn += native[j * 128 + i];
+            pk = fmax(pk, native[j * 128 + i]);
+        }
+    for (int j = 56; j < 72; j++)
+        for (int i = 56; i < 72; i++)
+            worst = fmax(worst, fabs(s.pix[j * 128 + i] * sn / so - native[j * 128 + i]));
+    printf("point source vs GalSim NATIVE (after the PSF-file ratio %.5f): worst core pixel "
+           "%.2e of the peak\n", sn / so, worst / pk);
+    /* GalSim's NATIVE and OVER4 differ by ~0.3% of the peak even after the ratio; 5e-3
+     * leaves room and would catch a half-pixel or pixel-response error (>10%). */
+    ck_assert_msg(worst / pk < 5e-3, "point source core differs by %.3g of the peak", worst / pk);
+    free(s.pix);
+    ctx_close(&c);
+    free(psfpix);
+    free(native);
+}
+END_TEST
+
+/* -------------------------------------------------------------------------- knots */
+
+/* Kolmogorov-Smirnov statistic of sorted samples against a CDF. */
+static double ks_stat(const double *x, int n, double (*cdf)(double))
+{
+    double d = 0;
+    for (int i = 0; i < n; i++) {
+        double f = cdf(x[i]);
+        d = fmax(d, fmax(fabs(f - (double)i / n), fabs(f - (double)(i + 1) / n)));
+    }
+    return d;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static double exp_disk_cdf(double x) { return 1 - (1 + x) * exp(-x); }
+static double uniform_cdf(double x) { return x; }
+
+START_TEST(test_knots_follow_disk)
+{
+    const int per = 1000, ngal = 30, n = per * ngal;
+    double *r = malloc(sizeof(double) * n), *phi = malloc(sizeof(double) * n);
+    double *xy = malloc(sizeof(double) * 2 * per);
+    const double hlr = 0.7, r0 = hlr / wf_sersic4_table()->b1;
+    for (int k = 0; k < ngal; k++) {
+        wf_galaxy g = galaxy(1, 0, hlr, 0, 0, 0);
+        g.id = 1000 + k;
+        g.knot_seed = 12345;
+        g.n_knots = per;
+        g.knot_frac = 0.2;
+        ck_assert(wf_profile_knots(&g, xy) == WF_OK);
+        for (int j = 0; j < per; j++) {
+            r[k * per + j] = hypot(xy[2 * j], xy[2 * j + 1]) / r0;
+            phi[k * per + j] = (atan2(xy[2 * j + 1], xy[2 * j]) + M_PI) / (2 * M_PI);
+        }
+    }
+    qsort(r, n, sizeof(double), cmp_double);
+    qsort(phi, n, sizeof(double), cmp_double);
+    double dr = ks_stat(r, n, exp_disk_cdf), dphi = ks_stat(phi, n, uniform_cdf);
+    double crit = 1.63 / sqrt(n); /* 1% significance */
+    printf("knots: KS D radius %.4f, angle %.4f (1%% critical %.4f, N = %d)\n", dr, dphi, crit, n);
+    ck_assert_msg(dr < crit, "knot radii do not follow the disk: D = %.4g", dr);
+    ck_assert_msg(dphi < crit, "knot angles not uniform: D = %.4g", dphi);
+    /* and a wrong profile is rejected: the same radii against a disk 5% larger */
+    double bad = 0;
+    for (int i = 0; i < n; i++)
+        bad = fmax(bad, fabs(exp_disk_cdf(r[i] / 1.05) - (double)i / n));
+    ck_assert_msg(bad > crit, "KS test lacks power (D = %.4g)", bad);
+    free(r);
+    free(phi);
+    free(xy);
+}
+END_TEST
+
+START_TEST(test_knots_reproducible)
+{
+    wf_galaxy g = galaxy(1, 0.2, 0.5, 0.25, 0.1, 0.2);
+    g.id = 42;
+    g.knot_seed = 0x1234567890abcdefull;
+    g.n_knots = 50;
+    g.knot_frac = 0.25;
+    double a[100], b[100], c2[100], d[100];
+    ck_assert(wf_profile_knots(&g, a) == WF_OK);
+    ck_assert(wf_profile_knots(&g, b) == WF_OK);
+    ck_assert_msg(memcmp(a, b, sizeof a) == 0, "same seed and id, different knots");
+    g.id = 43;
+    ck_assert(wf_profile_knots(&g, c2) == WF_OK);
+    g.id = 42;
+    g.knot_seed ^= 1;
+    ck_assert(wf_profile_knots(&g, d) == WF_OK);
+    int same_id = 0, same_seed = 0;
+    for (int i = 0; i < 100; i++) {
+        same_id += a[i] == c2[i];
+        same_seed += a[i] == d[i];
+    }
+    ck_assert_msg(same_id == 0 && same_seed == 0, "knots do not depend on id (%d) / seed (%d)",
+                  same_id, same_seed);
+    /* the drawn galaxy is reproducible too, and its knots are where the generator says */
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, NULL);
+    g.knot_seed ^= 1;
+    wf_stamp s1 = stamp_new(0, 0, 96, 96), s2 = stamp_new(0, 0, 96, 96);
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, NULL, 48.2, 47.9, &s1) == WF_OK);
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, NULL, 48.2, 47.9, &s2) == WF_OK);
+    ck_assert(memcmp(s1.pix, s2.pix, sizeof(double) * 96 * 96) == 0);
+    /* explicit positions reproduce the generated ones */
+    g.knot_xy = a;
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, NULL, 48.2, 47.9, &s2) == WF_OK);
+    ck_assert(memcmp(s1.pix, s2.pix, sizeof(double) * 96 * 96) == 0);
+    free(s1.pix);
+    free(s2.pix);
+    ctx_close(&c);
+}
+END_TEST
+
+/* ------------------------------------------------------------------ flux and shape */
+
+/* No PSF: every pixel is the profile's integral over it, so a round galaxy's stamp equals
+ * the exact pixel integrals (checked over the central 41 x 41 pixels, from exact corner
+ * values), and its sum the exact light of the stamp's square. */
+START_TEST(test_flux_exact_pixels)
+{
+    gl_init();
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, NULL);
+    struct {
+        double bf, hd, hb, x, y;
+    } cases[] = {{0.0, 0.3, 0.15, 20.0, 20.0}, {0.3, 0.5, 0.25, 40.3, 17.8},
+                 {1.0, 0.4, 0.2, 10.5, 10.5}, {0.5, 1.5, 0.75, 100.2, 99.6}};
+    for (int k = 0; k < 4; k++) {
+        wf_galaxy g = galaxy(1000.0, cases[k].bf, cases[k].hd, cases[k].hb, 0, 0);
+        wf_stamp s;
+        double frac;
+        ck_assert(wf_profile_galaxy_bounds(&c.work, &g, NULL, cases[k].x, cases[k].y, &s,
+                                           &frac) == WF_OK);
+        s.pix = calloc((size_t)s.nx * s.ny, sizeof(double));
+        ck_assert(wf_profile_draw_galaxy(&c.work, &g, NULL, cases[k].x, cases[k].y, &s) == WF_OK);
+        round_profile rp = {cases[k].bf, cases[k].hb, 1 - cases[k].bf, cases[k].hd};
+        double bx0 = (s.x0 - 0.5 - cases[k].x) * P, bx1 = bx0 + s.nx * P;
+        double by0 = (s.y0 - 0.5 - cases[k].y) * P, by1 = by0 + s.ny * P;
+        double exact = 1000.0 * box_light(&rp, bx0, bx1, by0, by1);
+        int h = 20, ci = (int)lround(cases[k].x) - s.x0, cj = (int)lround(cases[k].y) - s.y0;
+        double corner[42][42], worst = 0, peak = 0;
+        for (int j = 0; j <= 2 * h + 1; j++)
+            for (int i = 0; i <= 2 * h + 1; i++)
+                corner[j][i] = signed_corner(&rp, bx0 + (ci - h + i) * P, by0 + (cj - h + j) * P);
+        for (int j = 0; j <= 2 * h; j++)
+            for (int i = 0; i <= 2 * h; i++) {
+                int pi = ci - h + i, pj = cj - h + j;
+                if (pi < 0 || pj < 0 || pi >= s.nx || pj >= s.ny) continue;
+                double e = 1000.0 * (corner[j + 1][i + 1] - corner[j + 1][i] - corner[j][i + 1] +
+                                     corner[j][i]);
+                peak = fmax(peak, e);
+                worst = fmax(worst, fabs(s.pix[pj * s.nx + pi] - e));
+            }
+        printf("round galaxy %d: stamp %dx%d holds %.7f of the light (exact %.7f, bound %.4f); "
+               "worst central pixel %.2e of the peak\n",
+               k, s.nx, s.ny, s.sum / 1000.0, exact / 1000.0, frac, worst / peak);
+        /* the draw integrates in real space: exact to its quadrature (1e-12 of the flux) */
+        ck_assert_msg(fabs(s.sum - exact) / 1000.0 < 1e-8, "case %d: sum %.9f vs %.9f", k,
+                      s.sum, exact);
+        ck_assert_msg(exact / 1000.0 >= acc.flux_fraction, "case %d: stamp holds %.5f", k,
+                      exact / 1000.0);
+        ck_assert_msg(worst / peak < 1e-8, "case %d: pixel error %.3g of the peak", k,
+                      worst / peak);
+        free(s.pix);
+    }
+    ctx_close(&c);
+}
+END_TEST
+
+/* With a PSF: the light of a stamp large enough to hold everything equals the flux times
+ * the PSF image's sum, and the default stamp holds at least flux_fraction of it. */
+START_TEST(test_flux_with_psf)
+{
+    wf_psf_image img;
+    double *psfpix = gaussian_psf(128, 0.08, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    wf_galaxy g = galaxy(500.0, 0.2, 0.4, 0.2, 0.2, -0.1);
+    g.n_knots = 12;
+    g.knot_frac = 0.2;
+    g.knot_seed = 99;
+    wf_stamp s;
+    double frac;
+    ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, 300.3, 200.7, &s, &frac) == WF_OK);
+    s.pix = calloc((size_t)s.nx * s.ny, sizeof(double));
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 300.3, 200.7, &s) == WF_OK);
+    check_finite_nonneg(&s, "default stamp");
+    printf("galaxy + PSF: default stamp %dx%d holds %.5f (bound %.3f), clipped %.1e\n", s.nx,
+           s.ny, s.sum / 500.0, frac, s.clipped / 500.0);
+    ck_assert(s.sum / 500.0 >= acc.flux_fraction - 1e-4 && s.sum / 500.0 <= 1 + 1e-4);
+    free(s.pix);
+    /* everything: a tight folding threshold and a stamp holding all but 1e-9 */
+    ck_assert(wf_profile_work_tune(&c.work, 1 - 1e-9, 1e-9, 1e-8) == WF_OK);
+    ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, 300.3, 200.7, &s, NULL) == WF_OK);
+    s.pix = calloc((size_t)s.nx * s.ny, sizeof(double));
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 300.3, 200.7, &s) == WF_OK);
+    printf("galaxy + PSF: %dx%d stamp (fft %d) holds %.8f of the flux\n", s.nx, s.ny, s.fft,
+           s.sum / 500.0);
+    ck_assert_msg(fabs(s.sum / 500.0 - 1) < 2e-6, "sum %.9f", s.sum / 500.0);
+    free(s.pix);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
+START_TEST(test_centred_symmetric)
+{
+    wf_psf_image img;
+    double *psfpix = gaussian_psf(128, 0.07, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    const double pos[][2] = {{50.0, 50.0}, {50.5, 50.5}, {50.5, 50.0}};
+    for (int k = 0; k < 3; k++)
+        for (int with_psf = 0; with_psf < 2; with_psf++) {
+            wf_galaxy g = galaxy(1.0, 0.4, 0.5, 0.25, 0, 0);
+            wf_stamp s = stamp_new(10, 10, 81 + (pos[k][0] != 50.0), 81 + (pos[k][1] != 50.0));
+            ck_assert(wf_profile_draw_galaxy(&c.work, &g, with_psf ? &c.psf : NULL, pos[k][0],
+                                             pos[k][1], &s) == WF_OK);
+            double cx, cy, e1, e2;
+            unweighted(s.pix, s.nx, s.ny, &cx, &cy, &e1, &e2);
+            cx += s.x0 - pos[k][0];
+            cy += s.y0 - pos[k][1];
+            ck_assert_msg(fabs(cx) < 1e-9 && fabs(cy) < 1e-9,
+                          "centred profile at (%g, %g), psf %d: first moments %.3g %.3g",
+                          pos[k][0], pos[k][1], with_psf, cx, cy);
+            /* and the image is mirror-symmetric about the centre, not just balanced */
+            double asym = 0;
+            for (int j = 0; j < s.ny; j++)
+                for (int i = 0; i < s.nx; i++)
+                    asym = fmax(asym, fabs(s.pix[j * s.nx + i] -
+                                           s.pix[(s.ny - 1 - j) * s.nx + (s.nx - 1 - i)]));
+            ck_assert_msg(asym < 1e-12, "not point-symmetric: %.3g", asym);
+            free(s.pix);
+        }
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
+/* A sheared round profile has the input ellipticity: unweighted moments of a no-PSF draw
+ * (pixel variance p^2/12 removed) of an exponential, whose moments converge; e = 0.7 at
+ * six angles, through (e1, e2) and through the rotation. */
+START_TEST(test_sheared_ellipticity)
+{
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, NULL);
+    ck_assert(wf_profile_work_tune(&c.work, 1 - 1e-9, 1e-9, 1e-7) == WF_OK);
+    const double emag[] = {0.3, 0.7, 0.7, 0.7, 0.7, 0.7, 0.7};
+    const double beta[] = {-0.3, 0.0, 30.0, 45.0, 60.0, 90.0, 135.0}; /* position angle, deg */
+    double worst = 0;
+    for (int k = 0; k < 7; k++)
+        for (int via_rot = 0; via_rot < 2; via_rot++) {
+            double b = beta[k] * M_PI / 180;
+            double e1 = emag[k] * cos(2 * b), e2 = emag[k] * sin(2 * b);
+            wf_galaxy g = via_rot ? galaxy(1, 0, 0.35, 0, emag[k], 0)
+                                  : galaxy(1, 0, 0.35, 0, e1, e2);
+            if (via_rot) g.rotation = b;
+            wf_stamp s;
+            ck_assert(wf_profile_galaxy_bounds(&c.work, &g, NULL, 200.3, 100.6, &s, NULL) == WF_OK);
+            s.pix = calloc((size_t)s.nx * s.ny, sizeof(double));
+            ck_assert(wf_profile_draw_galaxy(&c.work, &g, NULL, 200.3, 100.6, &s) == WF_OK);
+            check_finite_nonneg(&s, "sheared");
+            double cx, cy, m1, m2;
+            unweighted(s.pix, s.nx, s.ny, &cx, &cy, &m1, &m2);
+            double d = fmax(fabs(m1 - e1), fabs(m2 - e2));
+            worst = fmax(worst, d);
+            /* the pixel-centre moments of a pixelised profile miss the light's position
+             * inside each pixel: 4e-5 measured */
+            ck_assert_msg(d < 1e-4, "e = %.2f at %.0f deg (%s): measured (%.5f, %.5f) vs "
+                          "(%.5f, %.5f)", emag[k], beta[k], via_rot ? "rotation" : "e1, e2",
+                          m1, m2, e1, e2);
+            ck_assert_msg(fabs(s.sum - 1) < 1e-5, "flux %.7f", s.sum);
+            /* pixel-centre moments of a pixelised off-centre profile are not its centroid
+             * exactly (the light's position inside each pixel is lost); for the
+             * exponential's central kink the difference is ~1e-4 pixel */
+            ck_assert_msg(fabs(cx + s.x0 - 200.3) < 1e-3 && fabs(cy + s.y0 - 100.6) < 1e-3,
+                          "centroid (%.6f, %.6f)", cx + s.x0, cy + s.y0);
+            free(s.pix);
+        }
+    printf("sheared exponential: worst ellipticity error %.2e (e up to 0.7, 7 angles, via "
+           "(e1, e2) and rotation)\n", worst);
+    ctx_close(&c);
+}
+END_TEST
+
+/* ------------------------------------------------------------------------ stiff cases */
+
+START_TEST(test_stiff_tiny_galaxy)
+{
+    wf_psf_image img;
+    double *psfpix = gaussian_psf(128, 0.07, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    wf_galaxy g = galaxy(1.0, 0.5, 0.005, 0.0025, 0.5, 0.3);
+    g.n_knots = 5;
+    g.knot_frac = 0.25;
+    g.knot_seed = 3;
+    wf_stamp s, pt;
+    ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, 64.2, 63.7, &s, NULL) == WF_OK);
+    s.pix = calloc((size_t)s.nx * s.ny, sizeof(double));
+    pt = stamp_new(s.x0, s.y0, s.nx, s.ny);
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 64.2, 63.7, &s) == WF_OK);
+    ck_assert(wf_profile_draw_point(&c.work, &c.psf, 1.0, 64.2, 63.7, &pt) == WF_OK);
+    check_finite_nonneg(&s, "hlr 0.005\"");
+    double worst = 0, peak = 0;
+    for (int i = 0; i < s.nx * s.ny; i++) {
+        worst = fmax(worst, fabs(s.pix[i] - pt.pix[i]));
+        peak = fmax(peak, pt.pix[i]);
+    }
+    printf("hlr 0.005\": %dx%d stamp, sum %.6f, differs from a point source by %.2e of the "
+           "peak\n", s.nx, s.ny, s.sum, worst / peak);
+    /* A 0.005" galaxy is nearly a point source to 0.11" pixels and a 0.07" PSF. The peak
+     * drops by about its second moment over the PSF's: the de Vaucouleurs tail gives
+     * <r^2> = 21.7 Re^2, so <r^2> / 2 = 5.5e-5 arcsec^2 in all against sigma^2 = 4.9e-3:
+     * ~1.1%; measured 0.9%. */
+    ck_assert_msg(worst / peak < 1.5e-2, "tiny galaxy vs point: %.3g", worst / peak);
+    ck_assert(fabs(s.sum - pt.sum) < 1e-4);
+    /* without a PSF nearly all of it falls in one pixel */
+    wf_stamp n = stamp_new(60, 60, 9, 9);
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, NULL, 64.2, 63.7, &n) == WF_OK);
+    check_finite_nonneg(&n, "hlr 0.005\", no PSF");
+    ck_assert_msg(n.pix[4 * 9 + 4] > 0.97 && fabs(n.sum - 1) < 2e-3, "centre pixel %.4f sum %.5f",
+                  n.pix[40], n.sum);
+    free(s.pix);
+    free(pt.pix);
+    free(n.pix);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
+START_TEST(test_stiff_huge_galaxy)
+{
+    gl_init();
+    wf_psf_image img;
+    double *psfpix = gaussian_psf(128, 0.07, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    const double bf[2] = {0.0, 0.3};
+    for (int k = 0; k < 2; k++) {
+        wf_galaxy g = galaxy(2e4, bf[k], 20.0, 10.0, 0, 0);
+        wf_stamp s;
+        double frac;
+        ck_assert(wf_profile_galaxy_bounds(&c.work, &g, NULL, 2000.0, 1500.3, &s, &frac) == WF_OK);
+        ck_assert_msg(s.nx <= acc.max_fft && s.ny <= acc.max_fft, "stamp %dx%d", s.nx, s.ny);
+        s.pix = calloc((size_t)s.nx * s.ny, sizeof(double));
+        double t0 = now_s();
+        ck_assert_msg(wf_profile_draw_galaxy(&c.work, &g, NULL, 2000.0, 1500.3, &s) == WF_OK,
+                      "%s", wf_error_message());
+        double ms = 1e3 * (now_s() - t0);
+        check_finite_nonneg(&s, "hlr 20\"");
+        round_profile rp = {bf[k], 10.0, 1 - bf[k], 20.0};
+        double bx0 = (s.x0 - 0.5 - 2000.0) * P, by0 = (s.y0 - 0.5 - 1500.3) * P;
+        double exact = box_light(&rp, bx0, bx0 + s.nx * P, by0, by0 + s.ny * P);
+        printf("hlr 20\" (bulge %.1f): stamp %dx%d (fft %d, %.0f ms) holds %.5f of the light, "
+               "exact %.5f, bound %.4f\n",
+               bf[k], s.nx, s.ny, s.fft, ms, s.sum / 2e4, exact, frac);
+        /* bounded: the stamp is clamped to max_fft; the light beyond the box (up to 30%
+         * for the bulge) is taken back out of the wrap, to 1e-3 */
+        ck_assert_msg(fabs(s.sum / 2e4 - exact) < 1e-3, "huge galaxy: %.5f vs exact %.5f",
+                      s.sum / 2e4, exact);
+        ck_assert(frac <= exact + 1e-3);
+        /* with the PSF: the same light to the PSF's effect at the edges */
+        wf_stamp sp = stamp_new(s.x0, s.y0, s.nx, s.ny);
+        ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 2000.0, 1500.3, &sp) == WF_OK);
+        check_finite_nonneg(&sp, "hlr 20\" with PSF");
+        ck_assert_msg(fabs(sp.sum - s.sum) / 2e4 < 1e-3, "with PSF %.5f without %.5f",
+                      sp.sum / 2e4, s.sum / 2e4);
+        free(s.pix);
+        free(sp.pix);
+    }
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
+/* Magnitude 35 in Y106 (26.46 gives 1 e-/s): 3.8e-4 e-/s. */
+START_TEST(test_stiff_faint)
+{
+    wf_psf_image img;
+    double *psfpix = gaussian_psf(128, 0.07, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    double flux = pow(10.0, -0.4 * (35.0 - 26.46));
+    wf_galaxy g = galaxy(flux, 0.3, 0.3, 0.15, 0.2, 0.1);
+    g.n_knots = 8;
+    g.knot_frac = 0.1;
+    wf_stamp s;
+    ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, 10.4, 4000.9, &s, NULL) == WF_OK);
+    s.pix = calloc((size_t)s.nx * s.ny, sizeof(double));
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 10.4, 4000.9, &s) == WF_OK);
+    check_finite_nonneg(&s, "magnitude 35");
+    ck_assert_msg(s.sum / flux > 0.995 && s.sum / flux < 1.0001, "sum %.6g of %.6g", s.sum, flux);
+    ck_assert_msg(s.clipped / flux < 1e-4, "clipped %.3g of the flux", s.clipped / flux);
+    wf_stamp p = stamp_new(s.x0, s.y0, s.nx, s.ny);
+    ck_assert(wf_profile_draw_point(&c.work, &c.psf, flux, 10.4, 4000.9, &p) == WF_OK);
+    check_finite_nonneg(&p, "magnitude 35 point");
+    /* zero flux: an empty stamp, not an error; its bounds are those it would have */
+    g.flux = 0;
+    g.bulge_frac = 1;
+    wf_stamp z;
+    ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, 10.4, 4000.9, &z, NULL) == WF_OK);
+    ck_assert(z.nx > 1 && z.nx < 200);
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 10.4, 4000.9, &s) == WF_OK);
+    ck_assert(s.sum == 0.0);
+    free(s.pix);
+    free(p.pix);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
+/* The bulge's cusp without a PSF, against exact pixel integrals computed here: the drawer
+ * integrates in real space (polar fans around the centre), so there is no Fourier series
+ * to ring and the pixels are exact to its quadrature. */
+START_TEST(test_stiff_cusp)
+{
+    gl_init();
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, NULL);
+    const double hlr[3] = {0.05, 0.1, 0.3};
+    for (int k = 0; k < 3; k++) {
+        wf_galaxy g = galaxy(1.0, 1.0, 1.0, hlr[k], 0, 0);
+        double x = 30.0 + 0.3 * k, y = 30.0 - 0.2 * k;
+        wf_stamp s = stamp_new(14, 14, 33, 33);
+        ck_assert(wf_profile_draw_galaxy(&c.work, &g, NULL, x, y, &s) == WF_OK);
+        round_profile rp = {1.0, hlr[k], 0.0, 1.0};
+        double worst = 0, peak = 0;
+        for (int j = 0; j < s.ny; j++)
+            for (int i = 0; i < s.nx; i++) {
+                double x0 = (s.x0 + i - 0.5 - x) * P, y0 = (s.y0 + j - 0.5 - y) * P;
+                double e = box_light(&rp, x0, x0 + P, y0, y0 + P);
+                peak = fmax(peak, e);
+                worst = fmax(worst, fabs(s.pix[j * s.nx + i] - e));
+            }
+        printf("de Vaucouleurs cusp, hlr %.2f\", no PSF: worst pixel %.2e of the peak\n", hlr[k],
+               worst / peak);
+        ck_assert_msg(worst / peak < 1e-9, "hlr %g: cusp error %.3g of the peak", hlr[k],
+                      worst / peak);
+        ck_assert_msg(s.clipped == 0.0, "hlr %g: negative pixels %.3g", hlr[k], s.clipped);
+        free(s.pix);
+    }
+    ctx_close(&c);
+}
+END_TEST
+
+/* Brute-force real-space convolution for the cusp test: exact light of 1/n-pixel
+ * sub-pixels over +-2.5" (the no-PSF drawer at 0.11/n" pixels, itself checked against
+ * exact integrals), each spread by the Gaussian PSF widened by a uniform sub-pixel's
+ * variance s^2 / 12 and integrated over the 0.11" pixels with error functions. The
+ * sub-pixel's light is not uniform near the cusp, so this converges as s^2 (measured:
+ * 3.5e-3, 9.1e-4, 2.3e-4 of the peak for n = 8, 16, 32). */
+static void cusp_reference(const wf_galaxy *g, double sigma, int n, double x, double y,
+                           const wf_stamp *s, double *ref)
+{
+    wf_profile_accuracy fine;
+    wf_profile_accuracy_default(&fine);
+    fine.pixel_scale = P / n;
+    ctx cf;
+    ctx_open(&cf, &fine, NULL);
+    int h = (int)(2.5 / (P / n));
+    wf_stamp sub = stamp_new(-h, -h, 2 * h + 1, 2 * h + 1);
+    ck_assert(wf_profile_draw_galaxy(&cf.work, g, NULL, 0.0, 0.0, &sub) == WF_OK);
+    double sg = sqrt(sigma * sigma + (P / n) * (P / n) / 12.0) * sqrt(2.0);
+    memset(ref, 0, sizeof(double) * s->nx * s->ny);
+    double *ex = malloc(sizeof(double) * s->nx), *ey = malloc(sizeof(double) * s->ny);
+    for (int j = 0; j < sub.ny; j++)
+        for (int i = 0; i < sub.nx; i++) {
+            double l = sub.pix[j * sub.nx + i];
+            if (l < 1e-14) continue;
+            double sx = x * P + (sub.x0 + i) * P / n, sy = y * P + (sub.y0 + j) * P / n;
+            for (int k = 0; k < s->nx; k++) {
+                double a = (s->x0 + k - 0.5) * P - sx;
+                ex[k] = 0.5 * (erf((a + P) / sg) - erf(a / sg));
+            }
+            for (int k = 0; k < s->ny; k++) {
+                double a = (s->y0 + k - 0.5) * P - sy;
+                ey[k] = 0.5 * (erf((a + P) / sg) - erf(a / sg));
+            }
+            for (int jj = 0; jj < s->ny; jj++) {
+                if (ey[jj] < 1e-16) continue;
+                for (int ii = 0; ii < s->nx; ii++) ref[jj * s->nx + ii] += l * ey[jj] * ex[ii];
+            }
+        }
+    free(ex);
+    free(ey);
+    free(sub.pix);
+    ctx_close(&cf);
+}
+
+/* The cusp through the PSF (the production path, Fourier space) against the brute-force
+ * convolution, Richardson-extrapolated from 1/8 and 1/16 sub-pixels (residual ~5e-5 of
+ * the peak, from the n = 16, 32 pair). */
+START_TEST(test_stiff_cusp_with_psf)
+{
+    const double sigma = 0.07;
+    wf_psf_image img;
+    double *psfpix = gaussian_psf(128, sigma, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    wf_galaxy g = galaxy(1.0, 1.0, 1.0, 0.05, 0.1, -0.05);
+    const double x = 40.3, y = 39.8;
+    wf_stamp s = stamp_new(30, 30, 21, 21);
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, x, y, &s) == WF_OK);
+    double r8[21 * 21], r16[21 * 21], worst = 0, peak = 0;
+    cusp_reference(&g, sigma, 8, x, y, &s, r8);
+    cusp_reference(&g, sigma, 16, x, y, &s, r16);
+    for (int i = 0; i < 21 * 21; i++) {
+        double ref = r16[i] + (r16[i] - r8[i]) / 3.0;
+        peak = fmax(peak, ref);
+        worst = fmax(worst, fabs(s.pix[i] - ref));
+    }
+    printf("de Vaucouleurs cusp (hlr 0.05\") through a 0.07\" PSF: worst pixel %.2e of the "
+           "peak against real-space convolution; negative ringing clipped %.1e of the flux\n",
+           worst / peak, s.clipped);
+    /* No ringing: the PSF band-limits the cusp, and the PSF table is cut where it is
+     * below 1e-7 (or tapered at the optical cut-off). */
+    ck_assert_msg(worst / peak < 2e-4, "cusp with PSF: %.3g of the peak", worst / peak);
+    ck_assert_msg(s.clipped < 1e-6, "ringing %.3g", s.clipped);
+    free(s.pix);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
+/* A stamp drawn in row pieces (as the tile renderer does for objects larger than its pool)
+ * has bit-identical pixels. */
+START_TEST(test_pieces_identical)
+{
+    wf_psf_image img;
+    double *psfpix = gaussian_psf(128, 0.07, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    wf_galaxy g = galaxy(100, 0.3, 0.6, 0.3, 0.1, 0.3);
+    g.n_knots = 20;
+    g.knot_frac = 0.2;
+    g.knot_seed = 77;
+    wf_stamp whole;
+    ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, 500.7, 800.2, &whole, NULL) == WF_OK);
+    whole.pix = calloc((size_t)whole.nx * whole.ny, sizeof(double));
+    ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 500.7, 800.2, &whole) == WF_OK);
+    int cut[] = {0, 7, 8, whole.ny / 2, whole.ny - 1, whole.ny};
+    for (int k = 0; k + 1 < 6; k++) {
+        if (cut[k + 1] <= cut[k]) continue;
+        wf_stamp part = stamp_new(whole.x0, whole.y0 + cut[k], whole.nx, cut[k + 1] - cut[k]);
+        ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 500.7, 800.2, &part) == WF_OK);
+        ck_assert_msg(memcmp(part.pix, whole.pix + (size_t)cut[k] * whole.nx,
+                             sizeof(double) * part.nx * part.ny) == 0,
+                      "rows %d..%d differ from the whole stamp", cut[k], cut[k + 1]);
+        free(part.pix);
+    }
+    free(whole.pix);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
+/* FFT sides that do not divide psf_table_fft read the PSF table through bicubic
+ * interpolation: its error, against the same draw with an exact table. */
+START_TEST(test_psf_table_interpolation)
+{
+    wf_psf_image img;
+    double *psfpix = gaussian_psf(128, 0.07, &img);
+    wf_profile_accuracy a1, a2;
+    wf_profile_accuracy_default(&a1);
+    a2 = a1;
+    a2.psf_table_fft = 256;
+    ctx c1, c2;
+    ctx_open(&c1, &a1, &img);
+    ctx_open(&c2, &a2, &img);
+    wf_galaxy g = galaxy(1, 0.3, 1.6, 0.8, 0.3, 0.1);
+    g.n_knots = 10;
+    g.knot_frac = 0.2;
+    /* the side from the 201-pixel stamp: 256, which does not divide 192 */
+    ck_assert(wf_profile_work_tune(&c1.work, 0.9, 0.05, 1e-5) == WF_OK);
+    ck_assert(wf_profile_work_tune(&c2.work, 0.9, 0.05, 1e-5) == WF_OK);
+    wf_stamp s1 = stamp_new(0, 0, 201, 201), s2 = stamp_new(0, 0, 201, 201);
+    ck_assert(wf_profile_draw_galaxy(&c1.work, &g, &c1.psf, 100.0, 100.0, &s1) == WF_OK);
+    ck_assert(wf_profile_draw_galaxy(&c2.work, &g, &c2.psf, 100.0, 100.0, &s2) == WF_OK);
+    ck_assert_msg(s1.fft == 256 && s2.fft == 256, "sides %d %d", s1.fft, s2.fft);
+    double worst = 0, peak = 0;
+    for (int i = 0; i < 201 * 201; i++) {
+        worst = fmax(worst, fabs(s1.pix[i] - s2.pix[i]));
+        peak = fmax(peak, s2.pix[i]);
+    }
+    printf("PSF table interpolation (side 256 from a 192 table): worst pixel %.2e of the "
+           "peak, flux %+.1e\n", worst / peak, s1.sum - s2.sum);
+    ck_assert_msg(worst / peak < 1e-3, "interpolated table: %.3g of the peak", worst / peak);
+    free(s1.pix);
+    free(s2.pix);
+    ctx_close(&c1);
+    ctx_close(&c2);
+    free(psfpix);
+}
+END_TEST
+
+/* A PSF sampled at a spacing that is not pixel / integer takes the direct-DFT path: the
+ * same Gaussian PSF sampled at 0.11/3.7" and at 0.11/4" gives the same stamps. */
+START_TEST(test_psf_any_sampling)
+{
+    const double sigma = 0.07;
+    wf_psf_image a, b;
+    double *pa = gaussian_psf(96, sigma, &a);
+    double h = P / 3.7, c = 0.5 * (96 - 1), sum = 0;
+    double *pb = malloc(sizeof(double) * 96 * 96);
+    for (int j = 0; j < 96; j++)
+        for (int i = 0; i < 96; i++) {
+            double r2 = ((i - c) * (i - c) + (j - c) * (j - c)) * h * h;
+            pb[j * 96 + i] = exp(-0.5 * r2 / (sigma * sigma));
+            sum += pb[j * 96 + i];
+        }
+    for (int i = 0; i < 96 * 96; i++) pb[i] /= sum;
+    b = (wf_psf_image){96, h, pb, 0.0};
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx ca, cb;
+    ctx_open(&ca, &acc, &a);
+    double t0 = now_s();
+    ctx_open(&cb, &acc, &b);
+    double ms = 1e3 * (now_s() - t0);
+    wf_galaxy g = galaxy(1, 0.3, 0.4, 0.2, 0.2, -0.3);
+    wf_stamp s1 = stamp_new(0, 0, 41, 41), s2 = stamp_new(0, 0, 41, 41);
+    ck_assert(wf_profile_draw_galaxy(&ca.work, &g, &ca.psf, 20.3, 19.9, &s1) == WF_OK);
+    ck_assert(wf_profile_draw_galaxy(&cb.work, &g, &cb.psf, 20.3, 19.9, &s2) == WF_OK);
+    double worst = 0, peak = 0;
+    for (int i = 0; i < 41 * 41; i++) {
+        worst = fmax(worst, fabs(s1.pix[i] - s2.pix[i]));
+        peak = fmax(peak, s1.pix[i]);
+    }
+    printf("PSF sampled at 0.11/3.7\" (direct DFT, %.0f ms to prepare) vs 0.11/4\": worst "
+           "pixel %.2e of the peak\n", ms, worst / peak);
+    ck_assert_msg(worst / peak < 1e-6, "sampling-dependent result: %.3g", worst / peak);
+    free(s1.pix);
+    free(s2.pix);
+    ctx_close(&ca);
+    ctx_close(&cb);
+    free(pa);
+    free(pb);
+}
+END_TEST
+
+START_TEST(test_bad_input)
+{
+    wf_psf_image img;
+    double *psfpix = gaussian_psf(64, 0.07, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    wf_stamp s = stamp_new(0, 0, 32, 32);
+    wf_galaxy good = galaxy(1, 0.3, 0.3, 0.15, 0.1, 0.1);
+    struct {
+        const char *what;
+        wf_galaxy g;
+    } bad[8];
+    for (int i = 0; i < 8; i++) bad[i].g = good;
+    bad[0].what = "NaN flux", bad[0].g.flux = NAN;
+    bad[1].what = "|e| = 1", bad[1].g.e1 = 0.8, bad[1].g.e2 = 0.6;
+    bad[2].what = "knot_frac 0.3", bad[2].g.knot_frac = 0.3, bad[2].g.n_knots = 5;
+    bad[3].what = "too many knots", bad[3].g.n_knots = WF_PROFILE_MAX_KNOTS + 1;
+    bad[4].what = "no bulge size", bad[4].g.hlr_bulge = 0;
+    bad[5].what = "negative flux", bad[5].g.flux = -1;
+    bad[6].what = "bulge_frac 1.5", bad[6].g.bulge_frac = 1.5;
+    bad[7].what = "infinite rotation", bad[7].g.rotation = INFINITY;
+    for (int i = 0; i < 8; i++) {
+        wf_status st = wf_profile_draw_galaxy(&c.work, &bad[i].g, &c.psf, 16, 16, &s);
+        ck_assert_msg(st != WF_OK, "%s accepted", bad[i].what);
+        ck_assert_msg(strlen(wf_error_message()) > 10, "%s: no message", bad[i].what);
+    }
+    ck_assert(wf_profile_draw_galaxy(&c.work, &good, &c.psf, NAN, 16, &s) != WF_OK);
+    /* a stamp farther than max_fft / 2 from the object */
+    ck_assert(wf_profile_draw_galaxy(&c.work, &good, &c.psf, 16 + acc.max_fft, 16, &s) ==
+              WF_ERR_RANGE);
+    ck_assert(wf_profile_draw_point(&c.work, &c.psf, -1, 16, 16, &s) != WF_OK);
+    wf_stamp none = {0};
+    ck_assert(wf_profile_draw_point(&c.work, &c.psf, 1, 16, 16, &none) != WF_OK);
+    /* PSF images */
+    wf_profile_psf p;
+    wf_psf_image bi = img;
+    double nanpix[16] = {0, 0, 0, 0, 0, NAN, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
+    bi.n = 4;
+    bi.pix = nanpix;
+    ck_assert(wf_profile_psf_init(&p, &bi, &acc, &c.arena) == WF_ERR_INPUT);
+    double zero[16] = {0};
+    bi.pix = zero;
+    ck_assert(wf_profile_psf_init(&p, &bi, &acc, &c.arena) == WF_ERR_INPUT);
+    bi = img;
+    bi.scale_arcsec = 0.11; /* undersampled */
+    ck_assert(wf_profile_psf_init(&p, &bi, &acc, &c.arena) == WF_ERR_RANGE);
+    /* accuracy knobs */
+    wf_profile_accuracy a = acc;
+    a.flux_fraction = 1.0;
+    size_t b;
+    ck_assert(wf_profile_work_need(&a, &b) == WF_ERR_RANGE);
+    ck_assert(wf_profile_work_tune(&c.work, 0.9, 0.0, 1e-5) == WF_ERR_RANGE);
+    /* an arena too small fails cleanly */
+    unsigned char small[4096];
+    wf_arena tiny;
+    wf_arena_init(&tiny, small, sizeof small, "tiny");
+    wf_profile_work w;
+    ck_assert(wf_profile_work_init(&w, &acc, &tiny) == WF_ERR_NOMEM);
+    free(s.pix);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
+/* Cost per draw with the reference PSF (or a Gaussian one): printed for the record. */
+START_TEST(test_timing)
+{
+    wf_psf_image img;
+    double *native = NULL;
+    double *psfpix = reference_psf(&img, &native);
+    const char *which = "GalSim Y106 OVER4 + NATIVE wings (14\")";
+    if (!psfpix) {
+        psfpix = gaussian_psf(128, 0.07, &img);
+        which = "Gaussian 0.07\"";
+    } else {
+        img.n = 128; /* OVER4 alone: the 3.52" image a PSF module would hand over */
+        double *core = malloc(sizeof(double) * 128 * 128);
+        for (int j = 0; j < 128; j++)
+            for (int i = 0; i < 128; i++) core[j * 128 + i] = psfpix[(j + 192) * 512 + i + 192];
+        free(psfpix);
+        psfpix = core;
+        img.pix = core;
+        which = "GalSim Y106 OVER4 (3.52\")";
+    }
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    double t0 = now_s();
+    ctx_open(&c, &acc, &img);
+    printf("timing with PSF %s: work + PSF table %.1f ms\n", which, 1e3 * (now_s() - t0));
+    struct {
+        const char *what;
+        double bf, hd, flux;
+        int knots;
+    } cases[] = {{"small galaxy (hlr 0.3\", bulge 0.3)", 0.3, 0.3, 100, 0},
+                 {"small galaxy + 10 knots", 0.3, 0.3, 100, 10},
+                 {"median catalog galaxy (hlr 0.32\", bulge 0.1)", 0.1, 0.32, 100, 10},
+                 {"large galaxy (hlr 1.5\", bulge 0.3)", 0.3, 1.5, 100, 10},
+                 {"point source", 0, 0, 100, -1}};
+    for (int k = 0; k < 5; k++) {
+        wf_galaxy g = galaxy(cases[k].flux, cases[k].bf, cases[k].hd, cases[k].hd / 2, 0.2, 0.1);
+        g.n_knots = cases[k].knots > 0 ? cases[k].knots : 0;
+        g.knot_frac = 0.15;
+        wf_stamp s;
+        if (cases[k].knots < 0)
+            ck_assert(wf_profile_point_bounds(&c.work, &c.psf, 100.3, 100.6, &s, NULL) == WF_OK);
+        else
+            ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, 100.3, 100.6, &s, NULL) ==
+                      WF_OK);
+        s.pix = calloc((size_t)s.nx * s.ny, sizeof(double));
+        int reps = 0;
+        t0 = now_s();
+        do {
+            if (cases[k].knots < 0)
+                ck_assert(wf_profile_draw_point(&c.work, &c.psf, 100, 100.3, 100.6, &s) == WF_OK);
+            else
+                ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 100.3, 100.6, &s) == WF_OK);
+            reps++;
+        } while (now_s() - t0 < 0.2);
+        printf("  %-46s stamp %3dx%-3d fft %3d: %.3f ms per draw\n", cases[k].what, s.nx, s.ny,
+               s.fft, 1e3 * (now_s() - t0) / reps);
+        free(s.pix);
+    }
+    ctx_close(&c);
+    free(psfpix);
+    free(native);
+}
+END_TEST
+
+static Suite *profile_suite(void)
+{
+    Suite *s = suite_create("profile");
+    TCase *ref = tcase_create("galsim");
+    tcase_set_timeout(ref, 120);
+    tcase_add_test(ref, test_galsim_nopsf);
+    tcase_add_test(ref, test_galsim_psf);
+    tcase_add_test(ref, test_galsim_point);
+    suite_add_tcase(s, ref);
+    TCase *ind = tcase_create("independent");
+    tcase_set_timeout(ind, 120);
+    tcase_add_test(ind, test_sersic_transform);
+    tcase_add_test(ind, test_knots_follow_disk);
+    tcase_add_test(ind, test_knots_reproducible);
+    tcase_add_test(ind, test_flux_exact_pixels);
+    tcase_add_test(ind, test_flux_with_psf);
+    tcase_add_test(ind, test_centred_symmetric);
+    tcase_add_test(ind, test_sheared_ellipticity);
+    tcase_add_test(ind, test_pieces_identical);
+    tcase_add_test(ind, test_psf_table_interpolation);
+    tcase_add_test(ind, test_psf_any_sampling);
+    suite_add_tcase(s, ind);
+    TCase *stiff = tcase_create("stiff");
+    tcase_set_timeout(stiff, 120);
+    tcase_add_test(stiff, test_stiff_tiny_galaxy);
+    tcase_add_test(stiff, test_stiff_huge_galaxy);
+    tcase_add_test(stiff, test_stiff_faint);
+    tcase_add_test(stiff, test_stiff_cusp);
+    tcase_add_test(stiff, test_stiff_cusp_with_psf);
+    tcase_add_test(stiff, test_bad_input);
+    suite_add_tcase(s, stiff);
+    TCase *t = tcase_create("timing");
+    tcase_set_timeout(t, 60);
+    tcase_add_test(t, test_timing);
+    suite_add_tcase(s, t);
+    return s;
+}
+
+int main(void) { return wf_test_main(profile_suite()); }

@@ -1,0 +1,206 @@
+/* One SCA's scene end to end on the host side (no detector): catalog -> WCS -> bandpass ->
+ * sky -> PSF -> stamps -> tiles. Fluxes add up, positions land where the WCS says, objects
+ * off the SCA are not drawn, the truth lists what is on it, and a magnitude-8 star and a
+ * magnitude-35 galaxy are handled. Uses the built-in models, so it runs without ../shared. */
+#include <fitsio.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sim/bandpass.h"
+#include "sim/catalog.h"
+#include "sim/scene.h"
+#include "sim/wcs.h"
+#include "tests/testutil.h"
+
+#define W 256
+#define H 256
+
+/* Writes a CSV catalog of stars or galaxies at given pixel positions of the setup's SCA. */
+static void write_catalog(const char *path, const wf_scene_setup *ss, int galaxies, int n,
+                          const double *x, const double *y, const double *mag)
+{
+    wf_focal_plane fp;
+    wf_wcs w;
+    wf_wcs_focal_plane(NULL, &fp);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, ss->ra, ss->dec, ss->pa, ss->sca, &w), WF_OK);
+    FILE *f = fopen(path, "w");
+    if (galaxies)
+        fprintf(f, "id,ra,dec,z,mag_Y106,hlr_disk,hlr_bulge,bulge_frac,knot_frac,e1,e2,pa\n");
+    else
+        fprintf(f, "id,ra,dec,mag_Y106\n");
+    for (int i = 0; i < n; i++) {
+        double ra, dec;
+        ck_assert_int_eq(wf_wcs_pix2world(&w, x[i], y[i], &ra, &dec), WF_OK);
+        if (galaxies)
+            fprintf(f, "%d,%.12f,%.12f,0.5,%.4f,0.3,0.15,0.3,0.0,0.2,-0.1,0\n", i + 1, ra, dec, mag[i]);
+        else
+            fprintf(f, "%d,%.12f,%.12f,%.4f\n", i + 1, ra, dec, mag[i]);
+    }
+    fclose(f);
+}
+
+static void setup_small(wf_scene_setup *ss)
+{
+    wf_scene_setup_default(ss);
+    ss->ncols = W;
+    ss->nrows = H;
+    ss->psf_size = 256;
+    ss->sky_on = 0;
+}
+
+static float *render(wf_scene *scene)
+{
+    wf_scene_source src;
+    ck_assert_int_eq(wf_scene_source_for(scene, 0, &src), WF_OK);
+    float *img = malloc(sizeof(float) * W * H);
+    for (int y0 = 0; y0 < H; y0 += 32)
+        ck_assert_msg(wf_scene_fill(&src, y0, y0 + 32, W, img + (size_t)y0 * W) == WF_OK, "%s", wf_error_message());
+    return img;
+}
+
+START_TEST(star_fluxes_and_positions)
+{
+    wf_scene_setup ss;
+    setup_small(&ss);
+    const double x[3] = {60.3, 180.75, 128.0}, y[3] = {70.6, 100.2, 200.45}, mag[3] = {18, 19, 20};
+    char path[4200];
+    snprintf(path, sizeof path, "%s/stars.csv", wf_test_tmpdir());
+    write_catalog(path, &ss, 0, 3, x, y, mag);
+    wf_catalog stars;
+    ck_assert_int_eq(wf_catalog_read_stars(path, &stars), WF_OK);
+    wf_scene *scene;
+    ck_assert_msg(wf_scene_create(&ss, NULL, &stars, &scene) == WF_OK, "%s", wf_error_message());
+    float *img = render(scene);
+    wf_bandpass bp;
+    wf_bandpass_load(WF_Y106, NULL, &bp);
+    for (int k = 0; k < 3; k++) {
+        double flux = wf_bandpass_countrate_ab(&bp, mag[k]);
+        double s = 0, sx = 0, sy = 0;
+        int r = 20; /* 2.2": holds > 97% of the PSF */
+        for (int j = (int)y[k] - r; j <= (int)y[k] + r; j++)
+            for (int i = (int)x[k] - r; i <= (int)x[k] + r; i++) {
+                double v = img[j * W + i];
+                s += v;
+                sx += v * i;
+                sy += v * j;
+            }
+        ck_assert_msg(s > 0.95 * flux && s < 1.0001 * flux, "star %d: %.3f of %.3f e-/s in 41x41", k, s, flux);
+        /* the 41x41 window sits on whole pixels, so it cuts the wings off-centre: 0.05 px */
+        ck_assert_msg(fabs(sx / s - x[k]) < 0.05 && fabs(sy / s - y[k]) < 0.05,
+                      "star %d centroid (%.3f, %.3f) vs (%.3f, %.3f)", k, sx / s, sy / s, x[k], y[k]);
+    }
+    free(img);
+    wf_scene_destroy(scene);
+    wf_catalog_free(&stars);
+}
+END_TEST
+
+START_TEST(galaxies_edges_and_extremes)
+{
+    wf_scene_setup ss;
+    setup_small(&ss);
+    /* on the SCA; on a corner; past an edge but reaching it; far off; magnitude 35 */
+    const double x[5] = {128, -0.4, W + 3.0, 5000, 64}, y[5] = {128, -0.4, 100, 5000, 192};
+    const double mag[5] = {20, 20, 19, 20, 35};
+    char path[4200];
+    snprintf(path, sizeof path, "%s/gal.csv", wf_test_tmpdir());
+    write_catalog(path, &ss, 1, 5, x, y, mag);
+    wf_catalog gal;
+    ck_assert_msg(wf_catalog_read_galaxies(path, &gal) == WF_OK, "%s", wf_error_message());
+    wf_scene *scene;
+    ck_assert_msg(wf_scene_create(&ss, &gal, NULL, &scene) == WF_OK, "%s", wf_error_message());
+    float *img = render(scene);
+    double total = 0;
+    for (int i = 0; i < W * H; i++) {
+        ck_assert_msg(isfinite(img[i]) && img[i] >= 0.0f, "pixel %d: %g", i, img[i]);
+        total += img[i];
+    }
+    wf_bandpass bp;
+    wf_bandpass_load(WF_Y106, NULL, &bp);
+    double f20 = wf_bandpass_countrate_ab(&bp, 20), f19 = wf_bandpass_countrate_ab(&bp, 19);
+    /* the centre galaxy whole, about a quarter of the corner one, a sliver of the edge one */
+    ck_assert_msg(total > 0.99 * 1.0 * f20 && total < f20 * 1.3 + 0.1 * f19,
+                  "total %.3f e-/s for a centre galaxy of %.3f", total, f20);
+    wf_scene_stats st;
+    wf_scene_get_stats(scene, &st);
+    ck_assert_int_eq(st.galaxies, 4); /* the far one is not drawn */
+    char tpath[4200];
+    snprintf(tpath, sizeof tpath, "%s/truth.fits", wf_test_tmpdir());
+    ck_assert_int_eq(wf_scene_write_truth(scene, tpath), WF_OK);
+    fitsfile *f;
+    int status = 0;
+    long rows = 0;
+    fits_open_table(&f, tpath, READONLY, &status);
+    fits_movnam_hdu(f, BINARY_TBL, "GALAXIES", 0, &status);
+    fits_get_num_rows(f, &rows, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_int_eq(rows, 3); /* centres on the SCA: centre, corner, magnitude 35 */
+    free(img);
+    wf_scene_destroy(scene);
+    wf_catalog_free(&gal);
+}
+END_TEST
+
+START_TEST(bright_star_within_budget)
+{
+    wf_scene_setup ss;
+    setup_small(&ss);
+    ss.pool_bytes = 4u << 20; /* smaller than the stamp: drawn in pieces */
+    const double x[1] = {128.2}, y[1] = {127.7}, mag[1] = {8};
+    char path[4200];
+    snprintf(path, sizeof path, "%s/bright.csv", wf_test_tmpdir());
+    write_catalog(path, &ss, 0, 1, x, y, mag);
+    wf_catalog stars;
+    ck_assert_int_eq(wf_catalog_read_stars(path, &stars), WF_OK);
+    wf_scene *scene;
+    ck_assert_msg(wf_scene_create(&ss, NULL, &stars, &scene) == WF_OK, "%s", wf_error_message());
+    float *img = render(scene);
+    wf_bandpass bp;
+    wf_bandpass_load(WF_Y106, NULL, &bp);
+    double flux = wf_bandpass_countrate_ab(&bp, 8), s = 0;
+    for (int i = 0; i < W * H; i++) {
+        ck_assert(isfinite(img[i]) && img[i] >= 0.0f);
+        s += img[i];
+    }
+    /* a 28" square holds most of a star's light; the rest is in the wings past the SCA */
+    ck_assert_msg(s > 0.97 * flux && s <= 1.0001 * flux, "%.4g of %.4g e-/s", s, flux);
+    free(img);
+    wf_scene_destroy(scene);
+    wf_catalog_free(&stars);
+}
+END_TEST
+
+START_TEST(empty_scene_is_sky)
+{
+    wf_scene_setup ss;
+    setup_small(&ss);
+    ss.sky_on = 1;
+    wf_scene *scene;
+    ck_assert_msg(wf_scene_create(&ss, NULL, NULL, &scene) == WF_OK, "%s", wf_error_message());
+    float *img = render(scene);
+    wf_scene_stats st;
+    wf_scene_get_stats(scene, &st);
+    ck_assert(st.sky_min > 0.2 && st.sky_max < 0.6); /* Y106 near the deep field, SPEC §2 */
+    for (int i = 0; i < W * H; i++) ck_assert(img[i] >= st.sky_min - 1e-6 && img[i] <= st.sky_max + 1e-6);
+    free(img);
+    wf_scene_destroy(scene);
+}
+END_TEST
+
+static Suite *suite(void)
+{
+    Suite *s = suite_create("scene");
+    TCase *tc = tcase_create("scene");
+    tcase_set_timeout(tc, 120);
+    tcase_add_test(tc, star_fluxes_and_positions);
+    tcase_add_test(tc, galaxies_edges_and_extremes);
+    tcase_add_test(tc, bright_star_within_budget);
+    tcase_add_test(tc, empty_scene_is_sky);
+    suite_add_tcase(s, tc);
+    return s;
+}
+
+int main(void) { return wf_test_main(suite()); }
