@@ -38,7 +38,7 @@ void wf_profile_accuracy_default(wf_profile_accuracy *acc)
     acc->psf_table_fft = 192;
 }
 
-static wf_status check_accuracy(const wf_profile_accuracy *acc)
+wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
 {
     if (!acc) return wf_error(WF_ERR_INPUT, "profile: no accuracy settings");
     if (!(acc->pixel_scale > 0.0 && acc->pixel_scale < 10.0))
@@ -91,7 +91,7 @@ static void layout(const wf_profile_accuracy *acc, work_layout *l)
 
 wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes)
 {
-    wf_status st = check_accuracy(acc);
+    wf_status st = wf_profile_check_accuracy(acc);
     if (st) return st;
     work_layout l;
     layout(acc, &l);
@@ -595,7 +595,9 @@ static double smooth_density(const job *jb, const wf_sersic_table *t, double x, 
  * larger than the PSF: half-light radii of tens of arcsec), the box's periodic images wrap
  * into the stamp. Their light is smooth there (it comes from >= half a box away), so it is
  * computed from the analytic profile, PSF and pixel neglected (relative effect ~(PSF size /
- * galaxy size)^2), on a coarse grid of nodes interpolated bilinearly, and subtracted. */
+ * galaxy size)^2), on a lattice of DEWRAP_NODES + 1 nodes per side of the FFT box,
+ * interpolated bilinearly, and subtracted. The lattice belongs to the box, not to the
+ * stamp asked for, so pieces of a stamp get the same pixels. */
 static wf_status dewrap(const wf_profile_work *w, const job *jb, const grid *gd, double x,
                         double y, wf_stamp *stamp)
 {
@@ -608,30 +610,41 @@ static wf_status dewrap(const wf_profile_work *w, const job *jb, const grid *gd,
         return wf_error(WF_ERR_RANGE, "profile: object of radius %.0f arcsec wraps %d times "
                         "around the largest FFT box (%.0f arcsec); raise max_fft", rfar, nimg,
                         period);
-    int gx = stamp->nx > DEWRAP_NODES ? DEWRAP_NODES : stamp->nx - 1;
-    int gy = stamp->ny > DEWRAP_NODES ? DEWRAP_NODES : stamp->ny - 1;
-    double hx = gx ? (double)(stamp->nx - 1) / gx : 1.0, hy = gy ? (double)(stamp->ny - 1) / gy : 1.0;
+    const double h = (double)gd->m / DEWRAP_NODES; /* pixels between nodes */
+    const long bx = (long)gd->ic - gd->half, by = (long)gd->jc - gd->half; /* node 0 */
+    int a0 = (int)floor((stamp->x0 - bx) / h), a1 = (int)floor((stamp->x0 + stamp->nx - 1 - bx) / h) + 1;
+    int b0 = (int)floor((stamp->y0 - by) / h), b1 = (int)floor((stamp->y0 + stamp->ny - 1 - by) / h) + 1;
+    if (a0 < 0) a0 = 0;
+    if (b0 < 0) b0 = 0;
+    if (a1 > DEWRAP_NODES) a1 = DEWRAP_NODES;
+    if (b1 > DEWRAP_NODES) b1 = DEWRAP_NODES;
     double node[(DEWRAP_NODES + 1) * (DEWRAP_NODES + 1)];
-    for (int b = 0; b <= gy; b++)
-        for (int a = 0; a <= gx; a++) {
-            double px = (stamp->x0 + a * hx - x) * p, py = (stamp->y0 + b * hy - y) * p;
+    for (int b = b0; b <= b1; b++)
+        for (int a = a0; a <= a1; a++) {
+            double px = (bx + a * h - x) * p, py = (by + b * h - y) * p;
             double wsum = 0.0;
             for (int ny = -nimg; ny <= nimg; ny++)
                 for (int nx = -nimg; nx <= nimg; nx++)
                     if (nx || ny) wsum += smooth_density(jb, t, px + nx * period, py + ny * period);
-            node[b * (gx + 1) + a] = wsum * p * p;
+            node[b * (DEWRAP_NODES + 1) + a] = wsum * p * p;
         }
     for (int yy = 0; yy < stamp->ny; yy++) {
-        double fy = gy ? yy / hy : 0.0;
-        int b = (int)fy < gy ? (int)fy : (gy ? gy - 1 : 0);
-        double ty = gy ? fy - b : 0.0;
+        double fy = (stamp->y0 + yy - by) / h;
+        int b = (int)floor(fy);
+        if (b < b0) b = b0;
+        if (b > b1 - 1) b = b1 - 1 >= b0 ? b1 - 1 : b0;
+        double ty = fy - b;
         for (int xx = 0; xx < stamp->nx; xx++) {
-            double fx = gx ? xx / hx : 0.0;
-            int a = (int)fx < gx ? (int)fx : (gx ? gx - 1 : 0);
-            double tx = gx ? fx - a : 0.0;
-            const double *n0 = node + b * (gx + 1) + a;
-            double v00 = n0[0], v10 = gx ? n0[1] : n0[0];
-            double v01 = gy ? n0[gx + 1] : n0[0], v11 = gx && gy ? n0[gx + 2] : v01;
+            double fx = (stamp->x0 + xx - bx) / h;
+            int a = (int)floor(fx);
+            if (a < a0) a = a0;
+            if (a > a1 - 1) a = a1 - 1 >= a0 ? a1 - 1 : a0;
+            double tx = fx - a;
+            const double *n0 = node + b * (DEWRAP_NODES + 1) + a;
+            int ra = a + 1 <= a1, rb = b + 1 <= b1;
+            double v00 = n0[0], v10 = ra ? n0[1] : v00;
+            double v01 = rb ? n0[DEWRAP_NODES + 1] : v00;
+            double v11 = ra && rb ? n0[DEWRAP_NODES + 2] : (rb ? v01 : v10);
             double wv = (1 - ty) * ((1 - tx) * v00 + tx * v10) + ty * ((1 - tx) * v01 + tx * v11);
             stamp->pix[(size_t)yy * stamp->nx + xx] -= wv;
         }
@@ -951,7 +964,7 @@ wf_status wf_profile_work_tune(wf_profile_work *work, double flux_fraction,
     acc.flux_fraction = flux_fraction;
     acc.folding_threshold = folding_threshold;
     acc.kvalue_accuracy = kvalue_accuracy;
-    wf_status st = check_accuracy(&acc);
+    wf_status st = wf_profile_check_accuracy(&acc);
     if (st) return st;
     work->acc = acc;
     return WF_OK;

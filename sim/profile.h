@@ -174,7 +174,8 @@ wf_status wf_profile_shear_from_distortion(double e1, double e2, double *g1, dou
 /* Half-light radius of the round exponential (n = 1) or de Vaucouleurs (n = 4) profile with
  * this full width at half maximum. */
 wf_status wf_profile_hlr_from_fwhm(int sersic_n, double fwhm, double *hlr);
-/* Fraction of a round profile's flux within radius r (arcsec) for half-light radius hlr. */
-double wf_profile_enclosed(int sersic_n, double hlr, double r);
+/* Fraction of a round exponential (n = 1) or de Vaucouleurs (n = 4) profile's flux within
+ * radius r (arcsec) for half-light radius hlr. */
+wf_status wf_profile_enclosed(int sersic_n, double hlr, double r, double *fraction);
 
 #endif

@@ -61,6 +61,10 @@ static inline double wf_sersic4_eval(const wf_sersic_table *t, double w)
 void wf_profile_fftw_lock(void);
 void wf_profile_fftw_unlock(void);
 
+/* WF_OK when the knobs are in range, else an error naming the first one out of range. */
+struct wf_profile_accuracy;
+wf_status wf_profile_check_accuracy(const struct wf_profile_accuracy *acc);
+
 /* Geometry of a sheared, rotated profile: x_sky = A x_round, A = R(rotation) S(g), with
  * GalSim's area-preserving shear S = [[1 + g1, g2], [g2, 1 - g1]] / sqrt(1 - g^2). The
  * transform of the sheared profile at k is the round one's at A^T k, |A^T k|^2 = k^T Q k. */

@@ -92,14 +92,18 @@ wf_status wf_profile_hlr_from_fwhm(int sersic_n, double fwhm, double *hlr)
     return WF_OK;
 }
 
-double wf_profile_enclosed(int sersic_n, double hlr, double r)
+wf_status wf_profile_enclosed(int sersic_n, double hlr, double r, double *fraction)
 {
-    if (!(r > 0.0)) return 0.0;
-    if (!(hlr > 0.0)) return 1.0;
+    if (sersic_n != 1 && sersic_n != 4)
+        return wf_error(WF_ERR_RANGE, "profile: Sersic index %d (only 1 and 4)", sersic_n);
+    if (!(hlr > 0.0) || !(r >= 0.0))
+        return wf_error(WF_ERR_RANGE, "profile: enclosed light of hlr %g within %g", hlr, r);
     const wf_sersic_table *t = wf_sersic4_table();
     if (sersic_n == 1) {
         double x = r / hlr * t->b1;
-        return -expm1(-x) - x * exp(-x);
+        *fraction = x < INFINITY ? -expm1(-x) - x * exp(-x) : 1.0;
+    } else {
+        *fraction = wf_gamma_p_int(8, t->b * pow(r / hlr, 0.25));
     }
-    return wf_gamma_p_int(8, t->b * pow(r / hlr, 0.25));
+    return WF_OK;
 }

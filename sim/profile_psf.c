@@ -92,8 +92,8 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
                               size_t *bytes, size_t *scratch)
 {
     double sum;
-    wf_status st = check_image(img, &sum);
-    if (st) return st;
+    wf_status st = wf_profile_check_accuracy(acc);
+    if (st || (st = check_image(img, &sum))) return st;
     int kr = sampling_kr(img, acc);
     size_t side = 2 * (size_t)kr + 1;
     /* an upper bound: the table is trimmed to the PSF's band once it is known */
@@ -240,8 +240,8 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
 {
     memset(psf, 0, sizeof *psf);
     double sum;
-    wf_status st = check_image(img, &sum);
-    if (st) return st;
+    wf_status st = wf_profile_check_accuracy(acc);
+    if (st || (st = check_image(img, &sum))) return st;
     if (img->scale_arcsec > 0.5 * acc->pixel_scale)
         return wf_error(WF_ERR_RANGE,
                         "profile: PSF sampled at %g arcsec, coarser than half the %g arcsec "

@@ -78,7 +78,7 @@ void wf_scene_setup_default(wf_scene_setup *s)
     s->ncols = s->nrows = 4088;
     s->pupil_bin = 8;
     s->psf_oversample = 4;
-    s->psf_size = 512;
+    s->psf_size = 256; /* 7" at 4x: drawing cost grows with its area (docs/BENCHMARKS.md) */
     s->flux_fraction = 0.995;
     s->pool_bytes = (size_t)64 << 20;
     s->threads = 1;
@@ -312,6 +312,12 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     d.cx = d.cy = (n - 1) / 2.0;
     d.pixel = 0; /* the drawer applies the pixel */
     if ((st = wf_psf_draw(s->psf, &d, s->psf_pix))) goto bad;
+    /* The image holds ~99% of the light within its 7" (the rest is far wings and spikes);
+     * normalised, every object keeps its whole flux, the wings' share moved inside. */
+    double psum = 0.0;
+    for (size_t k = 0; k < (size_t)n * n; k++) psum += s->psf_pix[k];
+    s->stats.psf_image_sum = psum;
+    for (size_t k = 0; k < (size_t)n * n; k++) s->psf_pix[k] /= psum;
     /* the pupil's cut-off 2 pi D / lambda in rad/arcsec: D = 2.36 m (SPEC §2) */
     double band_limit = 2.0 * M_PI * 2.36 / (lam * 1e-9) * (M_PI / (180.0 * 3600.0));
     s->psf_image = (wf_psf_image){n, d.scale, s->psf_pix, band_limit};

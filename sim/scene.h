@@ -22,7 +22,7 @@ typedef struct wf_scene_setup {
     int ncols, nrows;       /* active pixels simulated [4088] */
     int pupil_bin;          /* [8] */
     int psf_oversample;     /* PSF image sampling 0.11/K arcsec [4] */
-    int psf_size;           /* PSF image side in samples [512] */
+    int psf_size;           /* PSF image side in samples [256] */
     double flux_fraction;   /* stamps hold at least this [0.995] */
     size_t pool_bytes;      /* stamp pool per renderer [64 MiB] */
     int threads;            /* renderers to prepare [1] */
@@ -34,6 +34,7 @@ typedef struct wf_scene_stats {
     double sky_min, sky_max;   /* e-/pixel/s over the SCA */
     double zodi;               /* e-/s/arcsec^2 at the SCA centre */
     double psf_lambda_nm;
+    double psf_image_sum;      /* the PSF image's share of the light before normalising */
     double build_seconds;
 } wf_scene_stats;
 
