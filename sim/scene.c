@@ -406,6 +406,19 @@ wf_status wf_scene_source_for(wf_scene *s, int t, wf_scene_source *out)
 
 void wf_scene_get_stats(const wf_scene *s, wf_scene_stats *out) { *out = s->stats; }
 
+void wf_scene_render_stats(const wf_scene *s, long *stamps, long *pieces, size_t *pool_high)
+{
+    *stamps = *pieces = 0;
+    *pool_high = 0;
+    for (int t = 0; t < s->setup.threads; t++) {
+        wf_renderer_stats rs;
+        wf_renderer_get_stats(s->ts[t].renderer, &rs);
+        *stamps += rs.stamps_drawn;
+        *pieces += rs.pieces_drawn;
+        if (rs.pool_high_water > *pool_high) *pool_high = rs.pool_high_water;
+    }
+}
+
 static int on_sca(const wf_scene *s, const object *o)
 {
     return o->x >= -0.5 && o->y >= -0.5 && o->x < s->setup.ncols - 0.5 && o->y < s->setup.nrows - 0.5;

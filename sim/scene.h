@@ -53,6 +53,9 @@ wf_status wf_scene_source_for(wf_scene *scene, int t, wf_scene_source *out);
 
 void wf_scene_get_stats(const wf_scene *scene, wf_scene_stats *out);
 
+/* Renderer totals over all threads: stamps drawn whole and in pieces, pool high water. */
+void wf_scene_render_stats(const wf_scene *scene, long *stamps, long *pieces, size_t *pool_high);
+
 /* Writes the truth of what was drawn: tables GALAXIES and STARS with ID, RA, DEC, X, Y
  * (FITS 1-based pixel centres), MAG (this filter), FLUX (e-/s). Through a temporary file. */
 wf_status wf_scene_write_truth(const wf_scene *scene, const char *path);

@@ -345,6 +345,13 @@ static int run_exposure(cli *c, int demo)
         fprintf(stderr, "wfisim: wrote %s (arena %.1f MiB per readout instance, %.1f MiB used)\n",
                 at.path, job.arena_bytes / 1048576.0, job.arena_high_water / 1048576.0);
 done:
+    if (!st && objscene && !cfg->quiet) {
+        long stamps, pieces;
+        size_t pool;
+        wf_scene_render_stats(objscene, &stamps, &pieces, &pool);
+        fprintf(stderr, "wfisim: %ld stamps drawn whole, %ld in pieces, stamp pool high water %.1f MiB\n",
+                stamps, pieces, pool / 1048576.0);
+    }
     if (!st && objscene) { /* truth of what was drawn, beside the image */
         char tpath[WF_PATH_MAX + 64];
         snprintf(tpath, sizeof tpath, "%s/wfisim_e%06u_sca%02u_truth.fits", cfg->out_dir, cfg->ro.exposure,
