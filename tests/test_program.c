@@ -230,6 +230,17 @@ START_TEST(object_scene_deterministic)
         assert_same_file(a, b);
         assert_same_file(a, c);
     }
+    /* the WCS rides on the image HDUs */
+    char path[4200], ctype[FLEN_VALUE] = "";
+    snprintf(path, sizeof path, "%s/ref/" FITS, d);
+    fitsfile *f;
+    int status = 0;
+    fits_open_file(&f, path, READONLY, &status);
+    fits_movnam_hdu(f, IMAGE_HDU, "ERR", 0, &status);
+    fits_read_key_str(f, "CTYPE1", ctype, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_msg(!strncmp(ctype, "RA---TAN", 8), "CTYPE1 '%s'", ctype);
 }
 END_TEST
 
