@@ -102,7 +102,7 @@ wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes)
     *bytes = wf_arena_cost(m * (m + 2) * d) + 2 * wf_arena_cost((size_t)l.cap_line * 2 * d) +
              2 * wf_arena_cost((size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2 * d) +
              2 * wf_arena_cost((size_t)l.cap_line * sizeof(int)) +
-             2 * wf_arena_cost((size_t)l.cap_line * 4 * d) + wf_arena_cost((m / 2 + 1) * 2 * d) +
+             2 * wf_arena_cost((size_t)l.cap_line * 4 * d) + wf_arena_cost((m / 2 + 8) * 2 * d) +
              2 * wf_arena_cost((size_t)WF_PROFILE_MAX_KNOTS * 2 * d);
     return WF_OK;
 }
@@ -135,7 +135,7 @@ wf_status wf_profile_work_init(wf_profile_work *w, const wf_profile_accuracy *ac
                               (void **)&w->wx)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line * 4, d, "PSF weights",
                               (void **)&w->wy)) ||
-        (st = wf_arena_calloc(arena, (m / 2 + 1) * 2, d, "profile run", (void **)&w->run)) ||
+        (st = wf_arena_calloc(arena, (m / 2 + 8) * 2, d, "profile run", (void **)&w->run)) ||
         (st = wf_arena_calloc(arena, (size_t)WF_PROFILE_MAX_KNOTS * 2, d, "knot positions",
                               (void **)&w->knot_pos)) ||
         (st = wf_arena_calloc(arena, (size_t)WF_PROFILE_MAX_KNOTS * 2, d, "knot positions",
@@ -409,11 +409,12 @@ typedef struct grid {
     double dx, dy;       /* arcsec from the centre of pixel (ic, jc) to the object */
     int nk;              /* knots drawn in Fourier space: those inside the FFT box */
     const double *kpos;  /* their (x, y), arcsec from the object */
+    size_t ks;           /* entries per knot phase line (2 u + 1, and 8 or more of padding) */
 } grid;
 
-/* e^{-i u theta} (-1)^u for u = -n .. n into out[2 (u + n)], re-anchored every 32 steps so
- * that the recurrence's rounding stays ~1e-15. */
-static void phase_line(double theta, int n, double *out)
+/* e^{-i u theta} (-1)^u for u = -n .. n into re[(u + n) st], im[(u + n) st], re-anchored
+ * every 32 steps so that the recurrence's rounding stays ~1e-15. */
+static void phase_line_to(double theta, int n, double *re, double *im, size_t st)
 {
     for (int u0 = -n; u0 <= n; u0 += 32) {
         double a = -u0 * theta, sg = (u0 & 1) ? -1.0 : 1.0;
@@ -421,13 +422,19 @@ static void phase_line(double theta, int n, double *out)
         double sr = -cos(theta), si = sin(theta); /* step e^{-i theta} times -1 */
         int u1 = u0 + 32 <= n ? u0 + 32 : n + 1;
         for (int u = u0; u < u1; u++) {
-            out[2 * (u + n)] = cr;
-            out[2 * (u + n) + 1] = ci;
+            re[(size_t)(u + n) * st] = cr;
+            im[(size_t)(u + n) * st] = ci;
             double nr = cr * sr - ci * si;
             ci = cr * si + ci * sr;
             cr = nr;
         }
     }
+}
+
+/* The same, complex interleaved into out[2 (u + n)]. */
+static void phase_line(double theta, int n, double *out)
+{
+    phase_line_to(theta, n, out, out + 1, 2);
 }
 
 /* Catmull-Rom taps for reading the PSF table at fractional index t (table steps). */
@@ -444,41 +451,125 @@ static void cubic_taps(double t, int kr, int *first, double *wgt)
 
 static int floor_div(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
+/* run[i] += sum_j c_j x_j[i] for i < n, complex, split into real and imaginary arrays; knot
+ * j's phase line is x_j = kx + 2 j ks (real parts, then ks further the imaginary ones).
+ * Four knots at a time and two points at a time, so that the sums stay in registers and
+ * the pairs map onto vector instructions. */
+#if defined(__GNUC__)
+#define KNOT_LOAD(x, p) memcpy(&(x), (p), sizeof(x))
+/* Four points at a time in two vectors of NL lanes (type V), all knots into them; returns
+ * the first point not done. Lanes never mix, and without fused multiply-adds (ISO C mode
+ * contracts nothing) each sum is rounded exactly as the scalar loop's. */
+#define KNOT_BODY(V, NL)                                                                   \
+    int i0 = 0;                                                                            \
+    for (; i0 + 2 * (NL) <= n; i0 += 2 * (NL)) {                                           \
+        V sr0, si0, sr1, si1;                                                              \
+        KNOT_LOAD(sr0, rr + i0);                                                           \
+        KNOT_LOAD(sr1, rr + i0 + (NL));                                                    \
+        KNOT_LOAD(si0, ri + i0);                                                           \
+        KNOT_LOAD(si1, ri + i0 + (NL));                                                    \
+        const double *x = kx + i0;                                                         \
+        for (int j = 0; j < nkb; j++, x += 2 * ks) {                                       \
+            V xr0, xi0, xr1, xi1;                                                          \
+            KNOT_LOAD(xr0, x);                                                             \
+            KNOT_LOAD(xr1, x + (NL));                                                      \
+            KNOT_LOAD(xi0, x + ks);                                                        \
+            KNOT_LOAD(xi1, x + ks + (NL));                                                 \
+            const double cr = ckr[j], ci = cki[j];                                         \
+            sr0 += cr * xr0 - ci * xi0;                                                    \
+            si0 += cr * xi0 + ci * xr0;                                                    \
+            sr1 += cr * xr1 - ci * xi1;                                                    \
+            si1 += cr * xi1 + ci * xr1;                                                    \
+        }                                                                                  \
+        memcpy(rr + i0, &sr0, sizeof sr0);                                                 \
+        memcpy(rr + i0 + (NL), &sr1, sizeof sr1);                                          \
+        memcpy(ri + i0, &si0, sizeof si0);                                                 \
+        memcpy(ri + i0 + (NL), &si1, sizeof si1);                                          \
+    }                                                                                      \
+    return i0;
+
+typedef double knot_v2 __attribute__((vector_size(16)));
+static int knot_sum_v2(int n, int nkb, const double *ckr, const double *cki, const double *kx,
+                       size_t ks, double *restrict rr, double *restrict ri)
+{
+    KNOT_BODY(knot_v2, 2)
+}
+
+#if defined(__x86_64__) || defined(__i386__)
+#define KNOT_AVX 1
+typedef double knot_v4 __attribute__((vector_size(32)));
+__attribute__((target("avx2"))) static int
+knot_sum_v4(int n, int nkb, const double *ckr, const double *cki, const double *kx, size_t ks,
+            double *restrict rr, double *restrict ri)
+{
+    KNOT_BODY(knot_v4, 4)
+}
+static pthread_once_t knot_once = PTHREAD_ONCE_INIT;
+static int knot_avx;
+static void knot_probe(void) { knot_avx = __builtin_cpu_supports("avx2") ? 1 : 0; }
+#endif
+#endif
+
+static void knot_sum(int n, int nkb, const double *ckr, const double *cki, const double *kx,
+                     size_t ks, double *restrict rr, double *restrict ri)
+{
+    int i0 = 0;
+#if defined(__GNUC__)
+#if defined(KNOT_AVX)
+    pthread_once(&knot_once, knot_probe);
+    if (knot_avx) i0 = knot_sum_v4(n, nkb, ckr, cki, kx, ks, rr, ri);
+#endif
+    int i1 = knot_sum_v2(n - i0, nkb, ckr, cki, kx + i0, ks, rr + i0, ri + i0);
+    i0 += i1;
+#endif
+    for (int i = i0; i < n; i++) {
+        double sr = rr[i], si = ri[i];
+        const double *x = kx + i;
+        for (int j = 0; j < nkb; j++, x += 2 * ks) {
+            sr += ckr[j] * x[0] - cki[j] * x[ks];
+            si += ckr[j] * x[ks] + cki[j] * x[0];
+        }
+        rr[i] = sr;
+        ri[i] = si;
+    }
+}
+
 /* One pass over the fine grid: rows v, alias runs of u whose bins lie in the half plane.
  * The run buffer receives the object's transform (times phases) for u in [ua, ub]; it is
- * then multiplied by PSF x pixel and added into the bins. `knot0` selects the knot block
- * (-1: the smooth part or point source only). */
+ * then multiplied by PSF x pixel and added into the bins. The pass adds knots knot0 ..
+ * knot0 + nkb - 1, whose phase lines are in w->kx and w->ky (gd->ks entries per line, real
+ * parts then imaginary); the smooth part or point source rides with knot0 = 0 (and is
+ * alone when nkb = 0). */
 static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *psf,
-                      const grid *gd, int us, int knot0)
+                      const grid *gd, int us, int knot0, int nkb)
 {
     const int m = gd->m, half = gd->half, u_all = gd->u;
     const double dk = gd->dk;
     const wf_sersic_table *t = w->sersic;
     const double *ex = w->ex, *ey = w->ey;
-    double *run = w->run;
+    double *runr = w->run, *runi = w->run + (half + 8);
     const size_t row_len = (size_t)m + 2; /* doubles per row of the in-place buffer */
-    int nkb = 0;
-    if (knot0 >= 0) nkb = gd->nk - knot0 < WF_PROFILE_KNOT_BLOCK ? gd->nk - knot0
-                                                                  : WF_PROFILE_KNOT_BLOCK;
-    const int cap_k = 2 * u_all + 1;
+    const size_t ks = gd->ks;
     const double re2 = jb->re * jb->re, r02 = jb->r0 * jb->r0;
     const double qa = jb->shape.qxx * dk * dk;
     const int side = psf ? 2 * psf->kr + 1 : 0;
-    double ckr[WF_PROFILE_KNOT_BLOCK], cki[WF_PROFILE_KNOT_BLOCK];
+    const int smooth = knot0 <= 0;
+    const int point = jb->fpoint > 0.0, bulge = jb->fb > 0.0, disk = jb->fd > 0.0;
+    double ckr[WF_PROFILE_MAX_KNOTS], cki[WF_PROFILE_MAX_KNOTS];
 
     for (int v = -u_all; v <= u_all; v++) {
         int umax = (int)floor(sqrt((double)u_all * u_all - (double)v * v));
         int us_max = abs(v) <= us ? (int)floor(sqrt((double)us * us - (double)v * v)) : -1;
-        if (knot0 < 0 && us_max < 0) continue;
+        if (nkb == 0 && us_max < 0) continue;
         int by = ((v % m) + m) % m;
         double *crow = w->fft + (size_t)by * row_len;
         double ky = v * dk;
         double qb = 2.0 * jb->shape.qxy * dk * ky, qc = jb->shape.qyy * ky * ky;
         double eyr = ey[2 * (v + u_all)], eyi = ey[2 * (v + u_all) + 1];
         for (int j = 0; j < nkb; j++) { /* knot's y phase times its flux */
-            const double *kyj = w->ky + (size_t)j * cap_k * 2 + 2 * (size_t)(v + u_all);
+            const double *kyj = w->ky + (size_t)j * 2 * ks + (size_t)(v + u_all);
             ckr[j] = jb->fknot * kyj[0];
-            cki[j] = jb->fknot * kyj[1];
+            cki[j] = jb->fknot * kyj[ks];
         }
         const float *er = NULL, *ei = NULL;
         const int *tix = NULL;
@@ -494,49 +585,60 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
             tiy = w->iy[v + u_all];
             twy = w->wy + 4 * (size_t)(v + u_all);
         }
-        int a0 = floor_div(-umax, m), a1 = floor_div(umax, m);
+        /* the u range this row needs: all of the band with knots, else the smooth disk */
+        int ulim = nkb > 0 ? umax : us_max;
+        int a0 = floor_div(-ulim, m), a1 = floor_div(ulim, m);
         for (int a = a0; a <= a1; a++) {
-            int ua = a * m > -umax ? a * m : -umax;
-            int ub = a * m + half < umax ? a * m + half : umax;
+            int ua = a * m > -ulim ? a * m : -ulim;
+            int ub = a * m + half < ulim ? a * m + half : ulim;
             if (ua > ub) continue;
             int n = ub - ua + 1;
             /* the object's transform, times the centring and sub-pixel phases */
-            memset(run, 0, (size_t)n * 2 * sizeof(double));
-            if (knot0 <= 0) {
-                int sa = ua > -us_max ? ua : -us_max, sb = ub < us_max ? ub : us_max;
-                for (int u = sa; u <= sb; u++) {
-                    double g;
-                    if (jb->fpoint > 0.0) g = jb->fpoint;
-                    else {
+            int sa = ua, sb = ua - 1;
+            if (smooth) {
+                sa = ua > -us_max ? ua : -us_max;
+                sb = ub < us_max ? ub : us_max;
+            }
+            if (nkb > 0 || sa > ua || sb < ub) {
+                memset(runr, 0, (size_t)n * sizeof(double));
+                memset(runi, 0, (size_t)n * sizeof(double));
+            }
+            if (sa <= sb) {
+                double *rr = runr - ua, *ri = runi - ua;
+                const double *exu = ex + 2 * (ptrdiff_t)u_all;
+                if (point) {
+                    const double g = jb->fpoint;
+                    for (int u = sa; u <= sb; u++) {
+                        double pr = exu[2 * u], pi = exu[2 * u + 1];
+                        rr[u] = g * (pr * eyr - pi * eyi);
+                        ri[u] = g * (pr * eyi + pi * eyr);
+                    }
+                } else {
+                    for (int u = sa; u <= sb; u++) {
                         double q2 = (qa * u + qb) * u + qc;
-                        g = 0.0;
-                        if (jb->fb > 0.0) g += jb->fb * wf_sersic4_eval(t, re2 * q2);
-                        if (jb->fd > 0.0) {
+                        double g = 0.0;
+                        if (bulge) g += jb->fb * wf_sersic4_eval(t, re2 * q2);
+                        if (disk) {
                             double s = 1.0 / (1.0 + r02 * q2);
                             g += jb->fd * s * sqrt(s);
                         }
+                        double pr = exu[2 * u], pi = exu[2 * u + 1];
+                        rr[u] = g * (pr * eyr - pi * eyi);
+                        ri[u] = g * (pr * eyi + pi * eyr);
                     }
-                    double pr = ex[2 * (u + u_all)], pi = ex[2 * (u + u_all) + 1];
-                    run[2 * (u - ua)] = g * (pr * eyr - pi * eyi);
-                    run[2 * (u - ua) + 1] = g * (pr * eyi + pi * eyr);
                 }
             }
-            for (int j = 0; j < nkb; j++) {
-                const double *kxj = w->kx + (size_t)j * cap_k * 2 + 2 * (size_t)(ua + u_all);
-                double cr = ckr[j], ci = cki[j];
-                for (int i = 0; i < n; i++) {
-                    double xr = kxj[2 * i], xi = kxj[2 * i + 1];
-                    run[2 * i] += cr * xr - ci * xi;
-                    run[2 * i + 1] += cr * xi + ci * xr;
-                }
-            }
+            if (nkb > 0) /* rounded up to whole vectors: the lines and the run have room */
+                knot_sum((n + 7) & ~7, nkb, ckr, cki, w->kx + (size_t)(ua + u_all), ks, runr,
+                         runi);
             /* times PSF x pixel, into the bins */
             double *bins = crow + 2 * (size_t)(ua - a * m);
             if (gd->mode == MODE_EXACT) {
+                const size_t st = (size_t)gd->st;
+                const float *erp = er + (ptrdiff_t)ua * gd->st, *eip = ei + (ptrdiff_t)ua * gd->st;
                 for (int i = 0; i < n; i++) {
-                    size_t at = (size_t)(ua + i) * (size_t)gd->st;
-                    double fr = er[at], fi = ei[at];
-                    double rr = run[2 * i], ri = run[2 * i + 1];
+                    double fr = erp[i * st], fi = eip[i * st];
+                    double rr = runr[i], ri = runi[i];
                     bins[2 * i] += rr * fr - ri * fi;
                     bins[2 * i + 1] += rr * fi + ri * fr;
                 }
@@ -555,7 +657,7 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
                         fr += twy[b] * sr;
                         fi += twy[b] * si;
                     }
-                    double rr = run[2 * i], ri = run[2 * i + 1];
+                    double rr = runr[i], ri = runi[i];
                     bins[2 * i] += rr * fr - ri * fi;
                     bins[2 * i + 1] += rr * fi + ri * fr;
                 }
@@ -921,16 +1023,24 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
 
     memset(w->fft, 0, (size_t)gd.m * (gd.m + 2) * sizeof(double));
     if (!gd.nk) {
-        fold_pass(w, jb, psf, &gd, us, -1);
+        fold_pass(w, jb, psf, &gd, us, -1, 0);
     } else {
-        size_t line = 2 * (size_t)(2 * gd.u + 1);
-        for (int k0 = 0; k0 < gd.nk; k0 += WF_PROFILE_KNOT_BLOCK) {
-            for (int j = 0; j < WF_PROFILE_KNOT_BLOCK && k0 + j < gd.nk; j++) {
+        /* as many knots per pass as the phase-line buffers hold (all of them but for the
+         * largest boxes): each pass multiplies by the PSF once */
+        size_t len = 2 * (size_t)gd.u + 1;
+        gd.ks = ((len + 3) & ~(size_t)3) + 8; /* room for knot_sum's rounding up */
+        size_t room = (size_t)WF_PROFILE_KNOT_BLOCK * (size_t)w->cap_line / gd.ks;
+        int per = room > (size_t)WF_PROFILE_MAX_KNOTS ? WF_PROFILE_MAX_KNOTS : (int)room;
+        if (per < 1) per = 1;
+        for (int k0 = 0; k0 < gd.nk; k0 += per) {
+            int nkb = gd.nk - k0 < per ? gd.nk - k0 : per;
+            for (int j = 0; j < nkb; j++) {
                 const double *kp = gd.kpos + 2 * (size_t)(k0 + j);
-                phase_line(gd.dk * (kp[0] + gd.dx), gd.u, w->kx + (size_t)j * line);
-                phase_line(gd.dk * (kp[1] + gd.dy), gd.u, w->ky + (size_t)j * line);
+                double *lx = w->kx + 2 * (size_t)j * gd.ks, *ly = w->ky + 2 * (size_t)j * gd.ks;
+                phase_line_to(gd.dk * (kp[0] + gd.dx), gd.u, lx, lx + gd.ks, 1);
+                phase_line_to(gd.dk * (kp[1] + gd.dy), gd.u, ly, ly + gd.ks, 1);
             }
-            fold_pass(w, jb, psf, &gd, us, k0); /* the smooth part rides with block 0 */
+            fold_pass(w, jb, psf, &gd, us, k0, nkb); /* the smooth part rides with pass 0 */
         }
     }
     fftw_execute_dft_c2r((fftw_plan)w->plans[mi], (fftw_complex *)w->fft, w->fft);
