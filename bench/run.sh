@@ -56,7 +56,6 @@ row_readout "direct, MA table 11 (977 s), 64-row tiles, 2 threads" $N $N 64 dire
   echo "\`bench_direct_error 256 6\` and \`bench_direct_error 256 11\`:"
   echo
   $B/bench_direct_error 256 6
-  echo
   $B/bench_direct_error 256 11 | tail -n +3
   echo
   echo "## Peak RSS against image size (per-read, 64-row tiles, 1 thread)"

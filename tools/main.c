@@ -46,6 +46,11 @@ static const char *usage_text =
     "  --set KEY=VALUE      override one configuration key (repeatable)\n"
     "  --stream FILE|-      write the packet stream instead of FITS\n"
     "  --replay FILE        take the scene from a rate recording\n"
+    "  --ra D --dec D --pa D --sca N --filter F --mjd M --exptime S\n"
+    "                       pointing (PA as galsim.roman.getWCS), SCA, filter, mid-time, and\n"
+    "                       the single-frame exposure time (ramp mode: the MA table's)\n"
+    "  --catalog FILE [--stars FILE]   draw these catalogs (FITS or CSV, docs/CATALOGS.md)\n"
+    "  --data DIR           Roman data directory (default $WFISIM_DATA; none: built-ins)\n"
     "  --quiet              no progress output\n";
 
 static int fail(const char *what, wf_status st)
@@ -69,6 +74,9 @@ static const struct { const char *flag, *key; } shorthands[] = {
     {"--threads", "run.threads"},   {"--mode", "exposure.mode"}, {"--sampling", "exposure.sampling"},
     {"--exposure", "exposure.id"},  {"--sca", "exposure.sca"},  {"--ma-table", "readout.ma_table"},
     {"--filter", "exposure.filter"},
+    {"--ra", "pointing.ra"},        {"--dec", "pointing.dec"},  {"--pa", "pointing.pa"},
+    {"--mjd", "exposure.mjd"},      {"--exptime", "exposure.exptime"},
+    {"--data", "paths.data"},       {"--stars", "scene.stars"},
 };
 
 static int parse(int argc, char **argv, cli *c)
@@ -103,6 +111,12 @@ static int parse(int argc, char **argv, cli *c)
         if (!strcmp(a, "--set")) {
             if (!val) { fprintf(stderr, "wfisim: --set needs KEY=VALUE\n"); return 2; }
             if ((st = wf_config_set(&c->cfg, val, "--set"))) return fail("option", st);
+            i++;
+        } else if (!strcmp(a, "--catalog") && val) { /* a catalog file implies a catalog scene */
+            char buf[2 * WF_PATH_MAX];
+            snprintf(buf, sizeof buf, "scene.catalog=%s", val);
+            if ((st = wf_config_set(&c->cfg, buf, a)) || (st = wf_config_set(&c->cfg, "scene.kind=catalog", a)))
+                return fail("option", st);
             i++;
         } else if (!strcmp(a, "--stream") && val) { c->stream = val; i++; }
         else if (!strcmp(a, "--replay") && val) { c->replay = val; i++; }
