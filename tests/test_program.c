@@ -9,6 +9,7 @@
 #include <math.h>
 #include <fitsio.h>
 
+#include "sim/wcs.h"
 #include "tests/testutil.h"
 
 #define SMALL "--quiet --set scene.kind=grid --set readout.ncols=96 --set readout.nrows=80 --set readout.ma_table=4 " \
@@ -244,6 +245,62 @@ START_TEST(object_scene_deterministic)
 }
 END_TEST
 
+/* A catalog file through the command line: the objects the SCA sees are drawn and listed
+ * in the truth, the others (far away, selected out by the sky index) are not. */
+START_TEST(catalog_file_on_the_command_line)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    wf_focal_plane fp;
+    wf_wcs w;
+    wf_wcs_focal_plane(NULL, &fp);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, 71.0, -53.0, 30.0, 1, &w), WF_OK);
+    char path[4200];
+    snprintf(path, sizeof path, "%s/gal.csv", d);
+    FILE *f = fopen(path, "w");
+    fprintf(f, "id,ra,dec,z,mag_Y106,hlr_disk,hlr_bulge,bulge_frac,knot_frac,e1,e2,pa\n");
+    const double px[6] = {20, 60, 100, 64, 3000, 500}, py[6] = {30, 90, 110, 64, 3000, 20};
+    for (int i = 0; i < 6; i++) { /* the first four lie on a 128 x 128 corner of SCA 1 */
+        double ra, dec;
+        wf_wcs_pix2world(&w, px[i], py[i], &ra, &dec);
+        fprintf(f, "%d,%.10f,%.10f,0.7,21.5,0.4,0.2,0.2,0.1,0.1,0.05,10\n", 101 + i, ra, dec);
+    }
+    fclose(f);
+    ck_assert_int_eq(run("%s expose --quiet --catalog %s --set readout.ncols=128 --set readout.nrows=128 "
+                         "--set readout.ma_table=4 --out %s/out", bin, path, d), 0);
+    char truth[4300];
+    snprintf(truth, sizeof truth, "%s/out/wfisim_e000001_sca01_truth.fits", d);
+    fitsfile *t;
+    int status = 0;
+    long rows = 0;
+    fits_open_table(&t, truth, READONLY, &status);
+    fits_movnam_hdu(t, BINARY_TBL, "GALAXIES", 0, &status);
+    fits_get_num_rows(t, &rows, &status);
+    long long ids[8] = {0};
+    if (rows > 0 && rows <= 8) fits_read_col(t, TLONGLONG, 1, 1, 1, rows, NULL, ids, NULL, &status);
+    fits_close_file(t, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_int_eq(rows, 4);
+    for (int i = 0; i < 4; i++) ck_assert(ids[i] >= 101 && ids[i] <= 104);
+    /* a missing column is named, with a non-zero exit and no product */
+    f = fopen(path, "w");
+    fprintf(f, "id,ra,dec,z,mag_Y106\n1,71.0,-53.0,0.5,20\n");
+    fclose(f);
+    ck_assert_int_ne(run("%s expose --quiet --catalog %s --set readout.ncols=64 --set readout.nrows=64 "
+                         "--out %s/bad 2>%s/err.txt", bin, path, d, d), 0);
+    char err[4300];
+    snprintf(err, sizeof err, "%s/err.txt", d);
+    size_t n;
+    char *msg = slurp(err, &n);
+    ck_assert_msg(msg && strstr(msg, "gal.csv") && strstr(msg, "column"), "message: %s", msg ? msg : "");
+    free(msg);
+    char bad[4300];
+    snprintf(bad, sizeof bad, "%s/bad/" FITS, d);
+    ck_assert(!exists(bad));
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("program");
@@ -258,6 +315,7 @@ static Suite *suite(void)
     tcase_add_test(tc, flat_sky_ramp_bright);
     tcase_add_test(tc, flat_sky_single);
     tcase_add_test(tc, object_scene_deterministic);
+    tcase_add_test(tc, catalog_file_on_the_command_line);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -168,23 +168,50 @@ static void scene_inputs_free(scene_inputs *in)
     if (in->have_sne) wf_catalog_free(&in->sne);
 }
 
+/* The SCA's footprint on the sky, widened by the largest stamp reach (70"), so that objects
+ * just off the SCA whose light reaches onto it are kept. */
+static wf_status sca_region(const wf_config *cfg, wf_skyregion *reg)
+{
+    wf_focal_plane fp;
+    wf_wcs w;
+    wf_status st;
+    if ((st = wf_wcs_focal_plane(cfg->data_dir[0] ? cfg->data_dir : NULL, &fp)) ||
+        (st = wf_wcs_for_sca(&fp, cfg->ra, cfg->dec, cfg->pa, (int)cfg->ro.sca, &w)))
+        return st;
+    double ra[4], dec[4];
+    const double cx[4] = {-0.5, cfg->ro.ncols - 0.5, cfg->ro.ncols - 0.5, -0.5};
+    const double cy[4] = {-0.5, -0.5, cfg->ro.nrows - 0.5, cfg->ro.nrows - 0.5};
+    for (int k = 0; k < 4; k++)
+        if ((st = wf_wcs_pix2world(&w, cx[k], cy[k], &ra[k], &dec[k]))) return st;
+    return wf_skyindex_polygon(ra, dec, 4, 70.0, reg);
+}
+
+/* Keeps the rows of a catalog read from a file that fall in the footprint (a sky index:
+ * milliseconds for millions of rows). */
+static wf_status select_rows(wf_catalog *cat, const wf_skyregion *reg)
+{
+    wf_skyindex *ix;
+    wf_selection sel = {0};
+    wf_catalog sub;
+    wf_status st = wf_skyindex_build(cat->ra, cat->dec, cat->n, 1.0, &ix);
+    if (st) return st;
+    st = wf_skyindex_select(ix, reg, &sel);
+    if (!st) st = wf_catalog_subset(cat, sel.idx, sel.n, &sub);
+    wf_skyindex_selection_free(&sel);
+    wf_skyindex_free(ix);
+    if (st) return st;
+    wf_catalog_free(cat);
+    *cat = sub;
+    return WF_OK;
+}
+
 static wf_status load_catalogs(const wf_config *cfg, scene_inputs *in)
 {
     memset(in, 0, sizeof *in);
-    wf_status st = WF_OK;
+    wf_skyregion reg;
+    wf_status st = sca_region(cfg, &reg);
+    if (st) return st;
     if (cfg->scene_kind == 0) { /* synthetic: only the cells the SCA (and stamps reaching it) see */
-        wf_focal_plane fp;
-        wf_wcs w;
-        if ((st = wf_wcs_focal_plane(cfg->data_dir[0] ? cfg->data_dir : NULL, &fp)) ||
-            (st = wf_wcs_for_sca(&fp, cfg->ra, cfg->dec, cfg->pa, (int)cfg->ro.sca, &w)))
-            return st;
-        double ra[4], dec[4];
-        const double cx[4] = {-0.5, cfg->ro.ncols - 0.5, cfg->ro.ncols - 0.5, -0.5};
-        const double cy[4] = {-0.5, -0.5, cfg->ro.nrows - 0.5, cfg->ro.nrows - 0.5};
-        for (int k = 0; k < 4; k++)
-            if ((st = wf_wcs_pix2world(&w, cx[k], cy[k], &ra[k], &dec[k]))) return st;
-        wf_skyregion reg;
-        if ((st = wf_skyindex_polygon(ra, dec, 4, 70.0, &reg))) return st;
         wf_synth_config sc;
         wf_synth *syn;
         wf_synth_defaults(&sc);
@@ -206,10 +233,12 @@ static wf_status load_catalogs(const wf_config *cfg, scene_inputs *in)
     if (cfg->catalog[0]) {
         if ((st = wf_catalog_read_galaxies(cfg->catalog, &in->gal))) return st;
         in->have_gal = 1;
+        if ((st = select_rows(&in->gal, &reg))) return st;
     }
     if (cfg->stars[0]) {
         if ((st = wf_catalog_read_stars(cfg->stars, &in->stars))) return st;
         in->have_stars = 1;
+        if ((st = select_rows(&in->stars, &reg))) return st;
     }
     return WF_OK;
 }
