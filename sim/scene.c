@@ -406,6 +406,35 @@ wf_status wf_scene_source_for(wf_scene *s, int t, wf_scene_source *out)
 
 void wf_scene_get_stats(const wf_scene *s, wf_scene_stats *out) { *out = s->stats; }
 
+size_t wf_scene_object_count(const wf_scene *s) { return s->nobj; }
+
+wf_status wf_scene_draw_object(wf_scene *s, size_t k, wf_scene_object *info, int *x0, int *y0,
+                               int *nx, int *ny, double **pix)
+{
+    *pix = NULL;
+    if (k >= s->nobj) return wf_error(WF_ERR_RANGE, "scene: object %zu of %zu", k, s->nobj);
+    const wf_render_object *ro = &s->robj[k];
+    const object *o = ro->data;
+    double *buf = malloc((size_t)ro->nx * ro->ny * sizeof *buf);
+    if (!buf) return wf_error(WF_ERR_NOMEM, "scene: a %d x %d stamp", ro->nx, ro->ny);
+    wf_status st = draw_object(&s->ts[0], ro, ro->y0, ro->y0 + ro->ny, buf);
+    if (st) { free(buf); return st; }
+    info->id = (long long)(o->kind == OBJ_GALAXY ? s->gal->id[o->row] : s->stars->id[o->row]);
+    info->kind = (int)o->kind;
+    info->x = o->x;
+    info->y = o->y;
+    info->ra = o->ra;
+    info->dec = o->dec;
+    info->mag = o->mag;
+    info->flux = o->flux;
+    *x0 = ro->x0;
+    *y0 = ro->y0;
+    *nx = ro->nx;
+    *ny = ro->ny;
+    *pix = buf;
+    return WF_OK;
+}
+
 void wf_scene_render_stats(const wf_scene *s, long *stamps, long *pieces, size_t *pool_high)
 {
     *stamps = *pieces = 0;

@@ -53,6 +53,18 @@ wf_status wf_scene_source_for(wf_scene *scene, int t, wf_scene_source *out);
 
 void wf_scene_get_stats(const wf_scene *scene, wf_scene_stats *out);
 
+/* The stamp of drawn object k (0 <= k < count): bounds in SCA pixels (0-based) and pixels in
+ * e-/s, as the renderer adds them; *pix is malloc'd for the caller. Also its catalog id,
+ * kind (0 galaxy, 1 star), position (0-based pixels), magnitude and flux. */
+typedef struct wf_scene_object {
+    long long id;
+    int kind;
+    double x, y, ra, dec, mag, flux;
+} wf_scene_object;
+size_t wf_scene_object_count(const wf_scene *scene);
+wf_status wf_scene_draw_object(wf_scene *scene, size_t k, wf_scene_object *info, int *x0, int *y0,
+                               int *nx, int *ny, double **pix);
+
 /* Renderer totals over all threads: stamps drawn whole and in pieces, pool high water. */
 void wf_scene_render_stats(const wf_scene *scene, long *stamps, long *pieces, size_t *pool_high);
 

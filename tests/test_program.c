@@ -283,6 +283,25 @@ START_TEST(catalog_file_on_the_command_line)
     ck_assert_int_eq(status, 0);
     ck_assert_int_eq(rows, 4);
     for (int i = 0; i < 4; i++) ck_assert(ids[i] >= 101 && ids[i] <= 104);
+    /* one object's stamp holds at least scene.flux_fraction of its flux */
+    ck_assert_int_eq(run("%s stamp --quiet --catalog %s --id 103 --out %s/st", bin, path, d), 0);
+    char sp[4300];
+    snprintf(sp, sizeof sp, "%s/st/stamp_103.fits", d);
+    fitsfile *sf;
+    long nax[2] = {0, 0};
+    double flux = 0;
+    fits_open_file(&sf, sp, READONLY, &status);
+    fits_get_img_size(sf, 2, nax, &status);
+    fits_read_key_dbl(sf, "FLUX", &flux, NULL, &status);
+    double *pix = malloc(sizeof(double) * (size_t)(nax[0] * nax[1] + 1));
+    long first[2] = {1, 1};
+    fits_read_pix(sf, TDOUBLE, first, nax[0] * nax[1], NULL, pix, NULL, &status);
+    fits_close_file(sf, &status);
+    ck_assert_int_eq(status, 0);
+    double sum = 0;
+    for (long k = 0; k < nax[0] * nax[1]; k++) sum += pix[k];
+    free(pix);
+    ck_assert_msg(sum >= 0.995 * flux * (1 - 1e-6) && sum <= flux * (1 + 1e-6), "stamp %.6g of %.6g e-/s", sum, flux);
     /* a missing column is named, with a non-zero exit and no product */
     f = fopen(path, "w");
     fprintf(f, "id,ra,dec,z,mag_Y106\n1,71.0,-53.0,0.5,20\n");

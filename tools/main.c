@@ -1,6 +1,7 @@
 /* wfisim: one program, subcommands. The host side: parses options and configs, wires the
  * HAL implementations to the firmware and the assembler, and reports errors. */
 #include <errno.h>
+#include <fitsio.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
@@ -32,6 +33,7 @@ static const char *usage_text =
     "  expose               one exposure of the configured scene (--stream FILE|- for packets)\n"
     "  assemble FILE|-      packet stream -> FITS (SCI, ERR, DQ, RESULTANTS)\n"
     "  record --rates FILE  write the scene's rate rows to a replay file\n"
+    "  stamp --id ID        one catalog object's stamp (PSF, pixel, e-/s) -> DIR/stamp_ID.fits\n"
     "  psf --filter F --sca N --out F   a Roman PSF image (see wfisim psf --help)\n"
     "  survey plan --out F  the deep-tier observation plan and its coverage map (docs/SURVEY.md)\n"
     "  config doc           print the reference of every configuration key (docs/CONFIG.md)\n"
@@ -66,6 +68,7 @@ typedef struct cli {
     const char *replay;
     const char *rates;
     const char *positional;
+    const char *id;
 } cli;
 
 /* Options that are shorthands for configuration keys. */
@@ -121,6 +124,7 @@ static int parse(int argc, char **argv, cli *c)
         } else if (!strcmp(a, "--stream") && val) { c->stream = val; i++; }
         else if (!strcmp(a, "--replay") && val) { c->replay = val; i++; }
         else if (!strcmp(a, "--rates") && val) { c->rates = val; i++; }
+        else if (!strcmp(a, "--id") && val) { c->id = val; i++; }
         else if (a[0] == '-' && a[1] == '-') {
             fprintf(stderr, "wfisim: unknown option '%s' (see wfisim --help)\n", a);
             return 2;
@@ -426,6 +430,104 @@ static int cmd_assemble(cli *c)
     return st ? fail("assemble", st) : 0;
 }
 
+/* Keeps only the row with this id (no copy when absent: *found = 0). */
+static wf_status keep_id(wf_catalog *cat, long long id, int *found)
+{
+    for (size_t i = 0; i < cat->n; i++)
+        if (cat->id[i] == id) {
+            uint32_t row = (uint32_t)i;
+            wf_catalog sub;
+            wf_status st = wf_catalog_subset(cat, &row, 1, &sub);
+            if (st) return st;
+            wf_catalog_free(cat);
+            *cat = sub;
+            *found = 1;
+            return WF_OK;
+        }
+    cat->n = 0;
+    return WF_OK;
+}
+
+/* One object's stamp as the scene draws it (PSF of the SCA and filter, pixel response,
+ * e-/s), for users and checks: the counterpart of GalSim's obj.drawImage. */
+static int cmd_stamp(cli *c)
+{
+    wf_config *cfg = &c->cfg;
+    if (!c->id) { fprintf(stderr, "wfisim stamp: give --id ID (and --catalog FILE or a scene)\n"); return 2; }
+    char *end;
+    long long id = strtoll(c->id, &end, 10);
+    if (end == c->id || *end) { fprintf(stderr, "wfisim stamp: --id '%s' is not an integer\n", c->id); return 2; }
+    if (cfg->scene_kind == 2) { fprintf(stderr, "wfisim stamp: the grid scene has no catalog ids\n"); return 2; }
+    scene_inputs in;
+    wf_scene *scene = NULL;
+    double *pix = NULL;
+    wf_status st = load_catalogs(cfg, &in);
+    int found = 0;
+    if (!st && in.have_gal) st = keep_id(&in.gal, id, &found);
+    if (!st && in.have_stars) st = keep_id(&in.stars, id, &found);
+    if (!st && !found) st = wf_error(WF_ERR_INPUT, "object %lld is not in the catalog near SCA %u of this pointing", id, cfg->ro.sca);
+    wf_scene_setup ss;
+    wf_scene_setup_default(&ss);
+    ss.ra = cfg->ra, ss.dec = cfg->dec, ss.pa = cfg->pa, ss.sca = (int)cfg->ro.sca, ss.mjd = cfg->mjd;
+    snprintf(ss.filter, sizeof ss.filter, "%s", cfg->filter);
+    snprintf(ss.data_dir, sizeof ss.data_dir, "%s", cfg->data_dir);
+    ss.pupil_bin = 1 << cfg->pupil_bin;
+    ss.psf_oversample = cfg->psf_oversample;
+    ss.flux_fraction = cfg->flux_fraction;
+    ss.sky_on = 0;
+    if (!st) st = wf_scene_create(&ss, in.have_gal && in.gal.n ? &in.gal : NULL, in.have_stars && in.stars.n ? &in.stars : NULL, &scene);
+    if (!st && wf_scene_object_count(scene) == 0)
+        st = wf_error(WF_ERR_INPUT, "object %lld does not reach SCA %u of this pointing", id, cfg->ro.sca);
+    wf_scene_object info;
+    int x0 = 0, y0 = 0, nx = 0, ny = 0;
+    if (!st) st = wf_scene_draw_object(scene, 0, &info, &x0, &y0, &nx, &ny, &pix);
+    char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
+    snprintf(path, sizeof path, "%s/stamp_%lld.fits", cfg->out_dir, id);
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    if (!st) st = make_dir(cfg->out_dir);
+    if (!st) {
+        fitsfile *f;
+        int status = 0;
+        long naxes[2] = {nx, ny};
+        remove(tmp);
+        fits_create_diskfile(&f, tmp, &status);
+        fits_create_img(f, DOUBLE_IMG, 2, naxes, &status);
+        fits_write_key_lng(f, "OBJID", info.id, "catalog id", &status);
+        fits_write_key_str(f, "OBJTYPE", info.kind ? "star" : "galaxy", "", &status);
+        fits_write_key_str(f, "FILTER", cfg->filter, "", &status);
+        fits_write_key_lng(f, "SCA", cfg->ro.sca, "", &status);
+        fits_write_key_dbl(f, "RA_OBJ", info.ra, 12, "[deg]", &status);
+        fits_write_key_dbl(f, "DEC_OBJ", info.dec, 12, "[deg]", &status);
+        fits_write_key_dbl(f, "X_OBJ", info.x + 1, 10, "object centre, FITS pixel on the SCA", &status);
+        fits_write_key_dbl(f, "Y_OBJ", info.y + 1, 10, "object centre, FITS pixel on the SCA", &status);
+        fits_write_key_lng(f, "X0_SCA", x0 + 1, "SCA FITS column of stamp pixel 1", &status);
+        fits_write_key_lng(f, "Y0_SCA", y0 + 1, "SCA FITS row of stamp pixel 1", &status);
+        fits_write_key_dbl(f, "MAG", info.mag, 6, "AB magnitude in FILTER", &status);
+        fits_write_key_dbl(f, "FLUX", info.flux, 10, "[electron/s] total flux", &status);
+        fits_write_key_lng(f, "PUPILBIN", 1 << cfg->pupil_bin, "", &status);
+        fits_write_key_lng(f, "PSFOVER", cfg->psf_oversample, "PSF image oversampling", &status);
+        fits_write_key_dbl(f, "FLUXFRAC", cfg->flux_fraction, 6, "stamp holds at least this", &status);
+        fits_write_key_str(f, "BUNIT", "electron/s", "", &status);
+        long first[2] = {1, 1};
+        fits_write_pix(f, TDOUBLE, first, (long long)nx * ny, pix, &status);
+        int cs = 0;
+        fits_close_file(f, &cs);
+        if (status || cs) {
+            remove(tmp);
+            st = wf_error(WF_ERR_IO, "%s: cfitsio status %d writing the stamp", path, status ? status : cs);
+        } else if (rename(tmp, path) != 0) {
+            remove(tmp);
+            st = wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
+        }
+    }
+    if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s (%d x %d, %s %lld, %.4g e-/s)\n", path, nx, ny,
+                                    info.kind ? "star" : "galaxy", info.id, info.flux);
+    free(pix);
+    wf_scene_destroy(scene);
+    scene_inputs_free(&in);
+    return st ? fail("stamp", st) : 0;
+}
+
 static int cmd_record(cli *c)
 {
     if (!c->rates) { fprintf(stderr, "wfisim record: give --rates FILE\n"); return 2; }
@@ -471,6 +573,7 @@ int main(int argc, char **argv)
     if (!strcmp(cmd, "expose")) return run_exposure(&c, 0);
     if (!strcmp(cmd, "assemble")) return cmd_assemble(&c);
     if (!strcmp(cmd, "record")) return cmd_record(&c);
+    if (!strcmp(cmd, "stamp")) return cmd_stamp(&c);
     fprintf(stderr, "wfisim: unknown command '%s'\n\n%s", cmd, usage_text);
     return 2;
 }
