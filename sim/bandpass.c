@@ -29,8 +29,7 @@ static int filter_valid(wf_filter f) { return (int)f >= 0 && f < WF_NFILTER; }
 
 const char *wf_filter_name(wf_filter f) { return filter_valid(f) ? filter_names[f] : "?"; }
 
-/* Without touching the error message, so header scans can try every column name. */
-static int lookup_filter(const char *name, wf_filter *out)
+int wf_filter_lookup(const char *name, wf_filter *out)
 {
     for (int i = 0; i < WF_NFILTER; i++)
         if (!strcasecmp(name, filter_names[i])) {
@@ -48,7 +47,7 @@ static int lookup_filter(const char *name, wf_filter *out)
 wf_status wf_filter_parse(const char *name, wf_filter *out)
 {
     if (!name) return wf_error(WF_ERR_INPUT, "filter: no name given");
-    if (lookup_filter(name, out)) return WF_OK;
+    if (wf_filter_lookup(name, out)) return WF_OK;
     return wf_error(WF_ERR_INPUT,
                     "unknown filter '%s' (valid: R062 Z087 Y106 J129 H158 F184 K213 W146; "
                     "W149 means W146)",
@@ -174,7 +173,7 @@ static wf_status read_effarea(FILE *fp, const char *path, wf_filter f, wf_bandpa
             snprintf(names + used, sizeof names - used, "%s%s", i ? " " : "", tok);
             if (i > 0 && col < 0) {
                 wf_filter g;
-                if (lookup_filter(tok, &g) && g == f) col = i;
+                if (wf_filter_lookup(tok, &g) && g == f) col = i;
             }
         }
         ncol = i;

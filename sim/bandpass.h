@@ -46,6 +46,10 @@ const char *wf_filter_name(wf_filter f);
 
 /* Parses a filter name, case-insensitively; "W149" is accepted for W146. An unknown name is
  * an error that names it and lists the valid ones. */
+/* 1 and *out set when name is a filter (W149 = W146), else 0; no error message is
+ * recorded, so header scans can try every column name. */
+int wf_filter_lookup(const char *name, wf_filter *out);
+
 wf_status wf_filter_parse(const char *name, wf_filter *out);
 
 /* The SPEC §2 filter facts (Wang et al. 2023 §2.1): central wavelength and width, nm. */

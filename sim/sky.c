@@ -146,21 +146,6 @@ wf_status wf_sky_builtin(wf_sky_model *out)
 
 /* ------------------------------------------------------------------ table */
 
-static int lookup_column(const char *tok, wf_filter *f)
-{
-    static const char *const names[WF_NFILTER] = {"R062", "Z087", "Y106", "J129",
-                                                  "H158", "F184", "K213", "W146"};
-    for (int i = 0; i < WF_NFILTER; i++)
-        if (!strcasecmp(tok, names[i])) {
-            *f = (wf_filter)i;
-            return 1;
-        }
-    if (!strcasecmp(tok, "W149")) {
-        *f = WF_W146;
-        return 1;
-    }
-    return 0;
-}
 
 static wf_status read_table(FILE *fp, const char *path, wf_sky_model *out)
 {
@@ -190,7 +175,7 @@ static wf_status read_table(FILE *fp, const char *path, wf_sky_model *out)
                                 "%s:%d: header column %d is '%s', expected %s", path, lineno,
                                 i + 1, tok, i == 0 ? "Latitude" : "Longitude");
             wf_filter f;
-            if (i >= 2 && lookup_column(tok, &f) && col[f] < 0) col[f] = i;
+            if (i >= 2 && wf_filter_lookup(tok, &f) && col[f] < 0) col[f] = i;
         }
         ncol = i;
         break;

@@ -30,70 +30,6 @@ static const double spec_pivot_um[WF_NFILTER] = {0.629, 0.870, 1.057, 1.290,
 
 /* ------------------------------------------------------------------ small helpers */
 
-static char *slurp(const char *path)
-{
-    FILE *fp = fopen(path, "rb");
-    if (!fp) return NULL;
-    fseek(fp, 0, SEEK_END);
-    long n = ftell(fp);
-    fseek(fp, 0, SEEK_SET);
-    char *s = malloc((size_t)n + 1);
-    if (s && fread(s, 1, (size_t)n, fp) != (size_t)n) {
-        free(s);
-        s = NULL;
-    }
-    if (s) s[n] = '\0';
-    fclose(fp);
-    return s;
-}
-
-/* End (one past) of the JSON value starting at p: strings skipped, braces/brackets
- * matched. Enough for facts.json, which is plain generated JSON. */
-static const char *json_value_end(const char *p)
-{
-    int depth = 0;
-    for (; *p; p++) {
-        if (*p == '"') {
-            for (p++; *p && *p != '"'; p++)
-                if (*p == '\\' && p[1]) p++;
-            if (!*p) return p;
-            if (depth == 0) return p + 1;
-        } else if (*p == '{' || *p == '[') depth++;
-        else if (*p == '}' || *p == ']') {
-            if (--depth <= 0) return p + 1;
-        } else if (depth == 0 && (*p == ',' || *p == '\n')) return p;
-    }
-    return p;
-}
-
-/* The number at a path of keys ("a", "b", "c" for {"a": {"b": {"c": 1.5}}}), NAN when
- * absent. Each key is searched inside the value of the previous one. */
-static double json_number(const char *text, const char *const *keys, int nkeys)
-{
-    const char *lo = text, *hi = text + strlen(text);
-    for (int k = 0; k < nkeys; k++) {
-        char pat[256];
-        snprintf(pat, sizeof pat, "\"%s\"", keys[k]);
-        const char *p = lo;
-        for (;;) {
-            p = strstr(p, pat);
-            if (!p || p >= hi) return NAN;
-            const char *q = p + strlen(pat);
-            while (*q == ' ' || *q == '\t' || *q == '\n' || *q == '\r') q++;
-            if (*q == ':') {
-                q++;
-                while (*q == ' ' || *q == '\t' || *q == '\n' || *q == '\r') q++;
-                lo = q;
-                hi = json_value_end(q);
-                break;
-            }
-            p += strlen(pat);
-        }
-    }
-    char *end;
-    double v = strtod(lo, &end);
-    return end == lo ? NAN : v;
-}
 
 static void write_file(const char *path, const char *text)
 {
@@ -301,7 +237,7 @@ START_TEST(test_real_vs_galsim_and_spec)
     if (ref) {
         char path[4200];
         snprintf(path, sizeof path, "%s/facts.json", ref);
-        facts = slurp(path);
+        facts = wf_test_slurp(path, NULL);
     }
     static wf_bandpass bp;
     printf("  filter  zp(1e-/s)  -GalSim   -SPEC   zp(1ph/cm2/s) -GalSim  lam_eff  -GalSim  "
@@ -317,9 +253,9 @@ START_TEST(test_real_vs_galsim_and_spec)
             const char *k1[] = {"zeropoint_instrumental_1e_per_s", name};
             const char *k2[] = {"zeropoint_AB", name};
             const char *k3[] = {"effective_wavelength_nm", name};
-            gz = json_number(facts, k1, 2);
-            gzp = json_number(facts, k2, 2);
-            gle = json_number(facts, k3, 2);
+            gz = wf_test_json_number(facts, k1, 2);
+            gzp = wf_test_json_number(facts, k2, 2);
+            gle = wf_test_json_number(facts, k3, 2);
             ck_assert_msg(isfinite(gz) && isfinite(gzp) && isfinite(gle),
                           "facts.json lacks %s values", name);
         }

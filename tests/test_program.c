@@ -15,19 +15,6 @@
 #define SMALL "--quiet --set scene.kind=grid --set readout.ncols=96 --set readout.nrows=80 --set readout.ma_table=4 " \
               "--set detector.cr_rate=500 --set scene.grid.spacing=20 --set scene.grid.flux=2e4"
 
-static char *slurp(const char *path, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *buf = malloc((size_t)n + 1);
-    *len = fread(buf, 1, (size_t)n, f);
-    buf[*len] = '\0';
-    fclose(f);
-    return buf;
-}
 
 static int run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 #include <stdarg.h>
@@ -45,7 +32,7 @@ static int run(const char *fmt, ...)
 static void assert_same_file(const char *a, const char *b)
 {
     size_t la, lb;
-    char *x = slurp(a, &la), *y = slurp(b, &lb);
+    char *x = wf_test_slurp(a, &la), *y = wf_test_slurp(b, &lb);
     ck_assert_msg(x != NULL, "%s missing", a);
     ck_assert_msg(y != NULL, "%s missing", b);
     ck_assert_msg(la == lb && !memcmp(x, y, la), "%s and %s differ", a, b);
@@ -116,7 +103,7 @@ START_TEST(bad_config_named_and_no_product)
     int rc = run("%s expose --quiet --config %s --out %s/out 2>%s", bin, cfg, d, log);
     ck_assert_int_ne(rc, 0);
     size_t n;
-    char *msg = slurp(log, &n);
+    char *msg = wf_test_slurp(log, &n);
     ck_assert_msg(strstr(msg, "bad.yaml") && strstr(msg, ":4") && strstr(msg, "read_nosie"),
                   "message does not name file, line and key: %s", msg);
     free(msg);
@@ -138,7 +125,7 @@ START_TEST(corrupt_stream_leaves_nothing)
     char path[4200];
     snprintf(path, sizeof path, "%s/s.bin", d);
     size_t n;
-    char *buf = slurp(path, &n);
+    char *buf = wf_test_slurp(path, &n);
     buf[n / 2] ^= 0x40;
     FILE *f = fopen(path, "wb");
     fwrite(buf, 1, n, f);
@@ -311,7 +298,7 @@ START_TEST(catalog_file_on_the_command_line)
     char err[4300];
     snprintf(err, sizeof err, "%s/err.txt", d);
     size_t n;
-    char *msg = slurp(err, &n);
+    char *msg = wf_test_slurp(err, &n);
     ck_assert_msg(msg && strstr(msg, "gal.csv") && strstr(msg, "column"), "message: %s", msg ? msg : "");
     free(msg);
     char bad[4300];

@@ -24,69 +24,6 @@ static const wf_filter all_filters[WF_NFILTER] = {WF_R062, WF_Z087, WF_Y106, WF_
 
 /* ------------------------------------------------------------------ small helpers */
 
-static char *slurp(const char *path)
-{
-    FILE *fp = fopen(path, "rb");
-    if (!fp) return NULL;
-    fseek(fp, 0, SEEK_END);
-    long n = ftell(fp);
-    fseek(fp, 0, SEEK_SET);
-    char *s = malloc((size_t)n + 1);
-    if (s && fread(s, 1, (size_t)n, fp) != (size_t)n) {
-        free(s);
-        s = NULL;
-    }
-    if (s) s[n] = '\0';
-    fclose(fp);
-    return s;
-}
-
-/* End (one past) of the JSON value starting at p (strings skipped, brackets matched). */
-static const char *json_value_end(const char *p)
-{
-    int depth = 0;
-    for (; *p; p++) {
-        if (*p == '"') {
-            for (p++; *p && *p != '"'; p++)
-                if (*p == '\\' && p[1]) p++;
-            if (!*p) return p;
-            if (depth == 0) return p + 1;
-        } else if (*p == '{' || *p == '[') depth++;
-        else if (*p == '}' || *p == ']') {
-            if (--depth <= 0) return p + 1;
-        } else if (depth == 0 && (*p == ',' || *p == '\n')) return p;
-    }
-    return p;
-}
-
-/* The number at a path of keys, each searched inside the previous one's value; NAN when
- * absent. */
-static double json_number(const char *text, const char *const *keys, int nkeys)
-{
-    const char *lo = text, *hi = text + strlen(text);
-    for (int k = 0; k < nkeys; k++) {
-        char pat[256];
-        snprintf(pat, sizeof pat, "\"%s\"", keys[k]);
-        const char *p = lo;
-        for (;;) {
-            p = strstr(p, pat);
-            if (!p || p >= hi) return NAN;
-            const char *q = p + strlen(pat);
-            while (*q == ' ' || *q == '\t' || *q == '\n' || *q == '\r') q++;
-            if (*q == ':') {
-                q++;
-                while (*q == ' ' || *q == '\t' || *q == '\n' || *q == '\r') q++;
-                lo = q;
-                hi = json_value_end(q);
-                break;
-            }
-            p += strlen(pat);
-        }
-    }
-    char *end;
-    double v = strtod(lo, &end);
-    return end == lo ? NAN : v;
-}
 
 static char *load_facts(void)
 {
@@ -94,7 +31,7 @@ static char *load_facts(void)
     if (!ref) return NULL;
     char path[4200];
     snprintf(path, sizeof path, "%s/facts.json", ref);
-    return slurp(path);
+    return wf_test_slurp(path, NULL);
 }
 
 static void copy_dir(char *dst, size_t n, const char *src) { snprintf(dst, n, "%s", src); }
@@ -189,7 +126,7 @@ START_TEST(test_ecliptic_deep_field)
     if (!facts) WF_SKIP("../shared/reference/galsim (deep-field ecliptic coordinates)");
     const char *kl[] = {"sky_position", "ecliptic_lon_deg_epoch2025"};
     const char *kb[] = {"sky_position", "ecliptic_lat_deg"};
-    double glon = json_number(facts, kl, 2), glat = json_number(facts, kb, 2);
+    double glon = wf_test_json_number(facts, kl, 2), glat = wf_test_json_number(facts, kb, 2);
     free(facts);
     printf("  deep field: ecliptic (%.4f, %.4f) deg; GalSim (2025 obliquity) (%.4f, %.4f): "
            "diff (%+.4f, %+.4f)\n",
@@ -371,7 +308,7 @@ START_TEST(test_deep_field_vs_galsim)
             const char *kz[] = {"sky_level", dates[d].key, name, "zodi_e_per_arcsec2_per_s"};
             const char *kp[] = {"sky_level", dates[d].key, name,
                                 "zodi_x1.1_stray+thermal_e_per_pix_300s"};
-            double g = json_number(facts, kz, 4), gpix = json_number(facts, kp, 4);
+            double g = wf_test_json_number(facts, kz, 4), gpix = wf_test_json_number(facts, kp, 4);
             ck_assert_msg(isfinite(g) && isfinite(gpix), "facts.json lacks %s %s", dates[d].key,
                           name);
             double zt = NAN, zl, dlon, lat;

@@ -1,5 +1,6 @@
 #include "tests/testutil.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -45,4 +46,69 @@ int wf_test_main(Suite *suite)
     int failed = srunner_ntests_failed(sr);
     srunner_free(sr);
     return failed ? EXIT_FAILURE : EXIT_SUCCESS;
+}
+
+char *wf_test_slurp(const char *path, size_t *len)
+{
+    FILE *fp = fopen(path, "rb");
+    if (!fp) return NULL;
+    fseek(fp, 0, SEEK_END);
+    long n = ftell(fp);
+    fseek(fp, 0, SEEK_SET);
+    char *s = malloc((size_t)n + 1);
+    if (s && fread(s, 1, (size_t)n, fp) != (size_t)n) {
+        free(s);
+        s = NULL;
+    }
+    if (s) s[n] = '\0';
+    if (s && len) *len = (size_t)n;
+    fclose(fp);
+    return s;
+}
+
+/* End (one past) of the JSON value starting at p (strings skipped, brackets matched). */
+static const char *json_value_end(const char *p)
+{
+    int depth = 0;
+    for (; *p; p++) {
+        if (*p == '"') {
+            for (p++; *p && *p != '"'; p++)
+                if (*p == '\\' && p[1]) p++;
+            if (!*p) return p;
+            if (depth == 0) return p + 1;
+        } else if (*p == '{' || *p == '[') depth++;
+        else if (*p == '}' || *p == ']') {
+            if (--depth <= 0) return p + 1;
+        } else if (depth == 0 && (*p == ',' || *p == '\n')) return p;
+    }
+    return p;
+}
+
+/* The number at a path of keys, each searched inside the previous one's value; NAN when
+ * absent. */
+double wf_test_json_number(const char *text, const char *const *keys, int nkeys)
+{
+    const char *lo = text, *hi = text + strlen(text);
+    for (int k = 0; k < nkeys; k++) {
+        char pat[256];
+        snprintf(pat, sizeof pat, "\"%s\"", keys[k]);
+        const char *p = lo;
+        for (;;) {
+            p = strstr(p, pat);
+            if (!p || p >= hi) return NAN;
+            const char *q = p + strlen(pat);
+            while (*q == ' ' || *q == '\t' || *q == '\n' || *q == '\r') q++;
+            if (*q == ':') {
+                q++;
+                while (*q == ' ' || *q == '\t' || *q == '\n' || *q == '\r') q++;
+                lo = q;
+                hi = json_value_end(q);
+                break;
+            }
+            p += strlen(pat);
+        }
+    }
+    char *end;
+    double v = strtod(lo, &end);
+    return end == lo ? NAN : v;
 }

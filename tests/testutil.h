@@ -16,6 +16,13 @@ const char *wf_test_program(void);
 /* A fresh empty directory under $TMPDIR for this test (removed by the runner's tmp). */
 const char *wf_test_tmpdir(void);
 
+/* The whole file, NUL-terminated (len may be NULL); NULL when unreadable. Caller frees. */
+char *wf_test_slurp(const char *path, size_t *len);
+
+/* The number at a path of JSON keys (each searched inside the previous one's value), as in
+ * the reference facts.json; NAN when absent. Enough for the reference files, not general. */
+double wf_test_json_number(const char *text, const char *const *keys, int nkeys);
+
 #define WF_SKIP(reason)                                                        \
     do {                                                                       \
         printf("SKIP: %s: %s\n", __func__, (reason));                          \
