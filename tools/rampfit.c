@@ -331,14 +331,14 @@ wf_status wf_rampfit_pixel(const wf_rampfit_setup *setup, const double *resultan
 
     /* Segments still to examine (a stack) and segments accepted. Every split makes strictly
      * shorter pieces, so at most usable - 1 splits happen and both arrays stay bounded. */
-    int todo_s[WF_MA_MAX_RESULTANTS], todo_e[WF_MA_MAX_RESULTANTS], ntodo = 0;
+    int pend_s[WF_MA_MAX_RESULTANTS], pend_e[WF_MA_MAX_RESULTANTS], npend = 0;
     seg_fit done[WF_MA_MAX_RESULTANTS];
     int ndone = 0, first_clean = 1;
-    todo_s[ntodo] = 0;
-    todo_e[ntodo++] = usable - 1;
-    while (ntodo > 0) {
-        ntodo--;
-        int s = todo_s[ntodo], e = todo_e[ntodo];
+    pend_s[npend] = 0;
+    pend_e[npend++] = usable - 1;
+    while (npend > 0) {
+        npend--;
+        int s = pend_s[npend], e = pend_e[npend];
         if (e - s + 1 < 2)
             continue; /* one resultant carries no slope once the intercept is free */
         seg_fit f;
@@ -356,15 +356,15 @@ wf_status wf_rampfit_pixel(const wf_rampfit_setup *setup, const double *resultan
                 int hi_start = setup->nreads[i + 1] > 1 ? i + 2 : i + 1;
                 if (lo_end < 0)
                     first_clean = 0;
-                if (ntodo + 2 > WF_MA_MAX_RESULTANTS)
+                if (npend + 2 > WF_MA_MAX_RESULTANTS)
                     return wf_error(WF_ERR_INTERNAL, "ramp fit: segment stack overflow");
                 if (hi_start <= e) {
-                    todo_s[ntodo] = hi_start;
-                    todo_e[ntodo++] = e;
+                    pend_s[npend] = hi_start;
+                    pend_e[npend++] = e;
                 }
                 if (lo_end >= s) {
-                    todo_s[ntodo] = s;
-                    todo_e[ntodo++] = lo_end;
+                    pend_s[npend] = s;
+                    pend_e[npend++] = lo_end;
                 }
                 continue;
             }
