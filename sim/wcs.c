@@ -92,6 +92,24 @@ static int parse_int(const char *s, long *v)
     return *end == '\0' && end != s && errno == 0;
 }
 
+/* The next line of a whitespace table that holds fields, split into at most maxtok + 1
+ * tokens ('#' starts a comment); *n = 0 at the end of the file. */
+static wf_status next_fields(FILE *f, const char *path, char *line, size_t cap, int *lineno,
+                             char **tok, int maxtok, int *n)
+{
+    *n = 0;
+    while (fgets(line, (int)cap, f)) {
+        (*lineno)++;
+        if (!strchr(line, '\n') && !feof(f))
+            return wf_error(WF_ERR_INPUT, "%s:%d: line longer than %zu characters", path, *lineno,
+                            cap - 2);
+        char *hash = strchr(line, '#');
+        if (hash) *hash = '\0';
+        if ((*n = split(line, tok, maxtok)) > 0) return WF_OK;
+    }
+    return WF_OK;
+}
+
 static wf_status read_positions(const char *path, wf_focal_plane *fp)
 {
     FILE *f = fopen(path, "r");
@@ -100,18 +118,9 @@ static wf_status read_positions(const char *path, wf_focal_plane *fp)
     char line[1024];
     int lineno = 0;
     wf_status st = WF_OK;
-    while (!st && fgets(line, sizeof line, f)) {
-        lineno++;
-        if (!strchr(line, '\n') && !feof(f)) {
-            st = wf_error(WF_ERR_INPUT, "%s:%d: line longer than %zu characters", path, lineno,
-                          sizeof line - 2);
-            break;
-        }
-        char *hash = strchr(line, '#');
-        if (hash) *hash = '\0';
-        char *tok[8];
-        int n = split(line, tok, 7);
-        if (n == 0) continue;
+    char *tok[8];
+    int n;
+    while (!(st = next_fields(f, path, line, sizeof line, &lineno, tok, 7, &n)) && n > 0) {
         if (n != 7) {
             st = wf_error(WF_ERR_INPUT, "%s:%d: expected 7 columns (sca, field x, y, fpa x, y, u, v), "
                           "found %s", path, lineno, n > 7 ? "more" : "fewer");
@@ -156,18 +165,9 @@ static wf_status read_sip(const char *path, wf_focal_plane *fp)
     char line[1024];
     int lineno = 0;
     wf_status st = WF_OK;
-    while (!st && fgets(line, sizeof line, f)) {
-        lineno++;
-        if (!strchr(line, '\n') && !feof(f)) {
-            st = wf_error(WF_ERR_INPUT, "%s:%d: line longer than %zu characters", path, lineno,
-                          sizeof line - 2);
-            break;
-        }
-        char *hash = strchr(line, '#');
-        if (hash) *hash = '\0';
-        char *tok[9];
-        int n = split(line, tok, 8);
-        if (n == 0) continue;
+    char *tok[9];
+    int n;
+    while (!(st = next_fields(f, path, line, sizeof line, &lineno, tok, 8, &n)) && n > 0) {
         if (n != 8) {
             st = wf_error(WF_ERR_INPUT, "%s:%d: expected 8 columns (sca-1, a|b, row, 5 "
                           "coefficients), found %s", path, lineno, n > 8 ? "more" : "fewer");
@@ -206,6 +206,7 @@ static wf_status read_sip(const char *path, wf_focal_plane *fp)
             else
                 fp->b[s][i][j] = v;
         }
+        if (st) break; /* the loop condition would overwrite it */
     }
     fclose(f);
     for (int s = 0; !st && s < WF_WCS_NSCA; s++)
