@@ -20,7 +20,7 @@
                        by ~3% across the SCA, smoothly, so the interpolation error is ~1e-6 */
 #define STRAY_LIGHT 0.1
 
-typedef enum { OBJ_GALAXY = 0, OBJ_STAR = 1 } obj_kind;
+typedef enum { OBJ_GALAXY = 0, OBJ_STAR = 1, OBJ_SN = 2 } obj_kind;
 
 typedef struct object {
     obj_kind kind;
@@ -61,6 +61,7 @@ struct wf_scene {
     object *obj;
     size_t nobj;
     wf_render_object *robj;
+    size_t nrobj;            /* objects the renderer draws (SNe of zero flux are not drawn) */
     thread_state *ts;
     const wf_catalog *gal, *stars;
     wf_scene_stats stats;
@@ -202,6 +203,50 @@ static wf_status draw_object(void *ctx, const wf_render_object *ro, int ya, int 
     return WF_OK;
 }
 
+static long long object_id(const wf_scene *s, const object *o)
+{
+    if (o->kind == OBJ_SN) return s->setup.sne[o->row].id;
+    return (long long)(o->kind == OBJ_GALAXY ? s->gal->id[o->row] : s->stars->id[o->row]);
+}
+
+static wf_status grow(wf_scene *s, size_t *cap)
+{
+    if (s->nobj < *cap) return WF_OK;
+    size_t nc = *cap ? 2 * *cap : 1024;
+    object *p = realloc(s->obj, nc * sizeof *p);
+    if (!p) return wf_error(WF_ERR_NOMEM, "scene: cannot hold %zu objects", nc);
+    s->obj = p;
+    *cap = nc;
+    return WF_OK;
+}
+
+/* Supernovae: point sources at the flux the caller evaluated for this exposure. */
+static wf_status add_sne(wf_scene *s, size_t *cap)
+{
+    const double margin = 600.0;
+    for (size_t i = 0; i < s->setup.nsne; i++) {
+        const wf_scene_sn *sn = &s->setup.sne[i];
+        double x, y;
+        if (!isfinite(sn->mag) || !isfinite(sn->ra) || !isfinite(sn->dec))
+            return wf_error(WF_ERR_RANGE, "scene: supernova %lld: magnitude or position is not finite", sn->id);
+        if (wf_wcs_world2pix(&s->wcs, sn->ra, sn->dec, &x, &y) != WF_OK) continue;
+        if (x < -margin || y < -margin || x > s->setup.ncols + margin || y > s->setup.nrows + margin) continue;
+        wf_status st = grow(s, cap);
+        if (st) return st;
+        object *o = &s->obj[s->nobj++];
+        memset(o, 0, sizeof *o);
+        o->kind = OBJ_SN;
+        o->row = i;
+        o->x = x;
+        o->y = y;
+        o->ra = sn->ra;
+        o->dec = sn->dec;
+        o->mag = sn->mag;
+        o->flux = sn->mag >= 99.0 ? 0.0 : wf_bandpass_countrate_ab(s->bp, sn->mag);
+    }
+    return WF_OK;
+}
+
 static wf_status add_objects(wf_scene *s, const wf_catalog *cat, obj_kind kind, size_t *cap)
 {
     if (!cat || !cat->n) return WF_OK;
@@ -213,13 +258,7 @@ static wf_status add_objects(wf_scene *s, const wf_catalog *cat, obj_kind kind, 
         double x, y;
         if (wf_wcs_world2pix(&s->wcs, cat->ra[i], cat->dec[i], &x, &y) != WF_OK) continue;
         if (x < -margin || y < -margin || x > s->setup.ncols + margin || y > s->setup.nrows + margin) continue;
-        if (s->nobj == *cap) {
-            size_t nc = *cap ? 2 * *cap : 1024;
-            object *p = realloc(s->obj, nc * sizeof *p);
-            if (!p) return wf_error(WF_ERR_NOMEM, "scene: cannot hold %zu objects", nc);
-            s->obj = p;
-            *cap = nc;
-        }
+        if ((st = grow(s, cap))) return st;
         object *o = &s->obj[s->nobj];
         memset(o, 0, sizeof *o);
         o->kind = kind;
@@ -331,7 +370,9 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     if ((st = wf_profile_psf_init(&s->ppsf, &s->psf_image, &s->acc, &s->psf_arena))) goto bad;
     /* objects */
     size_t cap = 0;
-    if ((st = add_objects(s, gal, OBJ_GALAXY, &cap)) || (st = add_objects(s, stars, OBJ_STAR, &cap))) goto bad;
+    if ((st = add_objects(s, gal, OBJ_GALAXY, &cap)) || (st = add_objects(s, stars, OBJ_STAR, &cap)) ||
+        (st = add_sne(s, &cap)))
+        goto bad;
     if (!(s->robj = malloc((s->nobj ? s->nobj : 1) * sizeof *s->robj)) ||
         !(s->ts = calloc((size_t)setup->threads, sizeof *s->ts))) {
         st = wf_error(WF_ERR_NOMEM, "scene: out of memory");
@@ -351,18 +392,21 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     long kept = 0;
     for (size_t i = 0; i < s->nobj; i++) {
         object *o = &s->obj[i];
+        if (o->kind == OBJ_SN && !(o->flux > 0)) continue; /* nothing to draw; truth only */
         wf_stamp b;
         st = o->kind == OBJ_GALAXY ? wf_profile_galaxy_bounds(&s->ts[0].work, &o->g, &s->ppsf, o->x, o->y, &b, NULL)
                                    : wf_profile_point_bounds(&s->ts[0].work, &s->ppsf, o->x, o->y, &b, NULL);
         if (st) goto bad;
-        uint64_t id = (uint64_t)(o->kind == OBJ_GALAXY ? gal->id[o->row] : stars->id[o->row]);
-        s->robj[kept++] = (wf_render_object){id * 2u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o};
+        uint64_t id = (uint64_t)object_id(s, o);
+        s->robj[kept++] = (wf_render_object){id * 4u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o};
         if (b.x0 < setup->ncols && b.x0 + b.nx > 0 && b.y0 < setup->nrows && b.y0 + b.ny > 0) {
             if (o->kind == OBJ_GALAXY) s->stats.galaxies++;
-            else s->stats.stars++;
+            else if (o->kind == OBJ_STAR) s->stats.stars++;
+            else s->stats.sne++;
         }
     }
     wf_renderer_config rc = {setup->ncols, setup->nrows, 0.0, sky_row, s, setup->pool_bytes, 0};
+    s->nrobj = (size_t)kept;
     for (int t = 0; t < setup->threads; t++)
         if ((st = wf_renderer_create(&rc, s->robj, (size_t)kept, draw_object, &s->ts[t], &s->ts[t].renderer))) goto bad;
     free(sky);
@@ -406,20 +450,20 @@ wf_status wf_scene_source_for(wf_scene *s, int t, wf_scene_source *out)
 
 void wf_scene_get_stats(const wf_scene *s, wf_scene_stats *out) { *out = s->stats; }
 
-size_t wf_scene_object_count(const wf_scene *s) { return s->nobj; }
+size_t wf_scene_object_count(const wf_scene *s) { return s->nrobj; }
 
 wf_status wf_scene_draw_object(wf_scene *s, size_t k, wf_scene_object *info, int *x0, int *y0,
                                int *nx, int *ny, double **pix)
 {
     *pix = NULL;
-    if (k >= s->nobj) return wf_error(WF_ERR_RANGE, "scene: object %zu of %zu", k, s->nobj);
+    if (k >= s->nrobj) return wf_error(WF_ERR_RANGE, "scene: object %zu of %zu", k, s->nrobj);
     const wf_render_object *ro = &s->robj[k];
     const object *o = ro->data;
     double *buf = malloc((size_t)ro->nx * ro->ny * sizeof *buf);
     if (!buf) return wf_error(WF_ERR_NOMEM, "scene: a %d x %d stamp", ro->nx, ro->ny);
     wf_status st = draw_object(&s->ts[0], ro, ro->y0, ro->y0 + ro->ny, buf);
     if (st) { free(buf); return st; }
-    info->id = (long long)(o->kind == OBJ_GALAXY ? s->gal->id[o->row] : s->stars->id[o->row]);
+    info->id = object_id(s, o);
     info->kind = (int)o->kind;
     info->x = o->x;
     info->y = o->y;
@@ -455,17 +499,19 @@ static int on_sca(const wf_scene *s, const object *o)
 
 static int write_table(fitsfile *f, const wf_scene *s, obj_kind kind, const char *name, int *status)
 {
-    char *ttype[] = {"ID", "RA", "DEC", "X", "Y", "MAG", "FLUX"};
-    char *tform[] = {"1K", "1D", "1D", "1D", "1D", "1E", "1E"};
-    char *tunit[] = {"", "deg", "deg", "pixel", "pixel", "mag(AB)", "electron/s"};
-    fits_create_tbl(f, BINARY_TBL, 0, 7, ttype, tform, tunit, name, status);
+    char *ttype[] = {"ID", "RA", "DEC", "X", "Y", "MAG", "FLUX", "Z", "HOSTID", "PHASE", "FLAGS"};
+    char *tform[] = {"1K", "1D", "1D", "1D", "1D", "1E", "1E", "1D", "1K", "1D", "1J"};
+    char *tunit[] = {"", "deg", "deg", "pixel", "pixel", "mag(AB)", "electron/s", "", "", "d", ""};
+    fits_create_tbl(f, BINARY_TBL, 0, kind == OBJ_SN ? 11 : 7, ttype, tform, tunit, name, status);
+    if (kind == OBJ_SN)
+        fits_write_key_str(f, "PHASECNV", "rest-frame days from peak B at MJD-OBS", "PHASE", status);
     fits_write_key_str(f, "FILTER", s->setup.filter, "magnitudes and fluxes in this filter", status);
     fits_write_key_str(f, "PIXCONV", "FITS", "X, Y: 1-based pixel centres, as the image WCS", status);
     long row = 1;
     for (size_t i = 0; i < s->nobj && !*status; i++) {
         const object *o = &s->obj[i];
         if (o->kind != kind || !on_sca(s, o)) continue;
-        long long id = (long long)(kind == OBJ_GALAXY ? s->gal->id[o->row] : s->stars->id[o->row]);
+        long long id = object_id(s, o);
         double x = o->x + 1.0, y = o->y + 1.0, ra = o->ra, dec = o->dec;
         float mag = (float)o->mag, flux = (float)o->flux;
         fits_write_col(f, TLONGLONG, 1, row, 1, 1, &id, status);
@@ -475,6 +521,16 @@ static int write_table(fitsfile *f, const wf_scene *s, obj_kind kind, const char
         fits_write_col(f, TDOUBLE, 5, row, 1, 1, &y, status);
         fits_write_col(f, TFLOAT, 6, row, 1, 1, &mag, status);
         fits_write_col(f, TFLOAT, 7, row, 1, 1, &flux, status);
+        if (kind == OBJ_SN) {
+            const wf_scene_sn *sn = &s->setup.sne[o->row];
+            double z = sn->z, phase = sn->phase;
+            long long host = sn->host_id;
+            int flags = (int)sn->flags;
+            fits_write_col(f, TDOUBLE, 8, row, 1, 1, &z, status);
+            fits_write_col(f, TLONGLONG, 9, row, 1, 1, &host, status);
+            fits_write_col(f, TDOUBLE, 10, row, 1, 1, &phase, status);
+            fits_write_col(f, TINT, 11, row, 1, 1, &flags, status);
+        }
         row++;
     }
     return *status;
@@ -494,6 +550,7 @@ wf_status wf_scene_write_truth(const wf_scene *s, const char *path)
     fits_write_key_lng(f, "SCA", s->setup.sca, "sensor chip assembly", &status);
     write_table(f, s, OBJ_GALAXY, "GALAXIES", &status);
     write_table(f, s, OBJ_STAR, "STARS", &status);
+    write_table(f, s, OBJ_SN, "SNE", &status);
     /* checksums with fixed comments: the truth is byte-identical run to run */
     wf_status cst = status ? WF_OK : wf_fits_checksum_all(f, tmp);
     int close_status = 0;

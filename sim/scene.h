@@ -13,6 +13,18 @@
 #include "hal/scene.h"
 #include "sim/catalog.h"
 
+/* A supernova to inject: a point source whose AB magnitude in the setup's filter at this
+ * exposure the caller has taken from its light curve. A magnitude >= 99 (no flux: before
+ * explosion, faded, or outside the model) draws nothing, but the SN stays in the truth. */
+typedef struct wf_scene_sn {
+    long long id, host_id;  /* host_id -1: hostless */
+    double ra, dec;         /* degrees */
+    double z;
+    double phase;           /* rest-frame days from peak at the exposure mid-time */
+    double mag;             /* AB magnitude at mid-exposure (>= 99: no flux) */
+    unsigned flags;         /* WF_SALT_* flags of the light-curve evaluation */
+} wf_scene_sn;
+
 typedef struct wf_scene_setup {
     double ra, dec, pa;     /* boresight and observatory position angle, degrees */
     int sca;                /* 1..18 */
@@ -27,10 +39,12 @@ typedef struct wf_scene_setup {
     size_t pool_bytes;      /* stamp pool per renderer [64 MiB] */
     int threads;            /* renderers to prepare [1] */
     int sky_on;             /* add the sky [1] */
+    const wf_scene_sn *sne; /* supernovae (must outlive the scene) [none] */
+    size_t nsne;
 } wf_scene_setup;
 
 typedef struct wf_scene_stats {
-    long galaxies, stars;      /* drawn (reach the SCA) */
+    long galaxies, stars, sne; /* drawn (reach the SCA) */
     double sky_min, sky_max;   /* e-/pixel/s over the SCA */
     double zodi;               /* e-/s/arcsec^2 at the SCA centre */
     double psf_lambda_nm;
@@ -55,7 +69,7 @@ void wf_scene_get_stats(const wf_scene *scene, wf_scene_stats *out);
 
 /* The stamp of drawn object k (0 <= k < count): bounds in SCA pixels (0-based) and pixels in
  * e-/s, as the renderer adds them; *pix is malloc'd for the caller. Also its catalog id,
- * kind (0 galaxy, 1 star), position (0-based pixels), magnitude and flux. */
+ * kind (0 galaxy, 1 star, 2 supernova), position (0-based pixels), magnitude and flux. */
 typedef struct wf_scene_object {
     long long id;
     int kind;
@@ -68,8 +82,10 @@ wf_status wf_scene_draw_object(wf_scene *scene, size_t k, wf_scene_object *info,
 /* Renderer totals over all threads: stamps drawn whole and in pieces, pool high water. */
 void wf_scene_render_stats(const wf_scene *scene, long *stamps, long *pieces, size_t *pool_high);
 
-/* Writes the truth of what was drawn: tables GALAXIES and STARS with ID, RA, DEC, X, Y
- * (FITS 1-based pixel centres), MAG (this filter), FLUX (e-/s). Through a temporary file. */
+/* Writes the truth of what was drawn: tables GALAXIES, STARS and SNE with ID, RA, DEC, X, Y
+ * (FITS 1-based pixel centres), MAG (this filter), FLUX (e-/s); SNE also Z, HOSTID, PHASE
+ * (rest-frame days from peak) and FLAGS. Objects whose centre is on the SCA are listed.
+ * Through a temporary file. */
 wf_status wf_scene_write_truth(const wf_scene *scene, const char *path);
 
 /* The pointing's WCS header cards, for the image HDUs: "KEY = value" lines as META hdr.

@@ -20,6 +20,7 @@
 #include "tools/assemble.h"
 #include "tools/config.h"
 #include "tools/expose.h"
+#include "tools/pipeline.h"
 #include "tools/psfcmd.h"
 #include "tools/surveycmd.h"
 
@@ -135,291 +136,23 @@ static int parse(int argc, char **argv, cli *c)
     return 0;
 }
 
-static wf_status make_dir(const char *dir)
-{
-    char buf[WF_PATH_MAX];
-    snprintf(buf, sizeof buf, "%s", dir);
-    for (char *p = buf + 1; *p; p++)
-        if (*p == '/') {
-            *p = '\0';
-            if (mkdir(buf, 0777) != 0 && errno != EEXIST) return wf_error(WF_ERR_IO, "%s: cannot create directory", buf);
-            *p = '/';
-        }
-    if (mkdir(buf, 0777) != 0 && errno != EEXIST) return wf_error(WF_ERR_IO, "%s: cannot create directory", buf);
-    return WF_OK;
-}
-
-static void grid_from_config(const wf_config *cfg, wf_scene_grid *g)
-{
-    g->ncols = cfg->ro.ncols;
-    g->nrows = cfg->ro.nrows;
-    g->sky = cfg->sky_rate;
-    g->flux = cfg->grid_flux;
-    g->sigma = cfg->grid_sigma;
-    g->spacing = cfg->grid_spacing;
-}
-
-/* Catalogs of the scene: a synthetic field around the SCA, files, or a GalSim scene. */
-typedef struct scene_inputs {
-    wf_catalog gal, stars, sne;
-    int have_gal, have_stars, have_sne;
-} scene_inputs;
-
-static void scene_inputs_free(scene_inputs *in)
-{
-    if (in->have_gal) wf_catalog_free(&in->gal);
-    if (in->have_stars) wf_catalog_free(&in->stars);
-    if (in->have_sne) wf_catalog_free(&in->sne);
-}
-
-/* The SCA's footprint on the sky, widened by the largest stamp reach (70"), so that objects
- * just off the SCA whose light reaches onto it are kept. */
-static wf_status sca_region(const wf_config *cfg, wf_skyregion *reg)
-{
-    wf_focal_plane fp;
-    wf_wcs w;
-    wf_status st;
-    if ((st = wf_wcs_focal_plane(cfg->data_dir[0] ? cfg->data_dir : NULL, &fp)) ||
-        (st = wf_wcs_for_sca(&fp, cfg->ra, cfg->dec, cfg->pa, (int)cfg->ro.sca, &w)))
-        return st;
-    double ra[4], dec[4];
-    const double cx[4] = {-0.5, cfg->ro.ncols - 0.5, cfg->ro.ncols - 0.5, -0.5};
-    const double cy[4] = {-0.5, -0.5, cfg->ro.nrows - 0.5, cfg->ro.nrows - 0.5};
-    for (int k = 0; k < 4; k++)
-        if ((st = wf_wcs_pix2world(&w, cx[k], cy[k], &ra[k], &dec[k]))) return st;
-    return wf_skyindex_polygon(ra, dec, 4, 70.0, reg);
-}
-
-/* Keeps the rows of a catalog read from a file that fall in the footprint (a sky index:
- * milliseconds for millions of rows). */
-static wf_status select_rows(wf_catalog *cat, const wf_skyregion *reg)
-{
-    wf_skyindex *ix;
-    wf_selection sel = {0};
-    wf_catalog sub;
-    wf_status st = wf_skyindex_build(cat->ra, cat->dec, cat->n, 1.0, &ix);
-    if (st) return st;
-    st = wf_skyindex_select(ix, reg, &sel);
-    if (!st) st = wf_catalog_subset(cat, sel.idx, sel.n, &sub);
-    wf_skyindex_selection_free(&sel);
-    wf_skyindex_free(ix);
-    if (st) return st;
-    wf_catalog_free(cat);
-    *cat = sub;
-    return WF_OK;
-}
-
-static wf_status load_catalogs(const wf_config *cfg, scene_inputs *in)
-{
-    memset(in, 0, sizeof *in);
-    wf_skyregion reg;
-    wf_status st = sca_region(cfg, &reg);
-    if (st) return st;
-    if (cfg->scene_kind == 0) { /* synthetic: only the cells the SCA (and stamps reaching it) see */
-        wf_synth_config sc;
-        wf_synth *syn;
-        wf_synth_defaults(&sc);
-        sc.seed = cfg->seed;
-        if ((st = wf_synth_create(&sc, &syn))) return st;
-        st = wf_synth_select(syn, &reg, &in->gal, &in->stars);
-        wf_synth_free(syn);
-        if (!st) in->have_gal = in->have_stars = 1;
-        return st;
-    }
-    if (cfg->scene_kind == 3) {
-        if (!cfg->catalog[0]) return wf_error(WF_ERR_INPUT, "scene.kind galsim needs scene.catalog");
-        st = wf_catalog_read_galsim_scene(cfg->catalog, &in->gal, &in->stars, &in->sne);
-        if (!st) in->have_gal = in->have_stars = in->have_sne = 1;
-        return st;
-    }
-    if (!cfg->catalog[0] && !cfg->stars[0])
-        return wf_error(WF_ERR_INPUT, "scene.kind catalog needs scene.catalog and/or scene.stars");
-    if (cfg->catalog[0]) {
-        if ((st = wf_catalog_read_galaxies(cfg->catalog, &in->gal))) return st;
-        in->have_gal = 1;
-        if ((st = select_rows(&in->gal, &reg))) return st;
-    }
-    if (cfg->stars[0]) {
-        if ((st = wf_catalog_read_stars(cfg->stars, &in->stars))) return st;
-        in->have_stars = 1;
-        if ((st = select_rows(&in->stars, &reg))) return st;
-    }
-    return WF_OK;
-}
-
-typedef struct assembler_thread {
-    FILE *in;
-    wf_assemble_options opt;
-    wf_status status;
-    char message[1024];
-    char path[WF_PATH_MAX];
-} assembler_thread;
-
-static void *assemble_main(void *arg)
-{
-    assembler_thread *a = arg;
-    a->status = wf_assemble_stream(a->in, "in-process stream", &a->opt, a->path, sizeof a->path);
-    if (a->status) snprintf(a->message, sizeof a->message, "%s", wf_error_message());
-    /* drain so that a writer blocked on a full pipe sees EOF handling, not a hang */
-    char sink[65536];
-    while (fread(sink, 1, sizeof sink, a->in) > 0) {}
-    return NULL;
-}
-
 static int run_exposure(cli *c, int demo)
 {
-    wf_config *cfg = &c->cfg;
-    int T = cfg->threads < 1 ? 1 : cfg->threads;
-    wf_scene_source *scenes = calloc((size_t)T, sizeof *scenes);
-    wf_scene_replay *replays = calloc((size_t)T, sizeof *replays);
-    wf_scene_grid grid;
-    wf_status st = WF_OK;
-    int rc = 0, opened = 0;
-    scene_inputs inputs;
-    memset(&inputs, 0, sizeof inputs);
-    wf_scene *objscene = NULL;
-    char *extra = NULL;
-    const size_t extra_cap = 64 * 1024;
-    if (!scenes || !replays || !(extra = malloc(extra_cap))) { st = wf_error(WF_ERR_NOMEM, "out of memory"); goto done; }
-    grid_from_config(cfg, &grid);
-    int objects = !c->replay && cfg->scene_kind != 2;
-    if (objects) {
-        if ((st = load_catalogs(cfg, &inputs))) goto done;
-        wf_scene_setup ss;
-        wf_scene_setup_default(&ss);
-        ss.ra = cfg->ra;
-        ss.dec = cfg->dec;
-        ss.pa = cfg->pa;
-        ss.sca = (int)cfg->ro.sca;
-        snprintf(ss.filter, sizeof ss.filter, "%s", cfg->filter);
-        ss.mjd = cfg->mjd;
-        snprintf(ss.data_dir, sizeof ss.data_dir, "%s", cfg->data_dir);
-        ss.ncols = cfg->ro.ncols;
-        ss.nrows = cfg->ro.nrows;
-        ss.pupil_bin = 1 << cfg->pupil_bin;
-        ss.psf_oversample = cfg->psf_oversample;
-        ss.flux_fraction = cfg->flux_fraction;
-        ss.threads = T;
-        if ((st = wf_scene_create(&ss, inputs.have_gal ? &inputs.gal : NULL,
-                                  inputs.have_stars ? &inputs.stars : NULL, &objscene)))
-            goto done;
-        wf_scene_stats sst;
-        wf_scene_get_stats(objscene, &sst);
-        if (!cfg->quiet)
-            fprintf(stderr, "wfisim: scene of %ld galaxies and %ld stars on SCA %u in %s, sky %.4f-%.4f "
-                    "e-/pixel/s, PSF at %.1f nm, built in %.2f s\n", sst.galaxies, sst.stars, cfg->ro.sca,
-                    cfg->filter, sst.sky_min, sst.sky_max, sst.psf_lambda_nm, sst.build_seconds);
-    }
-    for (int i = 0; i < T; i++) {
-        if (objects) {
-            if ((st = wf_scene_source_for(objscene, i, &scenes[i]))) goto done;
-        } else if (c->replay) {
-            if ((st = wf_scene_replay_open(&replays[i], c->replay, &scenes[i]))) goto done;
-            opened = i + 1;
-            if (replays[i].ncols != cfg->ro.ncols || replays[i].nrows != cfg->ro.nrows) {
-                st = wf_error(WF_ERR_INPUT, "%s: recording is %d x %d, the SCA is %d x %d", c->replay,
-                              replays[i].ncols, replays[i].nrows, cfg->ro.ncols, cfg->ro.nrows);
-                goto done;
-            }
-        } else if ((st = wf_scene_grid_source(&grid, &scenes[i]))) goto done;
-    }
-    static const char *const kinds[] = {"synthetic", "catalog", "grid", "galsim"};
-    int len = snprintf(extra, extra_cap,
-                       "hdr.FILTER = %s / optical element\n"
-                       "hdr.SCENE = %s / scene source\n"
-                       "hdr.ORIGIN = wfisim %s / software\n",
-                       cfg->filter, c->replay ? "replay" : kinds[cfg->scene_kind], WFISIM_VERSION);
-    if (objects) {
-        len += snprintf(extra + len, extra_cap - (size_t)len,
-                        "hdr.RA_PNT = %.10f / [deg] boresight right ascension\n"
-                        "hdr.DEC_PNT = %.10f / [deg] boresight declination\n"
-                        "hdr.PA_PNT = %.10f / [deg] observatory position angle (GalSim getWCS PA)\n"
-                        "hdr.MJD-OBS = %.8f / [d] exposure mid-time\n",
-                        cfg->ra, cfg->dec, cfg->pa, cfg->mjd);
-        if ((st = wf_scene_wcs_meta(objscene, extra + len, extra_cap - (size_t)len))) goto done;
-    } else {
-        snprintf(extra + len, extra_cap - (size_t)len,
-                 "hdr.SKYRATE = %.9g / sky rate of the grid scene, e-/pixel/s\n", cfg->sky_rate);
-    }
-    (void)demo;
-
-    wf_expose_job job = {0};
-    job.ro = cfg->ro;
-    job.clock = c->clock;
-    job.noise = (wf_noise){WF_NOISE_PHILOX, cfg->seed, cfg->ro.exposure, cfg->ro.sca};
-    job.scenes = scenes;
-    job.threads = T;
-    job.progress = !cfg->quiet && isatty(STDERR_FILENO);
-    job.meta_extra = extra;
-
-    wf_link link;
-    wf_link_stream ls;
-    if (c->stream) {
-        FILE *f = strcmp(c->stream, "-") ? fopen(c->stream, "wb") : stdout;
-        if (!f) { st = wf_error(WF_ERR_IO, "%s: cannot create stream file", c->stream); goto done; }
-        wf_link_stream_open(&ls, f, c->stream, &link);
-        job.link = &link;
-        st = wf_expose_run(&job);
-        if (fflush(f) != 0 && !st) st = wf_error(WF_ERR_IO, "%s: write failed", c->stream);
-        if (f != stdout && fclose(f) != 0 && !st) st = wf_error(WF_ERR_IO, "%s: close failed", c->stream);
-        wf_link_stream_close(&ls);
-        goto done;
-    }
-    /* In-process: the same bytes go through a pipe to an assembler thread, so the FITS is
-     * identical to `wfisim expose --stream - | wfisim assemble -`. */
-    if ((st = make_dir(cfg->out_dir))) goto done;
-    int fds[2];
-    if (pipe(fds) != 0) { st = wf_error(WF_ERR_IO, "cannot create a pipe"); goto done; }
-    FILE *w = fdopen(fds[1], "wb"), *r = fdopen(fds[0], "rb");
-    assembler_thread at = {0};
-    at.in = r;
-    at.opt.out_dir = cfg->out_dir;
-    at.opt.quiet = cfg->quiet;
-    pthread_t th;
-    pthread_create(&th, NULL, assemble_main, &at);
-    wf_link_stream_open(&ls, w, "in-process stream", &link);
-    job.link = &link;
-    st = wf_expose_run(&job);
-    char expose_msg[1024];
-    snprintf(expose_msg, sizeof expose_msg, "%s", wf_error_message());
-    fclose(w);
-    pthread_join(th, NULL);
-    fclose(r);
-    wf_link_stream_close(&ls);
-    if (st) { wf_error(st, "%s", expose_msg); goto done; }
-    if (at.status) { st = wf_error(at.status, "%s", at.message); goto done; }
-    if (!cfg->quiet)
-        fprintf(stderr, "wfisim: wrote %s (arena %.1f MiB per readout instance, %.1f MiB used)\n",
-                at.path, job.arena_bytes / 1048576.0, job.arena_high_water / 1048576.0);
-done:
-    if (!st && objscene && !cfg->quiet) {
-        long stamps, pieces;
-        size_t pool;
-        wf_scene_render_stats(objscene, &stamps, &pieces, &pool);
-        fprintf(stderr, "wfisim: %ld stamps drawn whole, %ld in pieces, stamp pool high water %.1f MiB\n",
-                stamps, pieces, pool / 1048576.0);
-    }
-    if (!st && objscene) { /* truth of what was drawn, beside the image */
-        char tpath[WF_PATH_MAX + 64];
-        snprintf(tpath, sizeof tpath, "%s/wfisim_e%06u_sca%02u_truth.fits", cfg->out_dir, cfg->ro.exposure,
-                 cfg->ro.sca);
-        if (!(c->stream && (st = make_dir(cfg->out_dir)))) st = wf_scene_write_truth(objscene, tpath);
-        if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s\n", tpath);
-    }
-    wf_scene_destroy(objscene);
-    scene_inputs_free(&inputs);
-    free(extra);
-    for (int i = 0; i < opened; i++) wf_scene_replay_close(&replays[i]);
-    free(scenes);
-    free(replays);
-    if (st) rc = fail(demo ? "demo" : "expose", st);
-    return rc;
+    wf_pipeline_job job;
+    memset(&job, 0, sizeof job);
+    job.cfg = &c->cfg;
+    job.clock = &c->clock;
+    job.stream = c->stream;
+    job.replay = c->replay;
+    job.version = WFISIM_VERSION;
+    wf_status st = wf_pipeline_expose(&job);
+    return st ? fail(demo ? "demo" : "expose", st) : 0;
 }
 
 static int cmd_assemble(cli *c)
 {
     if (!c->positional) { fprintf(stderr, "wfisim assemble: give a stream file or '-'\n"); return 2; }
-    wf_status st = make_dir(c->cfg.out_dir);
+    wf_status st = wf_pipeline_make_dir(c->cfg.out_dir);
     if (st) return fail("assemble", st);
     FILE *in = strcmp(c->positional, "-") ? fopen(c->positional, "rb") : stdin;
     if (!in) { wf_error(WF_ERR_IO, "%s: cannot open", c->positional); return fail("assemble", WF_ERR_IO); }
@@ -458,10 +191,10 @@ static int cmd_stamp(cli *c)
     long long id = strtoll(c->id, &end, 10);
     if (end == c->id || *end) { fprintf(stderr, "wfisim stamp: --id '%s' is not an integer\n", c->id); return 2; }
     if (cfg->scene_kind == 2) { fprintf(stderr, "wfisim stamp: the grid scene has no catalog ids\n"); return 2; }
-    scene_inputs in;
+    wf_scene_inputs in;
     wf_scene *scene = NULL;
     double *pix = NULL;
-    wf_status st = load_catalogs(cfg, &in);
+    wf_status st = wf_pipeline_load_catalogs(cfg, &in);
     int found = 0;
     if (!st && in.have_gal) st = keep_id(&in.gal, id, &found);
     if (!st && in.have_stars) st = keep_id(&in.stars, id, &found);
@@ -484,7 +217,7 @@ static int cmd_stamp(cli *c)
     char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
     snprintf(path, sizeof path, "%s/stamp_%lld.fits", cfg->out_dir, id);
     snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    if (!st) st = make_dir(cfg->out_dir);
+    if (!st) st = wf_pipeline_make_dir(cfg->out_dir);
     if (!st) {
         fitsfile *f;
         int status = 0;
@@ -524,7 +257,7 @@ static int cmd_stamp(cli *c)
                                     info.kind ? "star" : "galaxy", info.id, info.flux);
     free(pix);
     wf_scene_destroy(scene);
-    scene_inputs_free(&in);
+    wf_pipeline_inputs_free(&in);
     return st ? fail("stamp", st) : 0;
 }
 
@@ -533,7 +266,7 @@ static int cmd_record(cli *c)
     if (!c->rates) { fprintf(stderr, "wfisim record: give --rates FILE\n"); return 2; }
     wf_scene_grid grid;
     wf_scene_source src;
-    grid_from_config(&c->cfg, &grid);
+    wf_pipeline_grid(&c->cfg, &grid);
     wf_status st = wf_scene_grid_source(&grid, &src);
     float *scratch = malloc((size_t)c->cfg.ro.tile_rows * c->cfg.ro.ncols * sizeof *scratch);
     if (!scratch) return fail("record", wf_error(WF_ERR_NOMEM, "out of memory"));

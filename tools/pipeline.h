@@ -1,0 +1,52 @@
+/* One exposure of one SCA from configuration to products: catalogs selected for the SCA's
+ * footprint, the scene (or a grid or a replay), the firmware on run.threads threads, the packet
+ * stream assembled to FITS in-process (or written out as a stream), and the truth table beside
+ * the image. `wfisim expose`, `wfisim demo` and `wfisim survey run` all come through here, so a
+ * survey product is byte-identical to the same exposure asked for with `wfisim expose`. */
+#ifndef WF_PIPELINE_H
+#define WF_PIPELINE_H
+
+#include "hal/clock.h"
+#include "hal/scene.h"
+#include "sim/catalog.h"
+#include "sim/scene.h"
+#include "tools/config.h"
+
+/* Catalogs of the scene: a synthetic field around the SCA, files, or a GalSim scene. */
+typedef struct wf_scene_inputs {
+    wf_catalog gal, stars, sne;
+    int have_gal, have_stars, have_sne;
+} wf_scene_inputs;
+
+/* Reads (or generates) the catalogs of cfg's scene and keeps the rows whose stamps can reach
+ * the SCA of cfg's pointing. */
+wf_status wf_pipeline_load_catalogs(const wf_config *cfg, wf_scene_inputs *in);
+void wf_pipeline_inputs_free(wf_scene_inputs *in);
+
+typedef struct wf_pipeline_job {
+    const wf_config *cfg;
+    const wf_clock *clock;
+    const char *stream;          /* write the packet stream here ("-": stdout) instead of FITS */
+    const char *replay;          /* take the rates from this recording */
+    const char *meta_extra;      /* further "hdr.KEY = value / comment" lines, or NULL */
+    const wf_scene_sn *sne;      /* supernovae to inject (NULL or nsne = 0: none) */
+    size_t nsne;
+    const char *version;         /* for the ORIGIN keyword */
+    /* out */
+    char image_path[WF_PATH_MAX + 64];
+    char truth_path[WF_PATH_MAX + 64];
+} wf_pipeline_job;
+
+wf_status wf_pipeline_expose(wf_pipeline_job *job);
+
+/* The product names of an exposure and SCA in dir. */
+void wf_pipeline_paths(const char *dir, unsigned exposure, unsigned sca, char *image, char *truth,
+                       size_t cap);
+
+/* The built-in grid scene of cfg (scene.sky_rate, scene.grid.*). */
+void wf_pipeline_grid(const wf_config *cfg, wf_scene_grid *g);
+
+/* mkdir -p. */
+wf_status wf_pipeline_make_dir(const char *dir);
+
+#endif
