@@ -197,6 +197,8 @@ static const key_desc keys[] = {
      .doc = "Galaxy catalog (FITS table or CSV, docs/CATALOGS.md), or the GalSim scene CSV."},
     {.name = "scene.stars", .type = KT_STRING, .unit = "", .def = "", FIELD(stars),
      .doc = "Star catalog (FITS table or CSV); empty: no stars for scene.kind catalog."},
+    {.name = "scene.sky", .type = KT_BOOL, .unit = "", .def = "true", FIELD(sky_on),
+     .doc = "Add the sky (zodiacal light, stray light, thermal) to object scenes; false for checks on an empty sky."},
     {.name = "scene.flux_fraction", .type = KT_DOUBLE, .unit = "", .def = "0.995", ABOVE(0.5), MAX(0.99999),
      FIELD(flux_fraction), .doc = "Each stamp holds at least this fraction of its object's flux."},
     {.name = "psf.pupil_bin", .type = KT_ENUM, .unit = "", .def = "8", .choices = pupil_bins,

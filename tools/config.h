@@ -36,6 +36,7 @@ typedef struct wf_config {
     int pupil_bin;                 /* psf.pupil_bin [8] */
     int psf_oversample;            /* psf.oversample [4] */
     double flux_fraction;          /* scene.flux_fraction [0.995] */
+    int sky_on;                    /* scene.sky [true] */
     char data_dir[WF_PATH_MAX];    /* paths.data [$WFISIM_DATA or ""] */
     char reference_dir[WF_PATH_MAX]; /* paths.reference [$WFISIM_REFERENCE or ""] */
 } wf_config;

@@ -22,7 +22,9 @@
 #include "tools/expose.h"
 #include "tools/pipeline.h"
 #include "tools/psfcmd.h"
+#include "tools/sncmd.h"
 #include "tools/surveycmd.h"
+#include "tools/surveyrun.h"
 
 #define WFISIM_VERSION "0.1.0"
 
@@ -37,6 +39,10 @@ static const char *usage_text =
     "  stamp --id ID        one catalog object's stamp (PSF, pixel, e-/s) -> DIR/stamp_ID.fits\n"
     "  psf --filter F --sca N --out F   a Roman PSF image (see wfisim psf --help)\n"
     "  survey plan --out F  the deep-tier observation plan and its coverage map (docs/SURVEY.md)\n"
+    "  survey run --plan F [--exposures A:B] [--scas 1,2,5-7] [--sne SNE.fits]\n"
+    "                       render every (exposure, SCA) of the range; resumable\n"
+    "  sn generate|lightcurves|lightcurve   supernova sample, truth light curves, one light\n"
+    "                       curve (see wfisim sn --help; docs/SUPERNOVAE.md)\n"
     "  config doc           print the reference of every configuration key (docs/CONFIG.md)\n"
     "  config check FILE    load a configuration file and report the first problem\n"
     "\n"
@@ -70,6 +76,8 @@ typedef struct cli {
     const char *rates;
     const char *positional;
     const char *id;
+    const char *plan, *exposures, *scas, *sne, *model;
+    int ma_table_given;
 } cli;
 
 /* Options that are shorthands for configuration keys. */
@@ -99,6 +107,7 @@ static int parse(int argc, char **argv, cli *c)
         const char *val = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--config")) { i++; continue; }
         if (!strcmp(a, "--quiet")) { c->cfg.quiet = 1; continue; }
+        if (!strcmp(a, "--ma-table")) c->ma_table_given = 1;
         if (!strcmp(a, "--help") || !strcmp(a, "-h")) { fputs(usage_text, stdout); exit(0); }
         int done = 0;
         for (size_t k = 0; k < sizeof shorthands / sizeof *shorthands; k++)
@@ -113,6 +122,7 @@ static int parse(int argc, char **argv, cli *c)
             }
         if (done) continue;
         if (!strcmp(a, "--set")) {
+            if (val && !strncmp(val, "readout.ma_table=", 17)) c->ma_table_given = 1;
             if (!val) { fprintf(stderr, "wfisim: --set needs KEY=VALUE\n"); return 2; }
             if ((st = wf_config_set(&c->cfg, val, "--set"))) return fail("option", st);
             i++;
@@ -126,6 +136,11 @@ static int parse(int argc, char **argv, cli *c)
         else if (!strcmp(a, "--replay") && val) { c->replay = val; i++; }
         else if (!strcmp(a, "--rates") && val) { c->rates = val; i++; }
         else if (!strcmp(a, "--id") && val) { c->id = val; i++; }
+        else if (!strcmp(a, "--plan") && val) { c->plan = val; i++; }
+        else if (!strcmp(a, "--exposures") && val) { c->exposures = val; i++; }
+        else if (!strcmp(a, "--scas") && val) { c->scas = val; i++; }
+        else if (!strcmp(a, "--sne") && val) { c->sne = val; i++; }
+        else if (!strcmp(a, "--model") && val) { c->model = val; i++; }
         else if (a[0] == '-' && a[1] == '-') {
             fprintf(stderr, "wfisim: unknown option '%s' (see wfisim --help)\n", a);
             return 2;
@@ -134,6 +149,18 @@ static int parse(int argc, char **argv, cli *c)
     }
     if ((st = wf_config_finish(&c->cfg, &c->clock))) return fail("config", st);
     return 0;
+}
+
+/* The SN sample of --sne with its model (--model, else the SALT3 model in the data folder). */
+static wf_status open_injector(const cli *c, wf_sn_injector **inj)
+{
+    *inj = NULL;
+    if (!c->sne) return WF_OK;
+    char model[WF_PATH_MAX + 32];
+    if (c->model) snprintf(model, sizeof model, "%s", c->model);
+    else if (c->cfg.data_dir[0]) snprintf(model, sizeof model, "%s/salt3/salt3-k21", c->cfg.data_dir);
+    else return wf_error(WF_ERR_INPUT, "--sne needs the SALT model: give --model DIR or a data folder (--data)");
+    return wf_sn_injector_open(c->sne, model, c->cfg.data_dir, inj);
 }
 
 static int run_exposure(cli *c, int demo)
@@ -145,7 +172,9 @@ static int run_exposure(cli *c, int demo)
     job.stream = c->stream;
     job.replay = c->replay;
     job.version = WFISIM_VERSION;
-    wf_status st = wf_pipeline_expose(&job);
+    wf_status st = open_injector(c, &job.injector);
+    if (!st) st = wf_pipeline_expose(&job);
+    wf_sn_injector_free(job.injector);
     return st ? fail(demo ? "demo" : "expose", st) : 0;
 }
 
@@ -261,6 +290,35 @@ static int cmd_stamp(cli *c)
     return st ? fail("stamp", st) : 0;
 }
 
+static int cmd_survey_run(cli *c)
+{
+    if (!c->plan) { fprintf(stderr, "wfisim survey run: give --plan plan.fits (from wfisim survey plan)\n"); return 2; }
+    wf_survey_run_options opt;
+    memset(&opt, 0, sizeof opt);
+    opt.plan_path = c->plan;
+    opt.first = 0;
+    opt.last = -1;
+    opt.ma_table_given = c->ma_table_given;
+    opt.version = WFISIM_VERSION;
+    wf_status st = WF_OK;
+    if (c->exposures) st = wf_survey_parse_range(c->exposures, &opt.first, &opt.last);
+    if (!st && c->scas) st = wf_survey_parse_scas(c->scas, opt.scas, &opt.nscas);
+    if (st) return fail("survey run", st);
+    if (c->cfg.scene_kind == 2 || c->replay || c->stream) {
+        fprintf(stderr, "wfisim survey run: the survey draws a scene (scene.kind synthetic, catalog or galsim); no --replay or --stream\n");
+        return 2;
+    }
+    if ((st = open_injector(c, &opt.sne))) return fail("survey run", st);
+    wf_survey_run_stats stats;
+    st = wf_survey_run(&c->cfg, &opt, &stats);
+    wf_sn_injector_free(opt.sne);
+    if (st) return fail("survey run", st);
+    if (!c->cfg.quiet)
+        fprintf(stderr, "wfisim survey: %ld products rendered (%ld replacing damaged ones), %ld already done; "
+                "%ld supernova images\n", stats.rendered, stats.redone, stats.skipped, stats.sne_drawn);
+    return 0;
+}
+
 static int cmd_record(cli *c)
 {
     if (!c->rates) { fprintf(stderr, "wfisim record: give --rates FILE\n"); return 2; }
@@ -282,8 +340,14 @@ int main(int argc, char **argv)
     const char *cmd = argv[1];
     if (!strcmp(cmd, "--help") || !strcmp(cmd, "-h") || !strcmp(cmd, "help")) { fputs(usage_text, stdout); return 0; }
     if (!strcmp(cmd, "--version")) { puts("wfisim " WFISIM_VERSION); return 0; }
+    if (!strcmp(cmd, "survey") && argc >= 3 && !strcmp(argv[2], "run")) {
+        cli c;
+        int rc = parse(argc - 3, argv + 3, &c);
+        return rc ? rc : cmd_survey_run(&c);
+    }
     if (!strcmp(cmd, "survey")) return wf_cmd_survey(argc - 2, argv + 2);
     if (!strcmp(cmd, "psf")) return wf_cmd_psf(argc - 2, argv + 2);
+    if (!strcmp(cmd, "sn")) return wf_cmd_sn(argc - 2, argv + 2);
     if (!strcmp(cmd, "config")) {
         if (argc >= 3 && !strcmp(argv[2], "doc")) { wf_config_write_doc(stdout); return 0; }
         if (argc >= 4 && !strcmp(argv[2], "check")) {

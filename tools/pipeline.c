@@ -155,13 +155,23 @@ static void *assemble_main(void *arg)
 static wf_status gather_sne(const wf_pipeline_job *pj, const wf_scene_inputs *in, wf_scene_sn **out,
                             size_t *n)
 {
-    size_t ncat = in->have_sne ? in->sne.n : 0, total = pj->nsne + ncat;
+    size_t ncat = in->have_sne ? in->sne.n : 0, ninj = 0;
+    wf_scene_sn *inj = NULL;
     *out = NULL;
     *n = 0;
-    if (!total) return WF_OK;
+    if (pj->injector) {
+        wf_skyregion reg;
+        wf_status st = sca_region(pj->cfg, &reg);
+        if (!st) st = wf_sn_injector_select(pj->injector, pj->cfg->filter, pj->cfg->mjd, &reg, &inj, &ninj);
+        if (st) return st;
+    }
+    size_t total = pj->nsne + ncat + ninj;
+    if (!total) { free(inj); return WF_OK; }
     wf_scene_sn *v = calloc(total, sizeof *v);
-    if (!v) return wf_error(WF_ERR_NOMEM, "out of memory for %zu supernovae", total);
+    if (!v) { free(inj); return wf_error(WF_ERR_NOMEM, "out of memory for %zu supernovae", total); }
     if (pj->nsne) memcpy(v, pj->sne, pj->nsne * sizeof *v);
+    if (ninj) memcpy(v + pj->nsne + ncat, inj, ninj * sizeof *v);
+    free(inj);
     if (ncat) {
         int band;
         wf_status st = wf_catalog_band(&in->sne, pj->cfg->filter, &band);
@@ -186,6 +196,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
 {
     const wf_config *cfg = pj->cfg;
     pj->image_path[0] = pj->truth_path[0] = '\0';
+    pj->nsne_drawn = 0;
     int T = cfg->threads < 1 ? 1 : cfg->threads;
     wf_scene_source *scenes = calloc((size_t)T, sizeof *scenes);
     wf_scene_replay *replays = calloc((size_t)T, sizeof *replays);
@@ -218,6 +229,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         ss.pupil_bin = 1 << cfg->pupil_bin;
         ss.psf_oversample = cfg->psf_oversample;
         ss.flux_fraction = cfg->flux_fraction;
+        ss.sky_on = cfg->sky_on;
         ss.threads = T;
         if ((st = gather_sne(pj, &inputs, &sne, &nsne))) goto done;
         ss.sne = sne;
@@ -227,6 +239,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
             goto done;
         wf_scene_stats sst;
         wf_scene_get_stats(objscene, &sst);
+        pj->nsne_drawn = (size_t)sst.sne;
         if (!cfg->quiet)
             fprintf(stderr, "wfisim: scene of %ld galaxies and %ld stars on SCA %u in %s, sky %.4f-%.4f "
                     "e-/pixel/s, PSF at %.1f nm, built in %.2f s\n", sst.galaxies, sst.stars, cfg->ro.sca,

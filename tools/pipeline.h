@@ -11,6 +11,7 @@
 #include "sim/catalog.h"
 #include "sim/scene.h"
 #include "tools/config.h"
+#include "tools/sninject.h"
 
 /* Catalogs of the scene: a synthetic field around the SCA, files, or a GalSim scene. */
 typedef struct wf_scene_inputs {
@@ -29,12 +30,14 @@ typedef struct wf_pipeline_job {
     const char *stream;          /* write the packet stream here ("-": stdout) instead of FITS */
     const char *replay;          /* take the rates from this recording */
     const char *meta_extra;      /* further "hdr.KEY = value / comment" lines, or NULL */
-    const wf_scene_sn *sne;      /* supernovae to inject (NULL or nsne = 0: none) */
+    const wf_scene_sn *sne;      /* supernovae to inject as given (NULL or nsne = 0: none) */
     size_t nsne;
+    wf_sn_injector *injector;    /* and those of an SN sample on this SCA at cfg's MJD, or NULL */
     const char *version;         /* for the ORIGIN keyword */
     /* out */
     char image_path[WF_PATH_MAX + 64];
     char truth_path[WF_PATH_MAX + 64];
+    size_t nsne_drawn;           /* SNe that reach the SCA */
 } wf_pipeline_job;
 
 wf_status wf_pipeline_expose(wf_pipeline_job *job);

@@ -8,6 +8,7 @@
 #include "sim/survey.h"
 #include "sim/wcs.h"
 #include "tools/config.h"
+#include "tools/plot.h"
 
 static const char *survey_usage =
     "usage: wfisim survey plan [--config FILE] [--data DIR] [--set survey.KEY=VALUE ...]\n"
@@ -48,9 +49,38 @@ static int coverage_path(const char *out, char *buf, size_t size)
     return n >= 0 && (size_t)n < size;
 }
 
+/* One PNG per filter beside the coverage FITS: exposures per cell, east to the left, north up,
+ * uncovered cells white. Written after the FITS products; the names go into *names. */
+static wf_status coverage_pngs(const wf_survey_coverage *cov, const char *cov_out, char *names, size_t cap)
+{
+    size_t len = strlen(cov_out);
+    size_t stem = len > 5 && !strcmp(cov_out + len - 5, ".fits") ? len - 5 : len;
+    size_t plane = (size_t)cov->nx * cov->ny;
+    float *img = malloc(plane * sizeof *img);
+    if (!img) return wf_error(WF_ERR_NOMEM, "out of memory for the coverage map");
+    double hx = 0.5 * cov->nx * cov->pixel, hy = 0.5 * cov->ny * cov->pixel;
+    wf_status st = WF_OK;
+    names[0] = '\0';
+    for (int f = 0; f < cov->nfilters && !st; f++) {
+        char path[WF_PATH_MAX + 64], title[128];
+        snprintf(path, sizeof path, "%.*s_%s.png", (int)stem, cov_out, cov->filters[f]);
+        for (size_t i = 0; i < plane; i++) img[i] = (float)cov->count[(size_t)f * plane + i];
+        snprintf(title, sizeof title, "%s exposures per %.0f\" cell: %.2f deg2 >= %d, %.2f deg2 >= 1",
+                 cov->filters[f], cov->pixel * 3600.0, cov->area[f][WF_SURVEY_NTHRESH - 1],
+                 cov->threshold[WF_SURVEY_NTHRESH - 1], cov->area[f][0]);
+        st = wf_plot_map_png(img, cov->nx, cov->ny, hx, -hx, -hy, hy, 1.0,
+                             cov->max_count[f] > 1 ? cov->max_count[f] : 2, title,
+                             "east offset from field centre (deg)", "north offset (deg)", "exposures", path);
+        size_t used = strlen(names);
+        snprintf(names + used, cap - used, "%s%s", used ? ", " : "", path);
+    }
+    free(img);
+    return st;
+}
+
 static void report(const wf_survey_plan *plan, const wf_survey_overlap *ov,
                    const wf_survey_coverage *cov, const wf_focal_plane *fp, const char *out,
-                   const char *cov_out)
+                   const char *cov_out, const char *pngs)
 {
     const wf_survey_params *p = &plan->par;
     const wf_exposure *last = &plan->exp[plan->nexp - 1];
@@ -68,6 +98,7 @@ static void report(const wf_survey_plan *plan, const wf_survey_overlap *ov,
         printf("  (max %d)\n", cov->max_count[f]);
     }
     printf("wrote %s and %s\n", out, cov_out);
+    if (pngs[0]) printf("coverage maps: %s\n", pngs);
 }
 
 static int cmd_plan(int argc, char **argv)
@@ -119,6 +150,7 @@ static int cmd_plan(int argc, char **argv)
     wf_survey_plan plan = {0};
     wf_survey_coverage cov = {0};
     wf_survey_overlap ov = {0};
+    char pngs[4 * WF_PATH_MAX + 512] = "";
     if (!rc) {
         /* Parameters first: a bad value is bad input whatever the data directory holds. */
         st = wf_survey_check(&par);
@@ -132,6 +164,7 @@ static int cmd_plan(int argc, char **argv)
             st = wf_survey_write_coverage(&cov, cov_out);
             if (st) unlink(out); /* both products or neither */
         }
+        if (!st) st = coverage_pngs(&cov, cov_out, pngs, sizeof pngs);
         if (st) rc = fail(st);
     }
     if (!rc) {
@@ -139,7 +172,7 @@ static int cmd_plan(int argc, char **argv)
             fprintf(stderr, "wfisim survey: warning: %ld SCA pairs of one snake overlap (largest "
                     "%.1f arcsec2, orient %d); a supernova there is seen twice per filter and "
                     "visit\n", ov.overlapping, ov.max_overlap, ov.worst_orient);
-        if (!quiet) report(&plan, &ov, &cov, fp, out, cov_out);
+        if (!quiet) report(&plan, &ov, &cov, fp, out, cov_out, pngs);
     }
     wf_survey_coverage_free(&cov);
     wf_survey_plan_free(&plan);

@@ -1,0 +1,229 @@
+/* Supernova injection end to end: SNe placed on known pixels of a plan's exposure are drawn
+ * through the survey run with every detector effect and the sky off; the image holds the flux
+ * of the magnitude the light curve gives at the exposure's mid-time (computed here by the
+ * model's direct 2-D path, not the injector's fast one), and each SN is in the truth of the
+ * SCA it falls on and of no other. */
+#include <fitsio.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sim/bandpass.h"
+#include "sim/salt.h"
+#include "sim/sncat.h"
+#include "sim/wcs.h"
+#include "tests/testutil.h"
+
+#define NOEFFECTS                                                                                    \
+    "--set detector.effects.photon_noise=false --set detector.effects.reciprocity=false "           \
+    "--set detector.effects.dark=false --set detector.effects.nonlinearity=false "                  \
+    "--set detector.effects.ipc=false --set detector.effects.read_noise=false "                     \
+    "--set detector.effects.quantize=false --set detector.effects.cosmic_rays=false "               \
+    "--set scene.sky=false --set scene.flux_fraction=0.9999 "                                         \
+    "--set readout.ncols=128 --set readout.nrows=128 --mode single"
+
+static int run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+static int run(const char *fmt, ...)
+{
+    char cmd[8192];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(cmd, sizeof cmd, fmt, ap);
+    va_end(ap);
+    int rc = system(cmd);
+    return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
+}
+
+static void plan_row0(const char *plan, double *ra, double *dec, double *pa, double *mjd)
+{
+    fitsfile *f;
+    int status = 0, c;
+    fits_open_file(&f, plan, READONLY, &status);
+    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
+    const char *names[4] = {"RA", "DEC", "PA", "MJD_MID"};
+    double *out[4] = {ra, dec, pa, mjd};
+    for (int k = 0; k < 4; k++) {
+        fits_get_colnum(f, CASEINSEN, (char *)names[k], &c, &status);
+        fits_read_col(f, TDOUBLE, c, 1, 1, 1, NULL, out[k], NULL, &status);
+    }
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+}
+
+static double image_sum(const char *path)
+{
+    fitsfile *f;
+    int status = 0;
+    fits_open_file(&f, path, READONLY, &status);
+    fits_movnam_hdu(f, IMAGE_HDU, "SCI", 0, &status);
+    long n[2] = {0, 0};
+    fits_get_img_size(f, 2, n, &status);
+    float *pix = malloc((size_t)(n[0] * n[1]) * sizeof *pix);
+    fits_read_img(f, TFLOAT, 1, n[0] * n[1], NULL, pix, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    double s = 0;
+    for (long i = 0; i < n[0] * n[1]; i++) s += pix[i];
+    free(pix);
+    return s;
+}
+
+/* The SNE rows of a truth file: ids, and MAG and FLUX of the first. */
+static int truth_sne(const char *path, long long *ids, int max, double *mag, double *flux)
+{
+    fitsfile *f;
+    int status = 0, c;
+    long n = 0;
+    fits_open_file(&f, path, READONLY, &status);
+    fits_movnam_hdu(f, BINARY_TBL, "SNE", 0, &status);
+    fits_get_num_rows(f, &n, &status);
+    ck_assert_int_eq(status, 0);
+    for (long r = 1; r <= n && r <= max; r++) {
+        fits_get_colnum(f, CASEINSEN, "ID", &c, &status);
+        fits_read_col(f, TLONGLONG, c, r, 1, 1, NULL, &ids[r - 1], NULL, &status);
+    }
+    if (n > 0) {
+        fits_get_colnum(f, CASEINSEN, "MAG", &c, &status);
+        fits_read_col(f, TDOUBLE, c, 1, 1, 1, NULL, mag, NULL, &status);
+        fits_get_colnum(f, CASEINSEN, "FLUX", &c, &status);
+        fits_read_col(f, TDOUBLE, c, 1, 1, 1, NULL, flux, NULL, &status);
+    }
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    return (int)n;
+}
+
+START_TEST(injected_flux_and_truth)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the Roman and SALT data");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], model[4200], sne[4200], stars[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(model, sizeof model, "%s/salt3/salt3-k21", data);
+    snprintf(sne, sizeof sne, "%s/sne.fits", d);
+    snprintf(stars, sizeof stars, "%s/stars.csv", d);
+    ck_assert_int_eq(run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
+    double ra, dec, pa, mjd;
+    plan_row0(plan, &ra, &dec, &pa, &mjd); /* exposure 0: Y106 */
+
+    /* SN 41 on SCA 1 at pixel (60.3, 50.6) (0-based), SN 42 on SCA 2 at (20.7, 90.2) */
+    wf_focal_plane fp;
+    wf_wcs w1, w2;
+    ck_assert_int_eq(wf_wcs_focal_plane(data, &fp), 0);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, ra, dec, pa, 1, &w1), 0);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, ra, dec, pa, 2, &w2), 0);
+    wf_sn_sample s;
+    memset(&s, 0, sizeof s);
+    snprintf(s.model, sizeof s.model, "salt3-k21");
+    const double z[2] = {0.5, 0.9}, dt[2] = {3.0, -12.0};
+    for (int k = 0; k < 2; k++) {
+        size_t r;
+        ck_assert_int_eq(wf_sn_sample_push(&s, &r), 0);
+        s.id[r] = 41 + k;
+        s.host_id[r] = -1;
+        s.host_comp[r] = -1;
+        s.flags[r] = WF_SN_FLAG_HOSTLESS;
+        s.z[r] = z[k];
+        s.t0[r] = mjd + dt[k];
+        s.x1[r] = 0.3;
+        s.c[r] = -0.05;
+        s.mu[r] = k ? 43.85 : 42.27;
+        s.x0[r] = pow(10.0, -0.4 * (s.mu[r] - 0.14 * 0.3 + 3.1 * -0.05)) / 1e-12;
+        ck_assert_int_eq(wf_wcs_pix2world(k ? &w2 : &w1, k ? 20.7 : 60.3, k ? 90.2 : 50.6, &s.ra[r], &s.dec[r]), 0);
+    }
+    ck_assert_int_eq(wf_sn_sample_write(&s, sne), 0);
+    /* the scene's only catalog object lies far off every SCA */
+    FILE *f = fopen(stars, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "id,ra,dec,mag_Y106,mag_J129,mag_H158,mag_F184\n1,%.6f,%.6f,20,20,20,20\n", fmod(ra + 20.0, 360.0), dec);
+    fclose(f);
+    ck_assert_int_eq(run("%s survey run --quiet --data %s --plan %s --exposures 0 --scas 1,2,3 --sne %s --model %s "
+                         "--set scene.kind=catalog --stars %s " NOEFFECTS " --out %s/out",
+                         bin, data, plan, sne, model, stars, d), 0);
+
+    /* the magnitude by the model's direct path at the exposure's mid-time */
+    wf_salt_model *m;
+    wf_bandpass bp;
+    ck_assert_int_eq(wf_salt_load(model, &m), 0);
+    ck_assert_int_eq(wf_bandpass_load(WF_Y106, data, &bp), 0);
+    for (int k = 0; k < 2; k++) {
+        wf_salt_params p = {s.z[k], s.t0[k], s.x0[k], s.x1[k], s.c[k]};
+        double mag, rate;
+        unsigned flags;
+        ck_assert_int_eq(wf_salt_bandmag(m, &p, WF_SALT_INTERP_BICUBIC, &bp, mjd, &mag, &flags), 0);
+        ck_assert_int_eq(flags, 0);
+        rate = wf_bandpass_countrate_ab(&bp, mag);
+        char img[4200], truth[4200];
+        snprintf(img, sizeof img, "%s/out/wfisim_e000000_sca%02d.fits", d, k + 1);
+        snprintf(truth, sizeof truth, "%s/out/wfisim_e000000_sca%02d_truth.fits", d, k + 1);
+        long long ids[4];
+        double tmag = NAN, tflux = NAN;
+        ck_assert_int_eq(truth_sne(truth, ids, 4, &tmag, &tflux), 1);
+        ck_assert_int_eq(ids[0], 41 + k);
+        ck_assert_double_eq_tol(tmag, mag, 1e-4);
+        ck_assert_double_eq_tol(tflux / rate, 1.0, 1e-4);
+        double sum = image_sum(img);
+        /* the stamp holds >= 99.99% of the light; the SN is > 30 px from every edge */
+        ck_assert_msg(fabs(sum / rate - 1.0) < 5e-3, "SN %d: image holds %.6g e-/s, light curve %.6g", 41 + k, sum,
+                      rate);
+    }
+    /* SCA 3 holds neither */
+    char truth3[4200];
+    snprintf(truth3, sizeof truth3, "%s/out/wfisim_e000000_sca03_truth.fits", d);
+    long long ids[4];
+    double tmag, tflux;
+    ck_assert_int_eq(truth_sne(truth3, ids, 4, &tmag, &tflux), 0);
+    wf_salt_free(m);
+    wf_sn_sample_free(&s);
+}
+END_TEST
+
+START_TEST(sample_roundtrip_and_bad_values)
+{
+    const char *d = wf_test_tmpdir();
+    char path[4200];
+    snprintf(path, sizeof path, "%s/s.fits", d);
+    wf_sn_sample s, t;
+    memset(&s, 0, sizeof s);
+    for (int k = 0; k < 3; k++) {
+        size_t r;
+        ck_assert_int_eq(wf_sn_sample_push(&s, &r), 0);
+        s.id[r] = 7 + k, s.z[r] = 0.1 * (k + 1), s.x0[r] = 1e-5, s.ra[r] = 71, s.dec[r] = -53 + 0.01 * k;
+        s.host_id[r] = k == 1 ? -1 : 1000 + k;
+    }
+    ck_assert_int_eq(wf_sn_sample_write(&s, path), 0);
+    ck_assert_int_eq(wf_sn_sample_read(path, &t), 0);
+    ck_assert_uint_eq(t.n, 3);
+    for (int k = 0; k < 3; k++) {
+        ck_assert(t.id[k] == s.id[k] && t.host_id[k] == s.host_id[k]);
+        ck_assert(t.z[k] == s.z[k] && t.dec[k] == s.dec[k]);
+    }
+    wf_sn_sample_free(&t);
+    s.z[2] = -0.5;
+    ck_assert_int_eq(wf_sn_sample_write(&s, path), 0);
+    ck_assert_int_ne(wf_sn_sample_read(path, &t), 0);
+    ck_assert_msg(strstr(wf_error_message(), "row 3") != NULL, "%s", wf_error_message());
+    s.z[2] = NAN;
+    ck_assert_int_eq(wf_sn_sample_write(&s, path), 0);
+    ck_assert_int_ne(wf_sn_sample_read(path, &t), 0);
+    ck_assert_msg(strstr(wf_error_message(), "Z") != NULL, "%s", wf_error_message());
+    wf_sn_sample_free(&s);
+}
+END_TEST
+
+static Suite *suite(void)
+{
+    Suite *s = suite_create("sninject");
+    TCase *tc = tcase_create("all");
+    tcase_set_timeout(tc, 300);
+    tcase_add_test(tc, injected_flux_and_truth);
+    tcase_add_test(tc, sample_roundtrip_and_bad_values);
+    suite_add_tcase(s, tc);
+    return s;
+}
+
+int main(void) { return wf_test_main(suite()); }

@@ -1,0 +1,842 @@
+#include "tools/sncmd.h"
+
+#include <fitsio.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+#include "sim/bandpass.h"
+#include "sim/catalog.h"
+#include "sim/cosmology.h"
+#include "sim/hostlib.h"
+#include "sim/salt.h"
+#include "sim/sncat.h"
+#include "sim/snhost.h"
+#include "sim/snpop.h"
+#include "sim/snrate.h"
+#include "sim/synth.h"
+#include "tools/config.h"
+#include "tools/plot.h"
+
+static const char *sn_usage =
+    "usage: wfisim sn generate (--plan plan.fits | --area DEG2 --start MJD --days N [--ra R --dec D])\n"
+    "                          [--catalog FILE | --hostless] [--seed S] [--model DIR] [--data DIR]\n"
+    "                          [--h0 H --om OM] [--alpha A --beta B --sigma-int S] [--dz DZ]\n"
+    "                          [--rate 'A B zmin zmax' ...] [--zmin Z --zmax Z] --out sne.fits\n"
+    "       wfisim sn lightcurves --sne sne.fits (--plan plan.fits | --grid START:END:STEP\n"
+    "                          [--filters Y106,J129,...]) [--model DIR] [--data DIR] --out lc.fits\n"
+    "                          [--plot ID,ID,... [--plot-dir DIR]]\n"
+    "       wfisim sn lightcurve --z Z --t0 MJD --band F --mjd M1,M2,... [--x1 X] [--c C]\n"
+    "                          [--x0 X0 | --mu MU] [--model DIR] [--data DIR] [--interp bicubic|linear]\n"
+    "\n"
+    "  generate     the SN Ia sample of SPEC 5 over a plan's footprint (its coverage map beside\n"
+    "               it) or a circle of DEG2 about (R, D); hosts from --catalog (FITS/CSV galaxies\n"
+    "               with z, logmass, logsfr, or an SNANA HOSTLIB), else the synthetic field\n"
+    "  lightcurves  truth light curves (ID, BAND, MJD, MAG, FLUX, FLAG) on the plan's exposures\n"
+    "               in each SN's model window, or on a regular grid in the listed filters\n"
+    "  lightcurve   one SN's AB magnitudes and e-/s at given dates (sncosmo's bandmag)\n"
+    "\n"
+    "  --model DIR  SALT model directory (default DATA/salt3/salt3-k21); --data DIR Roman data\n"
+    "               (default $WFISIM_DATA; without it the built-in top-hat bandpasses)\n";
+
+static int fail(wf_status st)
+{
+    const char *m = wf_error_message();
+    fprintf(stderr, "wfisim sn: %s\n", m[0] ? m : wf_status_name(st));
+    return st == WF_ERR_INPUT || st == WF_ERR_RANGE ? 2 : 1;
+}
+
+static int usage_error(const char *fmt, const char *arg)
+{
+    fprintf(stderr, "wfisim sn: ");
+    fprintf(stderr, fmt, arg);
+    fprintf(stderr, "\n\n%s", sn_usage);
+    return 2;
+}
+
+/* ---- options ------------------------------------------------------------------------- */
+
+#define MAX_RATE_LINES 8
+
+typedef struct opts {
+    const char *plan, *out, *catalog, *model, *data, *sne, *grid, *filters, *plot, *plot_dir;
+    const char *band, *mjd, *interp;
+    const char *rate[MAX_RATE_LINES];
+    int nrate, hostless;
+    double area, start, days, ra, dec, seed;
+    double h0, om, alpha, beta, sigma_int, dz, zmin, zmax;
+    double z, t0, x1, c, x0, mu;
+    char model_buf[WF_PATH_MAX + 32];
+} opts;
+
+static int number(const char *flag, const char *text, double *out)
+{
+    char *end;
+    double v = strtod(text, &end);
+    if (end == text || *end || !isfinite(v)) {
+        fprintf(stderr, "wfisim sn: %s '%s' is not a finite number\n", flag, text);
+        return 2;
+    }
+    *out = v;
+    return 0;
+}
+
+static int parse(int argc, char **argv, opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->area = o->start = o->days = o->x0 = o->mu = o->z = o->t0 = NAN;
+    o->ra = 71.0, o->dec = -53.0, o->seed = 1;
+    o->h0 = WF_COSMO_H0_DEFAULT, o->om = WF_COSMO_OM_DEFAULT;
+    o->alpha = o->beta = o->sigma_int = o->dz = o->zmin = o->zmax = NAN;
+    static const struct { const char *flag; size_t off; } strs[] = {
+        {"--plan", offsetof(opts, plan)},       {"--out", offsetof(opts, out)},
+        {"--catalog", offsetof(opts, catalog)}, {"--model", offsetof(opts, model)},
+        {"--data", offsetof(opts, data)},       {"--sne", offsetof(opts, sne)},
+        {"--grid", offsetof(opts, grid)},       {"--filters", offsetof(opts, filters)},
+        {"--plot", offsetof(opts, plot)},       {"--plot-dir", offsetof(opts, plot_dir)},
+        {"--band", offsetof(opts, band)},       {"--mjd", offsetof(opts, mjd)},
+        {"--interp", offsetof(opts, interp)},
+    };
+    static const struct { const char *flag; size_t off; } nums[] = {
+        {"--area", offsetof(opts, area)},   {"--start", offsetof(opts, start)},
+        {"--days", offsetof(opts, days)},   {"--ra", offsetof(opts, ra)},
+        {"--dec", offsetof(opts, dec)},     {"--seed", offsetof(opts, seed)},
+        {"--h0", offsetof(opts, h0)},       {"--om", offsetof(opts, om)},
+        {"--alpha", offsetof(opts, alpha)}, {"--beta", offsetof(opts, beta)},
+        {"--sigma-int", offsetof(opts, sigma_int)}, {"--dz", offsetof(opts, dz)},
+        {"--zmin", offsetof(opts, zmin)},   {"--zmax", offsetof(opts, zmax)},
+        {"--z", offsetof(opts, z)},         {"--t0", offsetof(opts, t0)},
+        {"--x1", offsetof(opts, x1)},       {"--c", offsetof(opts, c)},
+        {"--x0", offsetof(opts, x0)},       {"--mu", offsetof(opts, mu)},
+    };
+    for (int i = 0; i < argc; i++) {
+        const char *a = argv[i], *val = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--help") || !strcmp(a, "-h")) { fputs(sn_usage, stdout); exit(0); }
+        if (!strcmp(a, "--hostless")) { o->hostless = 1; continue; }
+        int done = 0;
+        for (size_t k = 0; k < sizeof strs / sizeof *strs && !done; k++)
+            if (!strcmp(a, strs[k].flag)) {
+                if (!val) return usage_error("%s needs a value", a);
+                *(const char **)((char *)o + strs[k].off) = val;
+                done = 1;
+            }
+        for (size_t k = 0; k < sizeof nums / sizeof *nums && !done; k++)
+            if (!strcmp(a, nums[k].flag)) {
+                if (!val) return usage_error("%s needs a value", a);
+                if (number(a, val, (double *)((char *)o + nums[k].off))) return 2;
+                done = 1;
+            }
+        if (!done && !strcmp(a, "--rate")) {
+            if (!val) return usage_error("%s needs 'A B zmin zmax'", a);
+            if (o->nrate == MAX_RATE_LINES) return usage_error("at most 8 %s pieces", a);
+            o->rate[o->nrate++] = val;
+            done = 1;
+        }
+        if (!done) return usage_error("unknown option '%s'", a);
+        i++;
+    }
+    if (!o->data) o->data = getenv("WFISIM_DATA") ? getenv("WFISIM_DATA") : "";
+    if (!o->model) {
+        if (!o->data[0]) {
+            fprintf(stderr, "wfisim sn: no SALT model: give --model DIR, or a data folder (--data DIR or "
+                            "$WFISIM_DATA) holding salt3/salt3-k21\n");
+            return 2;
+        }
+        snprintf(o->model_buf, sizeof o->model_buf, "%s/salt3/salt3-k21", o->data);
+        o->model = o->model_buf;
+    }
+    return 0;
+}
+
+/* ---- footprint: a plan's coverage map or a circle ----------------------------------- */
+
+typedef struct footprint {
+    int circle;
+    double ra0, dec0;           /* tangent point / circle centre, deg */
+    double radius;              /* circle: deg */
+    int nx, ny;                 /* map */
+    double crpix1, crpix2, cd11, cd22;
+    unsigned char *covered;     /* [ny][nx] */
+    size_t ncovered;
+    size_t *cells;              /* indices of covered cells */
+    double area;                /* deg^2 */
+} footprint;
+
+static void footprint_free(footprint *f)
+{
+    free(f->covered);
+    free(f->cells);
+}
+
+static void tan_to_world(double ra0, double dec0, double xi_deg, double eta_deg, double *ra, double *dec)
+{
+    const double d2r = M_PI / 180.0;
+    double xi = xi_deg * d2r, eta = eta_deg * d2r, d0 = dec0 * d2r;
+    double den = cos(d0) - eta * sin(d0);
+    double a = atan2(xi, den);
+    *ra = fmod(ra0 + a / d2r + 720.0, 360.0);
+    *dec = atan2((sin(d0) + eta * cos(d0)) * cos(a), den) / d2r;
+}
+
+static int world_to_tan(double ra0, double dec0, double ra, double dec, double *xi, double *eta)
+{
+    const double d2r = M_PI / 180.0;
+    double d0 = dec0 * d2r, d = dec * d2r, da = (ra - ra0) * d2r;
+    double cosc = sin(d0) * sin(d) + cos(d0) * cos(d) * cos(da);
+    if (cosc <= 0) return 0;
+    *xi = cos(d) * sin(da) / cosc / d2r;
+    *eta = (cos(d0) * sin(d) - sin(d0) * cos(d) * cos(da)) / cosc / d2r;
+    return 1;
+}
+
+static int footprint_contains(const footprint *f, double ra, double dec)
+{
+    double xi, eta;
+    if (!world_to_tan(f->ra0, f->dec0, ra, dec, &xi, &eta)) return 0;
+    if (f->circle) {
+        const double d2r = M_PI / 180.0;
+        double cosd = sin(f->dec0 * d2r) * sin(dec * d2r) + cos(f->dec0 * d2r) * cos(dec * d2r) * cos((ra - f->ra0) * d2r);
+        return cosd >= cos(f->radius * d2r);
+    }
+    long i = lround(xi / f->cd11 + f->crpix1) - 1, j = lround(eta / f->cd22 + f->crpix2) - 1;
+    return i >= 0 && j >= 0 && i < f->nx && j < f->ny && f->covered[(size_t)j * f->nx + i];
+}
+
+/* plan.fits -> plan_coverage.fits: covered cells are those any exposure of any filter sees. */
+static wf_status footprint_from_plan(const char *plan, footprint *f, double *mjd0, double *mjd1)
+{
+    memset(f, 0, sizeof *f);
+    char path[WF_PATH_MAX + 32];
+    size_t len = strlen(plan);
+    if (len > 5 && !strcmp(plan + len - 5, ".fits")) snprintf(path, sizeof path, "%.*s_coverage.fits", (int)(len - 5), plan);
+    else snprintf(path, sizeof path, "%s_coverage.fits", plan);
+    fitsfile *ff;
+    int status = 0;
+    if (fits_open_diskfile(&ff, plan, READONLY, &status))
+        return wf_error(WF_ERR_IO, "%s: cannot open the plan", plan);
+    int c1, c2;
+    long nrows = 0;
+    fits_movnam_hdu(ff, BINARY_TBL, "PLAN", 0, &status);
+    fits_get_colnum(ff, CASEINSEN, "MJD_START", &c1, &status);
+    fits_get_colnum(ff, CASEINSEN, "EXPTIME", &c2, &status);
+    fits_get_num_rows(ff, &nrows, &status);
+    *mjd0 = INFINITY, *mjd1 = -INFINITY;
+    for (long r = 1; r <= nrows && !status; r++) {
+        double m, t;
+        fits_read_col(ff, TDOUBLE, c1, r, 1, 1, NULL, &m, NULL, &status);
+        fits_read_col(ff, TDOUBLE, c2, r, 1, 1, NULL, &t, NULL, &status);
+        if (m < *mjd0) *mjd0 = m;
+        if (m + t / 86400.0 > *mjd1) *mjd1 = m + t / 86400.0;
+    }
+    int cs = 0;
+    fits_close_file(ff, &cs);
+    if (status || !nrows) return wf_error(WF_ERR_INPUT, "%s: not a plan with a PLAN table (MJD_START, EXPTIME)", plan);
+    if (fits_open_diskfile(&ff, path, READONLY, &status))
+        return wf_error(WF_ERR_IO, "%s: cannot open the plan's coverage map (written by `wfisim survey plan`)", path);
+    int nhdu = 0;
+    fits_get_num_hdus(ff, &nhdu, &status);
+    wf_status st = WF_OK;
+    int32_t *buf = NULL;
+    for (int h = 2; h <= nhdu && !status && !st; h++) {
+        int type;
+        long naxes[2] = {0, 0};
+        fits_movabs_hdu(ff, h, &type, &status);
+        fits_get_img_size(ff, 2, naxes, &status);
+        if (h == 2) {
+            f->nx = (int)naxes[0], f->ny = (int)naxes[1];
+            fits_read_key_dbl(ff, "CRVAL1", &f->ra0, NULL, &status);
+            fits_read_key_dbl(ff, "CRVAL2", &f->dec0, NULL, &status);
+            fits_read_key_dbl(ff, "CRPIX1", &f->crpix1, NULL, &status);
+            fits_read_key_dbl(ff, "CRPIX2", &f->crpix2, NULL, &status);
+            fits_read_key_dbl(ff, "CD1_1", &f->cd11, NULL, &status);
+            fits_read_key_dbl(ff, "CD2_2", &f->cd22, NULL, &status);
+            if (status || f->nx <= 0 || f->ny <= 0) break;
+            f->covered = calloc((size_t)f->nx * f->ny, 1);
+            buf = malloc((size_t)f->nx * f->ny * sizeof *buf);
+            if (!f->covered || !buf) { st = wf_error(WF_ERR_NOMEM, "%s: coverage map", path); break; }
+        }
+        if (naxes[0] != f->nx || naxes[1] != f->ny) { st = wf_error(WF_ERR_INPUT, "%s: HDU %d size differs", path, h); break; }
+        fits_read_img(ff, TINT, 1, (LONGLONG)f->nx * f->ny, NULL, buf, NULL, &status);
+        for (size_t k = 0; k < (size_t)f->nx * f->ny && !status; k++)
+            if (buf[k] > 0) f->covered[k] = 1;
+    }
+    free(buf);
+    fits_close_file(ff, &cs);
+    if (!st && (status || !f->covered)) st = wf_error(WF_ERR_INPUT, "%s: not a coverage map (cfitsio status %d)", path, status);
+    if (st) { footprint_free(f); return st; }
+    for (size_t k = 0; k < (size_t)f->nx * f->ny; k++) f->ncovered += f->covered[k];
+    if (!(f->cells = malloc((f->ncovered ? f->ncovered : 1) * sizeof *f->cells))) {
+        footprint_free(f);
+        return wf_error(WF_ERR_NOMEM, "coverage cells");
+    }
+    size_t n = 0;
+    for (size_t k = 0; k < (size_t)f->nx * f->ny; k++)
+        if (f->covered[k]) f->cells[n++] = k;
+    /* tangent-plane cell area: the projection stretches areas by 1/cos^3 of the distance
+     * from the centre, < 0.2% at the 1.5 deg edge of the deep field */
+    f->area = (double)f->ncovered * fabs(f->cd11 * f->cd22);
+    return WF_OK;
+}
+
+static void footprint_circle(footprint *f, double ra, double dec, double area)
+{
+    memset(f, 0, sizeof *f);
+    f->circle = 1;
+    f->ra0 = ra, f->dec0 = dec, f->area = area;
+    /* spherical cap of this solid angle: 2 pi (1 - cos r) */
+    double sr = area * (M_PI / 180.0) * (M_PI / 180.0);
+    f->radius = acos(1.0 - sr / (2.0 * M_PI)) * 180.0 / M_PI;
+}
+
+/* A point uniform over the footprint from two uniforms (and a third for the map's cell). */
+static void footprint_draw(const footprint *f, wf_rng *rng, double *ra, double *dec)
+{
+    double u1 = wf_rng_uniform53(rng), u2 = wf_rng_uniform53(rng), u3 = wf_rng_uniform53(rng);
+    if (f->circle) {
+        double cr = cos(f->radius * M_PI / 180.0);
+        double cost = 1.0 - u1 * (1.0 - cr), theta = acos(cost), phi = 2.0 * M_PI * u2;
+        /* offset theta in direction phi from the centre, on the sphere */
+        double d0 = f->dec0 * M_PI / 180.0;
+        double sd = sin(d0) * cos(theta) + cos(d0) * sin(theta) * cos(phi);
+        double d = asin(sd);
+        double a = atan2(sin(phi) * sin(theta) * cos(d0), cos(theta) - sin(d0) * sd);
+        *dec = d * 180.0 / M_PI;
+        *ra = fmod(f->ra0 + a * 180.0 / M_PI + 720.0, 360.0);
+        (void)u3;
+        return;
+    }
+    size_t k = f->cells[(size_t)(u3 * (double)f->ncovered) < f->ncovered ? (size_t)(u3 * (double)f->ncovered) : f->ncovered - 1];
+    double i = (double)(k % (size_t)f->nx) + u1 - 0.5, j = (double)(k / (size_t)f->nx) + u2 - 0.5;
+    tan_to_world(f->ra0, f->dec0, (i + 1.0 - f->crpix1) * f->cd11, (j + 1.0 - f->crpix2) * f->cd22, ra, dec);
+}
+
+/* ---- generate ------------------------------------------------------------------------ */
+
+static int is_hostlib(const char *path)
+{
+    size_t n = strlen(path);
+    if (n > 8 && !strcasecmp(path + n - 8, ".HOSTLIB")) return 1;
+    FILE *f = fopen(path, "r");
+    if (!f) return 0;
+    char line[512];
+    int found = 0;
+    for (int k = 0; k < 200 && fgets(line, sizeof line, f); k++)
+        if (!strncmp(line, "VARNAMES:", 9) || !strncmp(line, "GAL:", 4)) { found = 1; break; }
+    fclose(f);
+    return found;
+}
+
+/* Galaxies of the footprint: a file, or the synthetic field with the run's seed. */
+static wf_status load_hosts(const opts *o, const footprint *fp, wf_catalog *gal)
+{
+    wf_status st;
+    wf_catalog all;
+    if (o->catalog) {
+        if (is_hostlib(o->catalog)) st = wf_hostlib_read(o->catalog, &all, NULL);
+        else st = wf_catalog_read_galaxies(o->catalog, &all);
+        if (st) return st;
+    } else {
+        wf_synth_config sc;
+        wf_synth *syn;
+        wf_synth_defaults(&sc);
+        sc.seed = (uint64_t)o->seed;
+        if ((st = wf_synth_create(&sc, &syn))) return st;
+        wf_skyregion reg;
+        double r = fp->circle ? fp->radius : 0.5 * hypot(fp->nx * fabs(fp->cd11), fp->ny * fabs(fp->cd22));
+        st = wf_skyindex_circle(fp->ra0, fp->dec0, r, 0.0, &reg);
+        if (!st) st = wf_synth_select(syn, &reg, &all, NULL);
+        wf_synth_free(syn);
+        if (st) return st;
+    }
+    uint32_t *keep = malloc((all.n ? all.n : 1) * sizeof *keep);
+    if (!keep) { wf_catalog_free(&all); return wf_error(WF_ERR_NOMEM, "host selection"); }
+    size_t n = 0;
+    for (size_t i = 0; i < all.n; i++)
+        if (footprint_contains(fp, all.ra[i], all.dec[i])) keep[n++] = (uint32_t)i;
+    st = wf_catalog_subset(&all, keep, n, gal);
+    free(keep);
+    wf_catalog_free(&all);
+    return st;
+}
+
+static int cmd_generate(int argc, char **argv)
+{
+    opts o;
+    int rc = parse(argc, argv, &o);
+    if (rc) return rc;
+    if (!o.out) return usage_error("%s is required", "--out FILE");
+    if (!o.plan && !(isfinite(o.area) && isfinite(o.start) && isfinite(o.days)))
+        return usage_error("%s", "give --plan plan.fits, or --area DEG2 --start MJD --days N");
+    if (o.seed < 0 || o.seed != floor(o.seed)) return usage_error("%s must be a non-negative integer", "--seed");
+    wf_status st;
+    wf_cosmo cosmo;
+    wf_snrate law;
+    wf_snrate_survey sv;
+    wf_snpop pop;
+    wf_snhost_config hc;
+    wf_snrate_survey_default(&sv);
+    wf_snpop_default(&pop);
+    wf_snhost_config_default(&hc);
+    if (isfinite(o.alpha)) pop.alpha = o.alpha;
+    if (isfinite(o.beta)) pop.beta = o.beta;
+    if (isfinite(o.sigma_int)) pop.sigma_int = o.sigma_int;
+    if (isfinite(o.dz)) hc.dztol[0] = o.dz;
+    if (isfinite(o.zmin)) sv.zmin = o.zmin;
+    if (isfinite(o.zmax)) sv.zmax = o.zmax;
+    if ((st = wf_cosmo_init(&cosmo, o.h0, o.om))) return fail(st);
+    if (o.nrate) {
+        wf_snrate_clear(&law);
+        for (int k = 0; k < o.nrate; k++)
+            if ((st = wf_snrate_add_line(&law, o.rate[k], "--rate", k + 1))) return fail(st);
+    } else {
+        wf_snrate_default(&law);
+    }
+    if ((st = wf_snpop_validate(&pop)) || (st = wf_snhost_config_check(&hc))) return fail(st);
+    wf_salt_model *model = NULL;
+    if ((st = wf_salt_load(o.model, &model))) return fail(st);
+    double pmin, pmax;
+    wf_salt_phase_range(model, &pmin, &pmax);
+    sv.rest_before = pmax;
+    sv.rest_after = -pmin;
+    footprint fp;
+    if (o.plan) {
+        if ((st = footprint_from_plan(o.plan, &fp, &sv.mjd_start, &sv.mjd_end))) { wf_salt_free(model); return fail(st); }
+    } else {
+        if (!(o.area > 0) || !(o.days > 0)) { wf_salt_free(model); return usage_error("%s", "--area and --days must be > 0"); }
+        footprint_circle(&fp, o.ra, o.dec, o.area);
+        sv.mjd_start = o.start;
+        sv.mjd_end = o.start + o.days;
+    }
+    sv.area_deg2 = fp.area;
+    wf_snrate_gen gen;
+    wf_catalog hosts;
+    memset(&hosts, 0, sizeof hosts);
+    int have_hosts = 0;
+    wf_snhost_index *hix = NULL;
+    wf_sn_sample out;
+    memset(&out, 0, sizeof out);
+    uint32_t count = 0;
+    long nhostless = 0;
+    st = wf_snrate_gen_init(&gen, &law, &cosmo, &sv, (uint64_t)o.seed);
+    if (st) goto done;
+    if (!o.hostless) {
+        if ((st = load_hosts(&o, &fp, &hosts))) goto done;
+        have_hosts = 1;
+        if ((st = wf_snhost_index_build(&hosts, &hc, &hix))) goto done;
+    }
+    if ((st = wf_snrate_gen_count(&gen, &count)) || (st = wf_sn_sample_reserve(&out, count ? count : 1))) goto done;
+    for (uint32_t i = 0; i < count && !st; i++) {
+        size_t r;
+        double z, t0, mu;
+        if ((st = wf_sn_sample_push(&out, &r)) || (st = wf_snrate_gen_draw(&gen, i, &z, &t0)) ||
+            (st = wf_cosmo_distance_modulus(&cosmo, z, &mu)))
+            break;
+        wf_rng rng;
+        wf_sn_rng((uint64_t)o.seed, i, WF_SN_DRAW_POP, &rng);
+        wf_sn_params sp;
+        if ((st = wf_snpop_draw(&pop, &rng, mu, &sp))) break;
+        out.id[r] = (int64_t)i + 1;
+        out.z[r] = z, out.t0[r] = t0, out.mu[r] = mu;
+        out.x0[r] = sp.x0, out.x1[r] = sp.x1, out.c[r] = sp.c, out.delta[r] = sp.delta;
+        long row = -1, ncand = 0;
+        if (hix) {
+            wf_sn_rng((uint64_t)o.seed, i, WF_SN_DRAW_HOST, &rng);
+            if ((st = wf_snhost_choose(hix, z, wf_rng_uniform53(&rng), &row, &ncand))) break;
+        }
+        wf_sn_rng((uint64_t)o.seed, i, WF_SN_DRAW_POS, &rng);
+        if (row >= 0) {
+            wf_snhost_position pos;
+            if ((st = wf_snhost_place(&hosts, (size_t)row, &rng, &hc, &pos))) break;
+            out.host_id[r] = hosts.id[row];
+            out.ra[r] = pos.ra, out.dec[r] = pos.dec;
+            out.host_offset[r] = pos.offset;
+            out.host_comp[r] = pos.component;
+        } else {
+            footprint_draw(&fp, &rng, &out.ra[r], &out.dec[r]);
+            out.host_id[r] = -1;
+            out.host_comp[r] = -1;
+            out.flags[r] = o.hostless ? WF_SN_FLAG_NOHOSTCAT | WF_SN_FLAG_HOSTLESS : WF_SN_FLAG_HOSTLESS;
+            nhostless++;
+        }
+    }
+    if (st) goto done;
+    {
+        const char *base = strrchr(o.model, '/');
+        base = base && base[1] ? base + 1 : o.model;
+        snprintf(out.model, sizeof out.model, "%s", base);
+        int n = snprintf(out.cards, sizeof out.cards,
+                         "SEED = %.0f / generation seed\n"
+                         "H0 = %.6g / [km/s/Mpc] flat LCDM\n"
+                         "OMEGAM = %.6g / matter density\n"
+                         "ALPHA = %.6g / stretch standardisation\n"
+                         "BETA = %.6g / colour standardisation\n"
+                         "SIGINT = %.6g / [mag] coherent intrinsic scatter\n"
+                         "AREA = %.9g / [deg2] generation footprint\n"
+                         "MJDSTART = %.6f / survey start\n"
+                         "MJDEND = %.6f / survey end\n"
+                         "PEAKMIN = %.6f / earliest peak MJD (padded)\n"
+                         "PEAKMAX = %.6f / latest peak MJD (padded)\n"
+                         "ZMIN = %.6g / \n"
+                         "ZMAX = %.6g / \n"
+                         "NEXPECT = %.6f / expected number (rate x volume x time)\n"
+                         "NHOSTLSS = %ld / hostless supernovae\n"
+                         "DZTOL = %.6g / host redshift tolerance\n"
+                         "HOSTFMAX = %.6g / largest enclosed-flux fraction\n",
+                         o.seed, o.h0, o.om, pop.alpha, pop.beta, pop.sigma_int, fp.area, sv.mjd_start,
+                         sv.mjd_end, gen.peak_min, gen.peak_max, sv.zmin, sv.zmax, gen.expected, nhostless,
+                         hc.dztol[0], hc.fmax);
+        for (int k = 0; k < law.n && n > 0 && (size_t)n < sizeof out.cards; k++)
+            n += snprintf(out.cards + n, sizeof out.cards - (size_t)n, "RATE%d = '%.6g %.6g %.6g %.6g' / A B zmin zmax\n",
+                          k + 1, law.p[k].a, law.p[k].b, law.p[k].zlo, law.p[k].zhi);
+    }
+    st = wf_sn_sample_write(&out, o.out);
+    if (!st)
+        printf("wfisim sn: %u supernovae (expected %.1f over %.4f deg2 and %.1f days of peak dates), %ld hostless%s; "
+               "wrote %s\n", count, gen.expected, fp.area, gen.days, nhostless,
+               have_hosts ? "" : " (no host catalog)", o.out);
+done:
+    wf_sn_sample_free(&out);
+    wf_snhost_index_free(hix);
+    if (have_hosts) wf_catalog_free(&hosts);
+    wf_snrate_gen_free(&gen);
+    footprint_free(&fp);
+    wf_salt_free(model);
+    return st ? fail(st) : 0;
+}
+
+/* ---- light curves -------------------------------------------------------------------- */
+
+typedef struct lc_rows {
+    size_t n, cap;
+    int64_t *id;
+    char (*band)[8];
+    double *mjd, *mag, *flux;
+    int32_t *flag;
+} lc_rows;
+
+static wf_status rows_push(lc_rows *r, int64_t id, const char *band, double mjd, double mag, double flux, unsigned flag)
+{
+    if (r->n == r->cap) {
+        size_t nc = r->cap ? 2 * r->cap : 4096;
+        void *a = realloc(r->id, nc * sizeof *r->id), *b = NULL, *c = NULL, *d = NULL, *e = NULL, *f = NULL;
+        if (a) r->id = a;
+        if (a && (b = realloc(r->band, nc * sizeof *r->band))) r->band = b;
+        if (b && (c = realloc(r->mjd, nc * sizeof *r->mjd))) r->mjd = c;
+        if (c && (d = realloc(r->mag, nc * sizeof *r->mag))) r->mag = d;
+        if (d && (e = realloc(r->flux, nc * sizeof *r->flux))) r->flux = e;
+        if (e && (f = realloc(r->flag, nc * sizeof *r->flag))) r->flag = f;
+        if (!f) return wf_error(WF_ERR_NOMEM, "light curves: %zu rows", nc);
+        r->cap = nc;
+    }
+    size_t k = r->n++;
+    r->id[k] = id;
+    snprintf(r->band[k], sizeof r->band[k], "%s", band);
+    r->mjd[k] = mjd, r->mag[k] = mag, r->flux[k] = flux, r->flag[k] = (int32_t)flag;
+    return WF_OK;
+}
+
+static void rows_free(lc_rows *r)
+{
+    free(r->id);
+    free(r->band);
+    free(r->mjd);
+    free(r->mag);
+    free(r->flux);
+    free(r->flag);
+}
+
+static wf_status write_rows(const lc_rows *r, const char *path, const char *sne)
+{
+    char tmp[WF_PATH_MAX + 16];
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    remove(tmp);
+    fitsfile *f;
+    int status = 0;
+    if (fits_create_diskfile(&f, tmp, &status)) return wf_error(WF_ERR_IO, "%s: cannot create", tmp);
+    fits_create_img(f, BYTE_IMG, 0, NULL, &status);
+    char src[68];
+    snprintf(src, sizeof src, "%.66s", sne);
+    fits_write_key_str(f, "SNEFILE", src, "the SN sample", &status);
+    char *tt[] = {"ID", "BAND", "MJD", "MAG", "FLUX", "FLAG"};
+    char *tf[] = {"1K", "8A", "1D", "1D", "1D", "1J"};
+    char *tu[] = {"", "", "d", "mag(AB)", "electron/s", ""};
+    fits_create_tbl(f, BINARY_TBL, 0, 6, tt, tf, tu, "LIGHTCURVES", &status);
+    fits_write_comment(f, "MAG 99 where FLUX is 0; FLAG bits: 1 phase outside the model, 2 band outside "
+                       "its wavelengths, 4 negative band flux set to 0", &status);
+    LONGLONG n = (LONGLONG)r->n;
+    if (n) {
+        char **names = malloc(r->n * sizeof *names);
+        if (!names) status = MEMORY_ALLOCATION;
+        for (size_t k = 0; names && k < r->n; k++) names[k] = (char *)r->band[k];
+        fits_write_col(f, TLONGLONG, 1, 1, 1, n, r->id, &status);
+        if (names) fits_write_col(f, TSTRING, 2, 1, 1, n, names, &status);
+        fits_write_col(f, TDOUBLE, 3, 1, 1, n, r->mjd, &status);
+        fits_write_col(f, TDOUBLE, 4, 1, 1, n, r->mag, &status);
+        fits_write_col(f, TDOUBLE, 5, 1, 1, n, r->flux, &status);
+        fits_write_col(f, TINT, 6, 1, 1, n, r->flag, &status);
+        free(names);
+    }
+    int cs = 0;
+    fits_close_file(f, &cs);
+    if (status || cs) {
+        remove(tmp);
+        char msg[FLEN_STATUS];
+        fits_get_errstatus(status ? status : cs, msg);
+        return wf_error(WF_ERR_IO, "%s: writing light curves: %s", path, msg);
+    }
+    if (rename(tmp, path) != 0) {
+        remove(tmp);
+        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
+    }
+    return WF_OK;
+}
+
+typedef struct epoch { double mjd; int filter; } epoch;
+
+static int by_mjd(const void *a, const void *b)
+{
+    double x = ((const epoch *)a)->mjd, y = ((const epoch *)b)->mjd;
+    return (x > y) - (x < y);
+}
+
+static wf_status plan_epochs(const char *plan, epoch **out, size_t *n)
+{
+    fitsfile *f;
+    int status = 0, cm, cf;
+    long nrows = 0;
+    *out = NULL, *n = 0;
+    if (fits_open_diskfile(&f, plan, READONLY, &status)) return wf_error(WF_ERR_IO, "%s: cannot open the plan", plan);
+    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
+    fits_get_colnum(f, CASEINSEN, "MJD_MID", &cm, &status);
+    fits_get_colnum(f, CASEINSEN, "FILTER", &cf, &status);
+    fits_get_num_rows(f, &nrows, &status);
+    epoch *e = status ? NULL : malloc((size_t)(nrows > 0 ? nrows : 1) * sizeof *e);
+    wf_status st = WF_OK;
+    for (long r = 1; e && r <= nrows && !status && !st; r++) {
+        char name[32], *np = name;
+        fits_read_col(f, TDOUBLE, cm, r, 1, 1, NULL, &e[r - 1].mjd, NULL, &status);
+        fits_read_col(f, TSTRING, cf, r, 1, 1, NULL, &np, NULL, &status);
+        wf_filter fl;
+        if (!status && (st = wf_filter_parse(name, &fl))) break;
+        e[r - 1].filter = (int)fl;
+    }
+    int cs = 0;
+    fits_close_file(f, &cs);
+    if (!st && (status || !e)) st = wf_error(WF_ERR_INPUT, "%s: not a plan with a PLAN table (MJD_MID, FILTER)", plan);
+    if (st) { free(e); return st; }
+    qsort(e, (size_t)nrows, sizeof *e, by_mjd);
+    *out = e;
+    *n = (size_t)nrows;
+    return WF_OK;
+}
+
+static wf_status grid_epochs(const char *grid, const char *filters, epoch **out, size_t *n)
+{
+    double a, b, step;
+    *out = NULL, *n = 0;
+    if (sscanf(grid, "%lf:%lf:%lf", &a, &b, &step) != 3 || !(step > 0) || !(b >= a) || !isfinite(a) || !isfinite(b))
+        return wf_error(WF_ERR_INPUT, "--grid '%s': expected START:END:STEP with END >= START, STEP > 0", grid);
+    double count = floor((b - a) / step + 1e-9) + 1;
+    if (count > 1e7) return wf_error(WF_ERR_RANGE, "--grid '%s': %.0f dates is too many", grid, count);
+    int fl[WF_NFILTER], nf = 0;
+    char list[256];
+    snprintf(list, sizeof list, "%s", filters ? filters : "Y106,J129,H158,F184");
+    for (char *tok = strtok(list, ","); tok; tok = strtok(NULL, ",")) {
+        wf_filter f;
+        wf_status st = wf_filter_parse(tok, &f);
+        if (st) return st;
+        if (nf < WF_NFILTER) fl[nf++] = (int)f;
+    }
+    epoch *e = malloc((size_t)count * (size_t)nf * sizeof *e);
+    if (!e) return wf_error(WF_ERR_NOMEM, "--grid: %.0f dates", count);
+    size_t k = 0;
+    for (long i = 0; i < (long)count; i++)
+        for (int j = 0; j < nf; j++) e[k++] = (epoch){a + (double)i * step, fl[j]};
+    *out = e;
+    *n = k;
+    return WF_OK;
+}
+
+static wf_status plot_sn(const lc_rows *r, size_t first, size_t last, int64_t id, double z, const char *dir)
+{
+    char title[96], path[WF_PATH_MAX + 64];
+    snprintf(title, sizeof title, "SN %lld, z = %.3f", (long long)id, z);
+    snprintf(path, sizeof path, "%s/lc_%lld.png", dir, (long long)id);
+    wf_plot *p;
+    wf_status st = wf_plot_create(800, 560, title, "MJD", "AB magnitude", &p);
+    if (st) return st;
+    wf_plot_invert_y(p, 1);
+    size_t n = last - first;
+    double *x = malloc((n ? n : 1) * sizeof *x), *y = malloc((n ? n : 1) * sizeof *y);
+    if (!x || !y) st = wf_error(WF_ERR_NOMEM, "plot");
+    int drawn = 0;
+    for (int f = 0; f < WF_NFILTER && !st; f++) {
+        int m = 0;
+        for (size_t k = first; k < last; k++)
+            if (!strcmp(r->band[k], wf_filter_name((wf_filter)f)) && r->flux[k] > 0) {
+                x[m] = r->mjd[k];
+                y[m++] = r->mag[k];
+            }
+        if (m) {
+            st = wf_plot_series(p, x, y, NULL, m, wf_filter_name((wf_filter)f), WF_PLOT_LINE | WF_PLOT_MARKERS);
+            drawn = 1;
+        }
+    }
+    if (!st && !drawn) {
+        fprintf(stderr, "wfisim sn: SN %lld has no flux on the dates asked for: no plot\n", (long long)id);
+        wf_plot_free(p);
+        free(x);
+        free(y);
+        return WF_OK;
+    }
+    if (!st) st = wf_plot_write_png(p, path);
+    free(x);
+    free(y);
+    wf_plot_free(p);
+    if (!st) printf("wfisim sn: wrote %s\n", path);
+    return st;
+}
+
+static int cmd_lightcurves(int argc, char **argv)
+{
+    opts o;
+    int rc = parse(argc, argv, &o);
+    if (rc) return rc;
+    if (!o.sne || !o.out) return usage_error("%s are required", "--sne FILE and --out FILE");
+    if (!o.plan == !o.grid) return usage_error("%s", "give one of --plan plan.fits or --grid START:END:STEP");
+    wf_sn_sample s;
+    wf_salt_model *model = NULL;
+    epoch *ep = NULL;
+    size_t nep = 0;
+    lc_rows rows;
+    memset(&rows, 0, sizeof rows);
+    wf_bandpass *bp[WF_NFILTER] = {0};
+    int64_t plot_ids[64];
+    int nplot = 0;
+    if (o.plot) {
+        char list[1024];
+        snprintf(list, sizeof list, "%s", o.plot);
+        for (char *tok = strtok(list, ","); tok && nplot < 64; tok = strtok(NULL, ",")) {
+            char *end;
+            long long v = strtoll(tok, &end, 10);
+            if (end == tok || *end) return usage_error("--plot: '%s' is not an SN id", tok);
+            plot_ids[nplot++] = v;
+        }
+    }
+    wf_status st = wf_sn_sample_read(o.sne, &s);
+    if (st) return fail(st);
+    if (!st) st = wf_salt_load(o.model, &model);
+    if (!st) st = o.plan ? plan_epochs(o.plan, &ep, &nep) : grid_epochs(o.grid, o.filters, &ep, &nep);
+    for (size_t e = 0; e < nep && !st; e++) {
+        int f = ep[e].filter;
+        if (bp[f]) continue;
+        if (!(bp[f] = malloc(sizeof *bp[f]))) st = wf_error(WF_ERR_NOMEM, "bandpass");
+        else st = wf_bandpass_load((wf_filter)f, o.data, bp[f]);
+    }
+    int plotted = 0;
+    for (size_t i = 0; i < s.n && !st; i++) {
+        wf_salt_params p = {s.z[i], s.t0[i], s.x0[i], s.x1[i], s.c[i]};
+        wf_salt_lc *lc[WF_NFILTER] = {0};
+        double lo = -INFINITY, hi = INFINITY;
+        if (o.plan) { /* only the model window: outside it every value is 0 with a flag */
+            double pmin, pmax;
+            wf_salt_phase_range(model, &pmin, &pmax);
+            lo = s.t0[i] + (1.0 + s.z[i]) * pmin;
+            hi = s.t0[i] + (1.0 + s.z[i]) * pmax;
+        }
+        size_t first = rows.n;
+        for (size_t e = 0; e < nep && !st; e++) {
+            if (ep[e].mjd < lo || ep[e].mjd > hi) continue;
+            int f = ep[e].filter;
+            if (!lc[f] && (st = wf_salt_lc_init(model, &p, bp[f], WF_SALT_INTERP_BICUBIC, &lc[f]))) break;
+            double rate, mag;
+            unsigned flags;
+            if ((st = wf_salt_lc_rate(lc[f], ep[e].mjd, &rate, &flags))) break;
+            mag = WF_SALT_MAG_NONE;
+            if (rate > 0 && (st = wf_bandpass_mag_ab(bp[f], rate, &mag))) break;
+            st = rows_push(&rows, s.id[i], wf_filter_name((wf_filter)f), ep[e].mjd, mag, rate, flags);
+        }
+        for (int f = 0; f < WF_NFILTER; f++) wf_salt_lc_free(lc[f]);
+        for (int k = 0; k < nplot && !st; k++)
+            if (plot_ids[k] == s.id[i]) {
+                st = plot_sn(&rows, first, rows.n, s.id[i], s.z[i], o.plot_dir ? o.plot_dir : ".");
+                plotted++;
+            }
+    }
+    if (!st && plotted < nplot) st = wf_error(WF_ERR_INPUT, "--plot: %d of the ids are not in %s", nplot - plotted, o.sne);
+    if (!st) st = write_rows(&rows, o.out, o.sne);
+    if (!st) printf("wfisim sn: %zu light-curve points of %zu supernovae; wrote %s\n", rows.n, s.n, o.out);
+    for (int f = 0; f < WF_NFILTER; f++) free(bp[f]);
+    rows_free(&rows);
+    free(ep);
+    wf_salt_free(model);
+    wf_sn_sample_free(&s);
+    return st ? fail(st) : 0;
+}
+
+static int cmd_lightcurve(int argc, char **argv)
+{
+    opts o;
+    int rc = parse(argc, argv, &o);
+    if (rc) return rc;
+    if (!isfinite(o.z) || !isfinite(o.t0) || !o.band || !o.mjd)
+        return usage_error("%s are required", "--z, --t0, --band and --mjd");
+    if (isfinite(o.x0) && isfinite(o.mu)) return usage_error("%s", "give --x0 or --mu, not both");
+    if (!(o.z > 0)) return usage_error("%s must be > 0", "--z");
+    wf_salt_interp interp = WF_SALT_INTERP_BICUBIC;
+    if (o.interp && !strcmp(o.interp, "linear")) interp = WF_SALT_INTERP_LINEAR;
+    else if (o.interp && strcmp(o.interp, "bicubic")) return usage_error("--interp '%s': bicubic or linear", o.interp);
+    wf_filter f;
+    wf_status st = wf_filter_parse(o.band, &f);
+    if (st) return fail(st);
+    wf_snpop pop;
+    wf_snpop_default(&pop);
+    if (isfinite(o.alpha)) pop.alpha = o.alpha;
+    if (isfinite(o.beta)) pop.beta = o.beta;
+    double x0 = o.x0;
+    if (!isfinite(x0)) {
+        double mu = o.mu;
+        if (!isfinite(mu)) {
+            wf_cosmo c;
+            if ((st = wf_cosmo_init(&c, o.h0, o.om)) || (st = wf_cosmo_distance_modulus(&c, o.z, &mu))) return fail(st);
+        }
+        /* SPEC 5 / SNANA SALT2x0calc with no intrinsic scatter */
+        x0 = 1.0 / (1e-12 * pow(10.0, 0.4 * (mu - pop.alpha * o.x1 + pop.beta * o.c)));
+    }
+    if (!(x0 > 0)) return usage_error("%s must be > 0", "--x0");
+    wf_bandpass bp;
+    wf_salt_model *m = NULL;
+    if ((st = wf_bandpass_load(f, o.data, &bp)) || (st = wf_salt_load(o.model, &m))) return fail(st);
+    wf_salt_params p = {o.z, o.t0, x0, o.x1, o.c};
+    printf("# model %s, band %s (%s), z %.6g, t0 %.6f, x0 %.8g, x1 %.6g, c %.6g\n", wf_salt_name(m), wf_filter_name(f),
+           bp.builtin ? "built-in top-hat" : "data", o.z, o.t0, x0, o.x1, o.c);
+    printf("# mjd mag_ab flux_e_per_s flag\n");
+    char list[8192];
+    snprintf(list, sizeof list, "%s", o.mjd);
+    for (char *tok = strtok(list, ","); tok && !st; tok = strtok(NULL, ",")) {
+        double mjd, rate, mag;
+        unsigned flags;
+        if (number("--mjd", tok, &mjd)) { wf_salt_free(m); return 2; }
+        st = wf_salt_bandrate(m, &p, interp, &bp, mjd, &rate, &flags);
+        mag = WF_SALT_MAG_NONE;
+        if (!st && rate > 0) st = wf_bandpass_mag_ab(&bp, rate, &mag);
+        if (!st) printf("%.6f %.6f %.9g %u\n", mjd, mag, rate, flags);
+    }
+    wf_salt_free(m);
+    return st ? fail(st) : 0;
+}
+
+int wf_cmd_sn(int argc, char **argv)
+{
+    if (argc < 1) return usage_error("%s", "which sn command?");
+    if (!strcmp(argv[0], "--help") || !strcmp(argv[0], "-h") || !strcmp(argv[0], "help")) {
+        fputs(sn_usage, stdout);
+        return 0;
+    }
+    if (!strcmp(argv[0], "generate")) return cmd_generate(argc - 1, argv + 1);
+    if (!strcmp(argv[0], "lightcurves")) return cmd_lightcurves(argc - 1, argv + 1);
+    if (!strcmp(argv[0], "lightcurve")) return cmd_lightcurve(argc - 1, argv + 1);
+    return usage_error("unknown sn command '%s'", argv[0]);
+}

@@ -1,0 +1,259 @@
+#include "tools/surveyrun.h"
+
+#include <fitsio.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "hal/clock.h"
+#include "tools/pipeline.h"
+
+typedef struct plan_row {
+    int expid, visit, orient, pointing, pass;
+    char filter[16];
+    double ra, dec, pa, mjd_mid, exptime;
+} plan_row;
+
+wf_status wf_survey_parse_range(const char *text, long *first, long *last)
+{
+    char *end;
+    long a = strtol(text, &end, 10);
+    if (end == text || a < 0) return wf_error(WF_ERR_INPUT, "--exposures '%s': expected A:B, A: or A (EXPIDs >= 0)", text);
+    if (*end == '\0') { *first = *last = a; return WF_OK; }
+    if (*end != ':') return wf_error(WF_ERR_INPUT, "--exposures '%s': expected A:B, A: or A", text);
+    const char *b = end + 1;
+    if (*b == '\0') { *first = a; *last = -1; return WF_OK; }
+    long v = strtol(b, &end, 10);
+    if (end == b || *end || v < a) return wf_error(WF_ERR_INPUT, "--exposures '%s': B must be an integer >= A", text);
+    *first = a;
+    *last = v;
+    return WF_OK;
+}
+
+wf_status wf_survey_parse_scas(const char *text, int *scas, int *n)
+{
+    int seen[WF_NSCA + 1] = {0};
+    *n = 0;
+    const char *p = text;
+    while (*p) {
+        char *end;
+        long a = strtol(p, &end, 10), b = a;
+        if (end == p) return wf_error(WF_ERR_INPUT, "--scas '%s': expected a list like 1,2,5-7", text);
+        if (*end == '-') {
+            const char *q = end + 1;
+            b = strtol(q, &end, 10);
+            if (end == q) return wf_error(WF_ERR_INPUT, "--scas '%s': expected a list like 1,2,5-7", text);
+        }
+        if (a < 1 || b > WF_NSCA || b < a) return wf_error(WF_ERR_RANGE, "--scas '%s': SCAs are 1..18", text);
+        for (long s = a; s <= b; s++) {
+            if (seen[s]) return wf_error(WF_ERR_INPUT, "--scas '%s': SCA %ld given twice", text, s);
+            seen[s] = 1;
+            scas[(*n)++] = (int)s;
+        }
+        if (*end == ',') end++;
+        else if (*end) return wf_error(WF_ERR_INPUT, "--scas '%s': unexpected '%c'", text, *end);
+        p = end;
+    }
+    if (!*n) return wf_error(WF_ERR_INPUT, "--scas is empty");
+    return WF_OK;
+}
+
+int wf_survey_product_ok(const char *path)
+{
+    fitsfile *f;
+    int status = 0, nhdu = 0, ok = 1;
+    if (fits_open_diskfile(&f, path, READONLY, &status)) return 0;
+    fits_get_num_hdus(f, &nhdu, &status);
+    for (int h = 1; h <= nhdu && ok && !status; h++) {
+        int type, dataok = 0, hduok = 0;
+        fits_movabs_hdu(f, h, &type, &status);
+        fits_verify_chksum(f, &dataok, &hduok, &status);
+        ok = !status && dataok == 1 && hduok == 1;
+    }
+    int cs = 0;
+    fits_close_file(f, &cs);
+    return ok && !status && nhdu > 0;
+}
+
+/* The PLAN table of a plan written by `wfisim survey plan`, rows [first, last] by EXPID. The
+ * file's checksums must verify: a damaged plan would place every image wrongly. */
+static wf_status read_plan(const char *path, long first, long last, plan_row **out, size_t *n)
+{
+    *out = NULL;
+    *n = 0;
+    if (!wf_survey_product_ok(path))
+        return wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one with `wfisim survey plan`)", path);
+    fitsfile *f;
+    int status = 0;
+    fits_open_diskfile(&f, path, READONLY, &status);
+    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
+    if (status) {
+        int cs = 0;
+        fits_close_file(f, &cs);
+        return wf_error(WF_ERR_INPUT, "%s: no PLAN table", path);
+    }
+    static const char *names[] = {"EXPID", "VISIT", "ORIENT", "POINTING", "PASS", "FILTER",
+                                  "RA", "DEC", "PA", "MJD_MID", "EXPTIME"};
+    int col[11];
+    for (int k = 0; k < 11 && !status; k++)
+        if (fits_get_colnum(f, CASEINSEN, (char *)names[k], &col[k], &status)) {
+            int cs = 0;
+            fits_close_file(f, &cs);
+            return wf_error(WF_ERR_INPUT, "%s: PLAN table has no column %s", path, names[k]);
+        }
+    long nrows = 0;
+    fits_get_num_rows(f, &nrows, &status);
+    plan_row *rows = calloc((size_t)(nrows > 0 ? nrows : 1), sizeof *rows);
+    if (!rows) {
+        int cs = 0;
+        fits_close_file(f, &cs);
+        return wf_error(WF_ERR_NOMEM, "%s: %ld plan rows", path, nrows);
+    }
+    size_t k = 0;
+    for (long r = 1; r <= nrows && !status; r++) {
+        plan_row x;
+        int iv[5];
+        double dv[5];
+        char fbuf[32], *fp = fbuf;
+        for (int c = 0; c < 5; c++) fits_read_col(f, TINT, col[c], r, 1, 1, NULL, &iv[c], NULL, &status);
+        fits_read_col(f, TSTRING, col[5], r, 1, 1, NULL, &fp, NULL, &status);
+        for (int c = 0; c < 5; c++) fits_read_col(f, TDOUBLE, col[6 + c], r, 1, 1, NULL, &dv[c], NULL, &status);
+        if (status) break;
+        if (iv[0] < first || (last >= 0 && iv[0] > last)) continue;
+        x.expid = iv[0], x.visit = iv[1], x.orient = iv[2], x.pointing = iv[3], x.pass = iv[4];
+        snprintf(x.filter, sizeof x.filter, "%.15s", fbuf);
+        x.ra = dv[0], x.dec = dv[1], x.pa = dv[2], x.mjd_mid = dv[3], x.exptime = dv[4];
+        for (int c = 0; c < 5; c++)
+            if (!isfinite(dv[c])) {
+                free(rows);
+                int cs = 0;
+                fits_close_file(f, &cs);
+                return wf_error(WF_ERR_INPUT, "%s: PLAN row %ld column %s is not finite", path, r, names[6 + c]);
+            }
+        rows[k++] = x;
+    }
+    int cs = 0;
+    fits_close_file(f, &cs);
+    if (status) {
+        free(rows);
+        return wf_error(WF_ERR_IO, "%s: reading the PLAN table: cfitsio status %d", path, status);
+    }
+    *out = rows;
+    *n = k;
+    return WF_OK;
+}
+
+/* The built-in Rev F table whose duration is nearest t seconds at this frame time. */
+static wf_status nearest_table(double frame_time, double t, char *name, size_t cap)
+{
+    static const char *tables[] = {"4", "6", "11"};
+    double best = INFINITY;
+    for (int k = 0; k < 3; k++) {
+        wf_clock c = {0};
+        c.frame_time = frame_time;
+        wf_status st = wf_ma_builtin(tables[k], &c.ma);
+        if (st) return st;
+        double d = fabs(wf_clock_exposure_time(&c) - t);
+        if (d < best) {
+            best = d;
+            snprintf(name, cap, "%s", tables[k]);
+        }
+    }
+    return WF_OK;
+}
+
+static wf_status configure(const wf_config *base, const wf_survey_run_options *opt, const plan_row *x,
+                           int sca, wf_config *cfg, wf_clock *clock)
+{
+    *cfg = *base;
+    char buf[64];
+    cfg->ra = x->ra;
+    cfg->dec = x->dec;
+    cfg->pa = x->pa;
+    cfg->mjd = x->mjd_mid;
+    cfg->ro.exposure = (uint32_t)x->expid;
+    cfg->ro.sca = (uint32_t)sca;
+    snprintf(buf, sizeof buf, "exposure.filter=%s", x->filter);
+    wf_status st = wf_config_set(cfg, buf, opt->plan_path);
+    if (st) return st;
+    cfg->ro.exptime = x->exptime;
+    if (!opt->ma_table_given) {
+        char name[8];
+        if ((st = nearest_table(cfg->frame_time, x->exptime, name, sizeof name))) return st;
+        snprintf(cfg->ma_table, sizeof cfg->ma_table, "%s", name);
+    }
+    return wf_config_finish(cfg, clock);
+}
+
+wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt, wf_survey_run_stats *stats)
+{
+    memset(stats, 0, sizeof *stats);
+    plan_row *rows;
+    size_t nrows;
+    wf_status st = read_plan(opt->plan_path, opt->first, opt->last, &rows, &nrows);
+    if (st) return st;
+    if (!nrows) {
+        free(rows);
+        return wf_error(WF_ERR_INPUT, "%s: no exposure in the range asked for", opt->plan_path);
+    }
+    int all[WF_NSCA];
+    for (int s = 0; s < WF_NSCA; s++) all[s] = s + 1;
+    const int *scas = opt->nscas ? opt->scas : all;
+    int nscas = opt->nscas ? opt->nscas : WF_NSCA;
+    wf_config *cfg = malloc(sizeof *cfg);
+    wf_pipeline_job *job = malloc(sizeof *job);
+    if (!cfg || !job) st = wf_error(WF_ERR_NOMEM, "out of memory");
+    if (!st) st = wf_pipeline_make_dir(base->out_dir);
+    size_t total = nrows * (size_t)nscas, done = 0;
+    time_t t0 = time(NULL);
+    for (size_t i = 0; i < nrows && !st; i++) {
+        for (int k = 0; k < nscas && !st; k++, done++) {
+            wf_clock clock;
+            if ((st = configure(base, opt, &rows[i], scas[k], cfg, &clock))) break;
+            char image[WF_PATH_MAX + 64], truth[WF_PATH_MAX + 64];
+            wf_pipeline_paths(cfg->out_dir, cfg->ro.exposure, cfg->ro.sca, image, truth, sizeof image);
+            FILE *probe = fopen(image, "rb");
+            int existed = probe != NULL;
+            if (probe) fclose(probe);
+            if (existed && wf_survey_product_ok(image) && wf_survey_product_ok(truth)) {
+                stats->skipped++;
+                continue;
+            }
+            char extra[1024];
+            snprintf(extra, sizeof extra,
+                     "hdr.VISIT = %d / 0-based visit of the plan\n"
+                     "hdr.ORIENT = %d / 0-based orient of the plan\n"
+                     "hdr.POINTING = %d / 0-based pointing along the forward snake\n"
+                     "hdr.PASS = %d / 0-based filter pass of the visit\n"
+                     "hdr.PLANEXPT = %.3f / [s] planned exposure time\n",
+                     rows[i].visit, rows[i].orient, rows[i].pointing, rows[i].pass, rows[i].exptime);
+            memset(job, 0, sizeof *job);
+            job->cfg = cfg;
+            job->clock = &clock;
+            job->meta_extra = extra;
+            job->injector = opt->sne;
+            job->version = opt->version;
+            cfg->quiet = 1;
+            st = wf_pipeline_expose(job);
+            if (st) {
+                char msg[1024];
+                snprintf(msg, sizeof msg, "%s", wf_error_message());
+                st = wf_error(st, "exposure %d SCA %d: %s", rows[i].expid, scas[k], msg);
+                break;
+            }
+            stats->rendered++;
+            if (existed) stats->redone++;
+            stats->sne_drawn += (long)job->nsne_drawn;
+            if (!base->quiet)
+                fprintf(stderr, "wfisim survey: [%zu/%zu] exposure %d SCA %d %s MJD %.5f%s (%.0f s)\n", done + 1,
+                        total, rows[i].expid, scas[k], rows[i].filter, rows[i].mjd_mid,
+                        existed ? " (damaged product redone)" : "", difftime(time(NULL), t0));
+        }
+    }
+    free(job);
+    free(cfg);
+    free(rows);
+    return st;
+}

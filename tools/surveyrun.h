@@ -1,0 +1,48 @@
+/* `wfisim survey run`: every (exposure, SCA) of a range of a plan, rendered by the same
+ * pipeline as `wfisim expose` at the exposure's own pointing, PA, filter and mid-time.
+ *
+ * Resumable: a product whose image and truth files both exist and whose every HDU's CHECKSUM
+ * and DATASUM verify is skipped; anything else (missing, truncated, damaged) is rendered again
+ * (products are written through temporary files, so an interrupted run leaves no half file).
+ * Each product depends only on the plan row, the SCA, the configuration and the seed (noise is
+ * keyed by exposure id and SCA), so it is the same whichever other products were run.
+ *
+ * Read pattern: up the ramp, each exposure uses the built-in Rev F table whose duration is
+ * nearest its planned time (300 s -> table 6, 900 s -> table 11) unless readout.ma_table was
+ * given; single-frame mode uses the planned time exactly. */
+#ifndef WF_SURVEYRUN_H
+#define WF_SURVEYRUN_H
+
+#include "tools/config.h"
+#include "tools/sninject.h"
+
+#define WF_NSCA 18
+
+typedef struct wf_survey_run_options {
+    const char *plan_path;
+    long first, last;          /* EXPID range [first, last]; last < 0: to the end */
+    int scas[WF_NSCA];         /* SCAs to render, in this order */
+    int nscas;                 /* 0: all 18 */
+    int ma_table_given;        /* 1: readout.ma_table (given on the command line) applies to all */
+    wf_sn_injector *sne;       /* supernovae to inject, or NULL */
+    const char *version;
+} wf_survey_run_options;
+
+typedef struct wf_survey_run_stats {
+    long rendered, skipped, redone; /* redone: a damaged product was replaced */
+    long sne_drawn;                 /* SN entries in the truth of the products rendered */
+} wf_survey_run_stats;
+
+/* Parses "a:b", "a:" or "a" (inclusive EXPIDs) into *first, *last. */
+wf_status wf_survey_parse_range(const char *text, long *first, long *last);
+
+/* Parses "1,2,5-7" into SCA numbers (1..18, no repeats). */
+wf_status wf_survey_parse_scas(const char *text, int *scas, int *n);
+
+/* 1 when every HDU of the FITS file at path has a CHECKSUM and DATASUM that verify. */
+int wf_survey_product_ok(const char *path);
+
+wf_status wf_survey_run(const wf_config *cfg, const wf_survey_run_options *opt,
+                        wf_survey_run_stats *stats);
+
+#endif
