@@ -177,6 +177,35 @@ START_TEST(injected_flux_and_truth)
     long long ids[4];
     double tmag, tflux;
     ck_assert_int_eq(truth_sne(truth3, ids, 4, &tmag, &tflux), 0);
+
+    /* the observed light curves list the same (SN, image) pairs for exposure 0 */
+    char lc[4200];
+    snprintf(lc, sizeof lc, "%s/lc.fits", d);
+    ck_assert_int_eq(run("%s sn lightcurves --data %s --sne %s --model %s --plan %s --out %s >/dev/null", bin, data, sne,
+                         model, plan, lc), 0);
+    fitsfile *ff;
+    int status = 0, ce, cs, ci;
+    long nrows = 0;
+    fits_open_file(&ff, lc, READONLY, &status);
+    fits_movnam_hdu(ff, BINARY_TBL, "LIGHTCURVES", 0, &status);
+    fits_get_num_rows(ff, &nrows, &status);
+    fits_get_colnum(ff, CASEINSEN, "EXPID", &ce, &status);
+    fits_get_colnum(ff, CASEINSEN, "SCA", &cs, &status);
+    fits_get_colnum(ff, CASEINSEN, "ID", &ci, &status);
+    int seen = 0;
+    for (long r = 1; r <= nrows && !status; r++) {
+        int e, sca;
+        long long id;
+        fits_read_col(ff, TINT, ce, r, 1, 1, NULL, &e, NULL, &status);
+        fits_read_col(ff, TINT, cs, r, 1, 1, NULL, &sca, NULL, &status);
+        fits_read_col(ff, TLONGLONG, ci, r, 1, 1, NULL, &id, NULL, &status);
+        if (e != 0) continue;
+        ck_assert_msg((id == 41 && sca == 1) || (id == 42 && sca == 2), "exposure 0: SN %lld on SCA %d", id, sca);
+        seen |= id == 41 ? 1 : 2;
+    }
+    fits_close_file(ff, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_int_eq(seen, 3);
     wf_salt_free(m);
     wf_sn_sample_free(&s);
 }

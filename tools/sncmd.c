@@ -19,13 +19,15 @@
 #include "sim/synth.h"
 #include "tools/config.h"
 #include "tools/plot.h"
+#include "tools/sninject.h"
+#include "sim/wcs.h"
 
 static const char *sn_usage =
     "usage: wfisim sn generate (--plan plan.fits | --area DEG2 --start MJD --days N [--ra R --dec D])\n"
     "                          [--catalog FILE | --hostless] [--seed S] [--model DIR] [--data DIR]\n"
     "                          [--h0 H --om OM] [--alpha A --beta B --sigma-int S] [--dz DZ]\n"
     "                          [--rate 'A B zmin zmax' ...] [--zmin Z --zmax Z] --out sne.fits\n"
-    "       wfisim sn lightcurves --sne sne.fits (--plan plan.fits | --grid START:END:STEP\n"
+    "       wfisim sn lightcurves --sne sne.fits (--plan plan.fits [--window] | --grid START:END:STEP\n"
     "                          [--filters Y106,J129,...]) [--model DIR] [--data DIR] --out lc.fits\n"
     "                          [--plot ID,ID,... [--plot-dir DIR]]\n"
     "       wfisim sn lightcurve --z Z --t0 MJD --band F --mjd M1,M2,... [--x1 X] [--c C]\n"
@@ -34,8 +36,10 @@ static const char *sn_usage =
     "  generate     the SN Ia sample of SPEC 5 over a plan's footprint (its coverage map beside\n"
     "               it) or a circle of DEG2 about (R, D); hosts from --catalog (FITS/CSV galaxies\n"
     "               with z, logmass, logsfr, or an SNANA HOSTLIB), else the synthetic field\n"
-    "  lightcurves  truth light curves (ID, BAND, MJD, MAG, FLUX, FLAG) on the plan's exposures\n"
-    "               in each SN's model window, or on a regular grid in the listed filters\n"
+    "  lightcurves  truth light curves (ID, BAND, MJD, MAG, FLUX, FLAG, EXPID, SCA, X, Y): with\n"
+    "               --plan, on every image of the plan whose SCA holds the SN inside its model\n"
+    "               phase range (--window: on every\n"
+    "               plan date in its model window); or on a regular grid in the listed filters\n"
     "  lightcurve   one SN's AB magnitudes and e-/s at given dates (sncosmo's bandmag)\n"
     "\n"
     "  --model DIR  SALT model directory (default DATA/salt3/salt3-k21); --data DIR Roman data\n"
@@ -64,7 +68,7 @@ typedef struct opts {
     const char *plan, *out, *catalog, *model, *data, *sne, *grid, *filters, *plot, *plot_dir;
     const char *band, *mjd, *interp;
     const char *rate[MAX_RATE_LINES];
-    int nrate, hostless;
+    int nrate, hostless, window;
     double area, start, days, ra, dec, seed;
     double h0, om, alpha, beta, sigma_int, dz, zmin, zmax;
     double z, t0, x1, c, x0, mu;
@@ -115,6 +119,7 @@ static int parse(int argc, char **argv, opts *o)
         const char *a = argv[i], *val = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--help") || !strcmp(a, "-h")) { fputs(sn_usage, stdout); exit(0); }
         if (!strcmp(a, "--hostless")) { o->hostless = 1; continue; }
+        if (!strcmp(a, "--window")) { o->window = 1; continue; }
         int done = 0;
         for (size_t k = 0; k < sizeof strs / sizeof *strs && !done; k++)
             if (!strcmp(a, strs[k].flag)) {
@@ -508,46 +513,42 @@ done:
 
 /* ---- light curves -------------------------------------------------------------------- */
 
+typedef struct lc_row {
+    int64_t id;
+    char band[8];
+    double mjd, mag, flux;
+    double x, y;          /* FITS pixel on the SCA (observed mode), else NaN */
+    int32_t flag, expid, sca; /* expid, sca -1 unless observed */
+} lc_row;
+
 typedef struct lc_rows {
     size_t n, cap;
-    int64_t *id;
-    char (*band)[8];
-    double *mjd, *mag, *flux;
-    int32_t *flag;
+    lc_row *v;
 } lc_rows;
 
-static wf_status rows_push(lc_rows *r, int64_t id, const char *band, double mjd, double mag, double flux, unsigned flag)
+static wf_status rows_push(lc_rows *r, const lc_row *row)
 {
     if (r->n == r->cap) {
         size_t nc = r->cap ? 2 * r->cap : 4096;
-        void *a = realloc(r->id, nc * sizeof *r->id), *b = NULL, *c = NULL, *d = NULL, *e = NULL, *f = NULL;
-        if (a) r->id = a;
-        if (a && (b = realloc(r->band, nc * sizeof *r->band))) r->band = b;
-        if (b && (c = realloc(r->mjd, nc * sizeof *r->mjd))) r->mjd = c;
-        if (c && (d = realloc(r->mag, nc * sizeof *r->mag))) r->mag = d;
-        if (d && (e = realloc(r->flux, nc * sizeof *r->flux))) r->flux = e;
-        if (e && (f = realloc(r->flag, nc * sizeof *r->flag))) r->flag = f;
-        if (!f) return wf_error(WF_ERR_NOMEM, "light curves: %zu rows", nc);
+        lc_row *p = realloc(r->v, nc * sizeof *p);
+        if (!p) return wf_error(WF_ERR_NOMEM, "light curves: %zu rows", nc);
+        r->v = p;
         r->cap = nc;
     }
-    size_t k = r->n++;
-    r->id[k] = id;
-    snprintf(r->band[k], sizeof r->band[k], "%s", band);
-    r->mjd[k] = mjd, r->mag[k] = mag, r->flux[k] = flux, r->flag[k] = (int32_t)flag;
+    r->v[r->n++] = *row;
     return WF_OK;
 }
 
-static void rows_free(lc_rows *r)
+static int by_id_mjd(const void *a, const void *b)
 {
-    free(r->id);
-    free(r->band);
-    free(r->mjd);
-    free(r->mag);
-    free(r->flux);
-    free(r->flag);
+    const lc_row *x = a, *y = b;
+    if (x->id != y->id) return x->id < y->id ? -1 : 1;
+    if (x->mjd != y->mjd) return x->mjd < y->mjd ? -1 : 1;
+    return (x->sca > y->sca) - (x->sca < y->sca);
 }
 
-static wf_status write_rows(const lc_rows *r, const char *path, const char *sne)
+/* Column by column in chunks: cfitsio takes contiguous arrays. */
+static wf_status write_rows(const lc_rows *r, const char *path, const char *sne, int observed)
 {
     char tmp[WF_PATH_MAX + 16];
     snprintf(tmp, sizeof tmp, "%s.tmp", path);
@@ -559,25 +560,46 @@ static wf_status write_rows(const lc_rows *r, const char *path, const char *sne)
     char src[68];
     snprintf(src, sizeof src, "%.66s", sne);
     fits_write_key_str(f, "SNEFILE", src, "the SN sample", &status);
-    char *tt[] = {"ID", "BAND", "MJD", "MAG", "FLUX", "FLAG"};
-    char *tf[] = {"1K", "8A", "1D", "1D", "1D", "1J"};
-    char *tu[] = {"", "", "d", "mag(AB)", "electron/s", ""};
-    fits_create_tbl(f, BINARY_TBL, 0, 6, tt, tf, tu, "LIGHTCURVES", &status);
+    fits_write_key_str(f, "LCMODE", observed ? "observed" : "dates", observed ? "rows: images whose SCA holds the SN"
+                       : "rows: every date asked for", &status);
+    char *tt[] = {"ID", "BAND", "MJD", "MAG", "FLUX", "FLAG", "EXPID", "SCA", "X", "Y"};
+    char *tf[] = {"1K", "8A", "1D", "1D", "1D", "1J", "1J", "1J", "1D", "1D"};
+    char *tu[] = {"", "", "d", "mag(AB)", "electron/s", "", "", "", "pixel", "pixel"};
+    fits_create_tbl(f, BINARY_TBL, 0, 10, tt, tf, tu, "LIGHTCURVES", &status);
     fits_write_comment(f, "MAG 99 where FLUX is 0; FLAG bits: 1 phase outside the model, 2 band outside "
-                       "its wavelengths, 4 negative band flux set to 0", &status);
-    LONGLONG n = (LONGLONG)r->n;
-    if (n) {
-        char **names = malloc(r->n * sizeof *names);
-        if (!names) status = MEMORY_ALLOCATION;
-        for (size_t k = 0; names && k < r->n; k++) names[k] = (char *)r->band[k];
-        fits_write_col(f, TLONGLONG, 1, 1, 1, n, r->id, &status);
-        if (names) fits_write_col(f, TSTRING, 2, 1, 1, n, names, &status);
-        fits_write_col(f, TDOUBLE, 3, 1, 1, n, r->mjd, &status);
-        fits_write_col(f, TDOUBLE, 4, 1, 1, n, r->mag, &status);
-        fits_write_col(f, TDOUBLE, 5, 1, 1, n, r->flux, &status);
-        fits_write_col(f, TINT, 6, 1, 1, n, r->flag, &status);
-        free(names);
+                       "its wavelengths, 4 negative band flux set to 0; EXPID, SCA -1 and X, Y NaN for dates "
+                       "not tied to an image; X, Y FITS pixels", &status);
+    enum { CHUNK = 65536 };
+    double *d = malloc(CHUNK * sizeof *d);
+    int64_t *id = malloc(CHUNK * sizeof *id);
+    int *iv = malloc(CHUNK * sizeof *iv);
+    char **names = malloc(CHUNK * sizeof *names);
+    if (!d || !id || !iv || !names) status = MEMORY_ALLOCATION;
+    for (size_t a = 0; a < r->n && !status; a += CHUNK) {
+        size_t m = r->n - a < CHUNK ? r->n - a : CHUNK;
+        LONGLONG first = (LONGLONG)a + 1;
+        for (size_t k = 0; k < m; k++) id[k] = r->v[a + k].id, names[k] = (char *)r->v[a + k].band;
+        fits_write_col(f, TLONGLONG, 1, first, 1, (LONGLONG)m, id, &status);
+        fits_write_col(f, TSTRING, 2, first, 1, (LONGLONG)m, names, &status);
+        for (int c = 0; c < 5; c++) {
+            for (size_t k = 0; k < m; k++) {
+                const lc_row *x = &r->v[a + k];
+                d[k] = c == 0 ? x->mjd : c == 1 ? x->mag : c == 2 ? x->flux : c == 3 ? x->x : x->y;
+            }
+            fits_write_col(f, TDOUBLE, c < 3 ? 3 + c : 6 + c, first, 1, (LONGLONG)m, d, &status);
+        }
+        for (int c = 0; c < 3; c++) {
+            for (size_t k = 0; k < m; k++) {
+                const lc_row *x = &r->v[a + k];
+                iv[k] = c == 0 ? x->flag : c == 1 ? x->expid : x->sca;
+            }
+            fits_write_col(f, TINT, 6 + c, first, 1, (LONGLONG)m, iv, &status);
+        }
     }
+    free(d);
+    free(id);
+    free(iv);
+    free(names);
     int cs = 0;
     fits_close_file(f, &cs);
     if (status || cs) {
@@ -593,7 +615,10 @@ static wf_status write_rows(const lc_rows *r, const char *path, const char *sne)
     return WF_OK;
 }
 
-typedef struct epoch { double mjd; int filter; } epoch;
+typedef struct epoch {
+    double mjd, ra, dec, pa;
+    int filter, expid;
+} epoch;
 
 static int by_mjd(const void *a, const void *b)
 {
@@ -604,27 +629,33 @@ static int by_mjd(const void *a, const void *b)
 static wf_status plan_epochs(const char *plan, epoch **out, size_t *n)
 {
     fitsfile *f;
-    int status = 0, cm, cf;
+    int status = 0, c[6];
     long nrows = 0;
     *out = NULL, *n = 0;
     if (fits_open_diskfile(&f, plan, READONLY, &status)) return wf_error(WF_ERR_IO, "%s: cannot open the plan", plan);
     fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
-    fits_get_colnum(f, CASEINSEN, "MJD_MID", &cm, &status);
-    fits_get_colnum(f, CASEINSEN, "FILTER", &cf, &status);
+    const char *names[6] = {"MJD_MID", "FILTER", "RA", "DEC", "PA", "EXPID"};
+    for (int k = 0; k < 6; k++) fits_get_colnum(f, CASEINSEN, (char *)names[k], &c[k], &status);
     fits_get_num_rows(f, &nrows, &status);
     epoch *e = status ? NULL : malloc((size_t)(nrows > 0 ? nrows : 1) * sizeof *e);
     wf_status st = WF_OK;
     for (long r = 1; e && r <= nrows && !status && !st; r++) {
         char name[32], *np = name;
-        fits_read_col(f, TDOUBLE, cm, r, 1, 1, NULL, &e[r - 1].mjd, NULL, &status);
-        fits_read_col(f, TSTRING, cf, r, 1, 1, NULL, &np, NULL, &status);
+        epoch *x = &e[r - 1];
+        fits_read_col(f, TDOUBLE, c[0], r, 1, 1, NULL, &x->mjd, NULL, &status);
+        fits_read_col(f, TSTRING, c[1], r, 1, 1, NULL, &np, NULL, &status);
+        fits_read_col(f, TDOUBLE, c[2], r, 1, 1, NULL, &x->ra, NULL, &status);
+        fits_read_col(f, TDOUBLE, c[3], r, 1, 1, NULL, &x->dec, NULL, &status);
+        fits_read_col(f, TDOUBLE, c[4], r, 1, 1, NULL, &x->pa, NULL, &status);
+        fits_read_col(f, TINT, c[5], r, 1, 1, NULL, &x->expid, NULL, &status);
         wf_filter fl;
         if (!status && (st = wf_filter_parse(name, &fl))) break;
-        e[r - 1].filter = (int)fl;
+        x->filter = (int)fl;
     }
     int cs = 0;
     fits_close_file(f, &cs);
-    if (!st && (status || !e)) st = wf_error(WF_ERR_INPUT, "%s: not a plan with a PLAN table (MJD_MID, FILTER)", plan);
+    if (!st && (status || !e))
+        st = wf_error(WF_ERR_INPUT, "%s: not a plan with a PLAN table (EXPID, MJD_MID, FILTER, RA, DEC, PA)", plan);
     if (st) { free(e); return st; }
     qsort(e, (size_t)nrows, sizeof *e, by_mjd);
     *out = e;
@@ -653,7 +684,7 @@ static wf_status grid_epochs(const char *grid, const char *filters, epoch **out,
     if (!e) return wf_error(WF_ERR_NOMEM, "--grid: %.0f dates", count);
     size_t k = 0;
     for (long i = 0; i < (long)count; i++)
-        for (int j = 0; j < nf; j++) e[k++] = (epoch){a + (double)i * step, fl[j]};
+        for (int j = 0; j < nf; j++) e[k++] = (epoch){a + (double)i * step, NAN, NAN, NAN, fl[j], -1};
     *out = e;
     *n = k;
     return WF_OK;
@@ -675,27 +706,92 @@ static wf_status plot_sn(const lc_rows *r, size_t first, size_t last, int64_t id
     for (int f = 0; f < WF_NFILTER && !st; f++) {
         int m = 0;
         for (size_t k = first; k < last; k++)
-            if (!strcmp(r->band[k], wf_filter_name((wf_filter)f)) && r->flux[k] > 0) {
-                x[m] = r->mjd[k];
-                y[m++] = r->mag[k];
+            if (!strcmp(r->v[k].band, wf_filter_name((wf_filter)f)) && r->v[k].flux > 0) {
+                x[m] = r->v[k].mjd;
+                y[m++] = r->v[k].mag;
             }
         if (m) {
             st = wf_plot_series(p, x, y, NULL, m, wf_filter_name((wf_filter)f), WF_PLOT_LINE | WF_PLOT_MARKERS);
             drawn = 1;
         }
     }
-    if (!st && !drawn) {
+    if (!st && !drawn)
         fprintf(stderr, "wfisim sn: SN %lld has no flux on the dates asked for: no plot\n", (long long)id);
-        wf_plot_free(p);
-        free(x);
-        free(y);
-        return WF_OK;
-    }
-    if (!st) st = wf_plot_write_png(p, path);
+    else if (!st)
+        st = wf_plot_write_png(p, path);
     free(x);
     free(y);
     wf_plot_free(p);
-    if (!st) printf("wfisim sn: wrote %s\n", path);
+    if (!st && drawn) printf("wfisim sn: wrote %s\n", path);
+    return st;
+}
+
+/* The images of the plan that hold each SN: per exposure and SCA, the SNe of the footprint
+ * (the injector's sky index and light curves) whose centre is on the SCA. */
+static wf_status observed_rows(const opts *o, const epoch *ep, size_t nep, wf_bandpass **bp, lc_rows *rows)
+{
+    wf_focal_plane *fp = malloc(sizeof *fp);
+    wf_sn_injector *inj = NULL;
+    if (!fp) return wf_error(WF_ERR_NOMEM, "focal plane");
+    wf_status st = wf_wcs_focal_plane(o->data[0] ? o->data : NULL, fp);
+    if (!st) st = wf_sn_injector_open(o->sne, o->model, o->data, &inj);
+    for (size_t e = 0; e < nep && !st; e++) {
+        for (int sca = 1; sca <= 18 && !st; sca++) {
+            wf_wcs w;
+            double ra[4], dec[4];
+            const double cx[4] = {-0.5, 4087.5, 4087.5, -0.5}, cy[4] = {-0.5, -0.5, 4087.5, 4087.5};
+            if ((st = wf_wcs_for_sca(fp, ep[e].ra, ep[e].dec, ep[e].pa, sca, &w))) break;
+            for (int k = 0; k < 4 && !st; k++) st = wf_wcs_pix2world(&w, cx[k], cy[k], &ra[k], &dec[k]);
+            wf_skyregion reg;
+            wf_scene_sn *v = NULL;
+            size_t n = 0;
+            if (!st) st = wf_skyindex_polygon(ra, dec, 4, 1.0, &reg);
+            if (!st) st = wf_sn_injector_select(inj, wf_filter_name((wf_filter)ep[e].filter), ep[e].mjd, &reg, &v, &n);
+            for (size_t k = 0; k < n && !st; k++) {
+                double x, y;
+                if (wf_wcs_world2pix(&w, v[k].ra, v[k].dec, &x, &y) != WF_OK) continue;
+                if (x < -0.5 || y < -0.5 || x >= 4087.5 || y >= 4087.5) continue;
+                if (v[k].flags & WF_SALT_OUT_PHASE) continue; /* before or after the model: no light */
+                lc_row row = {v[k].id, "", ep[e].mjd, v[k].mag,
+                              v[k].mag < WF_SALT_MAG_NONE ? wf_bandpass_countrate_ab(bp[ep[e].filter], v[k].mag) : 0.0,
+                              x + 1.0, y + 1.0, (int32_t)v[k].flags, ep[e].expid, sca};
+                snprintf(row.band, sizeof row.band, "%s", wf_filter_name((wf_filter)ep[e].filter));
+                st = rows_push(rows, &row);
+            }
+            free(v);
+        }
+    }
+    wf_sn_injector_free(inj);
+    free(fp);
+    return st;
+}
+
+/* Every date of ep (in the SN's model window only, with window = 1). */
+static wf_status dated_rows(const wf_sn_sample *s, const wf_salt_model *model, const epoch *ep, size_t nep,
+                            wf_bandpass **bp, int window, lc_rows *rows)
+{
+    wf_status st = WF_OK;
+    double pmin, pmax;
+    wf_salt_phase_range(model, &pmin, &pmax);
+    for (size_t i = 0; i < s->n && !st; i++) {
+        wf_salt_params p = {s->z[i], s->t0[i], s->x0[i], s->x1[i], s->c[i]};
+        wf_salt_lc *lc[WF_NFILTER] = {0};
+        double lo = window ? s->t0[i] + (1.0 + s->z[i]) * pmin : -INFINITY;
+        double hi = window ? s->t0[i] + (1.0 + s->z[i]) * pmax : INFINITY;
+        for (size_t e = 0; e < nep && !st; e++) {
+            if (ep[e].mjd < lo || ep[e].mjd > hi) continue;
+            int f = ep[e].filter;
+            if (!lc[f] && (st = wf_salt_lc_init(model, &p, bp[f], WF_SALT_INTERP_BICUBIC, &lc[f]))) break;
+            double rate, mag = WF_SALT_MAG_NONE;
+            unsigned flags;
+            if ((st = wf_salt_lc_rate(lc[f], ep[e].mjd, &rate, &flags))) break;
+            if (rate > 0 && (st = wf_bandpass_mag_ab(bp[f], rate, &mag))) break;
+            lc_row row = {s->id[i], "", ep[e].mjd, mag, rate, NAN, NAN, (int32_t)flags, ep[e].expid, -1};
+            snprintf(row.band, sizeof row.band, "%s", wf_filter_name((wf_filter)f));
+            st = rows_push(rows, &row);
+        }
+        for (int f = 0; f < WF_NFILTER; f++) wf_salt_lc_free(lc[f]);
+    }
     return st;
 }
 
@@ -706,12 +802,12 @@ static int cmd_lightcurves(int argc, char **argv)
     if (rc) return rc;
     if (!o.sne || !o.out) return usage_error("%s are required", "--sne FILE and --out FILE");
     if (!o.plan == !o.grid) return usage_error("%s", "give one of --plan plan.fits or --grid START:END:STEP");
+    if (o.window && !o.plan) return usage_error("%s goes with --plan", "--window");
     wf_sn_sample s;
     wf_salt_model *model = NULL;
     epoch *ep = NULL;
     size_t nep = 0;
-    lc_rows rows;
-    memset(&rows, 0, sizeof rows);
+    lc_rows rows = {0, 0, NULL};
     wf_bandpass *bp[WF_NFILTER] = {0};
     int64_t plot_ids[64];
     int nplot = 0;
@@ -735,41 +831,29 @@ static int cmd_lightcurves(int argc, char **argv)
         if (!(bp[f] = malloc(sizeof *bp[f]))) st = wf_error(WF_ERR_NOMEM, "bandpass");
         else st = wf_bandpass_load((wf_filter)f, o.data, bp[f]);
     }
+    int observed = o.plan && !o.window;
+    if (!st) st = observed ? observed_rows(&o, ep, nep, bp, &rows) : dated_rows(&s, model, ep, nep, bp, o.window, &rows);
+    if (!st && rows.n) qsort(rows.v, rows.n, sizeof *rows.v, by_id_mjd);
     int plotted = 0;
-    for (size_t i = 0; i < s.n && !st; i++) {
-        wf_salt_params p = {s.z[i], s.t0[i], s.x0[i], s.x1[i], s.c[i]};
-        wf_salt_lc *lc[WF_NFILTER] = {0};
-        double lo = -INFINITY, hi = INFINITY;
-        if (o.plan) { /* only the model window: outside it every value is 0 with a flag */
-            double pmin, pmax;
-            wf_salt_phase_range(model, &pmin, &pmax);
-            lo = s.t0[i] + (1.0 + s.z[i]) * pmin;
-            hi = s.t0[i] + (1.0 + s.z[i]) * pmax;
-        }
-        size_t first = rows.n;
-        for (size_t e = 0; e < nep && !st; e++) {
-            if (ep[e].mjd < lo || ep[e].mjd > hi) continue;
-            int f = ep[e].filter;
-            if (!lc[f] && (st = wf_salt_lc_init(model, &p, bp[f], WF_SALT_INTERP_BICUBIC, &lc[f]))) break;
-            double rate, mag;
-            unsigned flags;
-            if ((st = wf_salt_lc_rate(lc[f], ep[e].mjd, &rate, &flags))) break;
-            mag = WF_SALT_MAG_NONE;
-            if (rate > 0 && (st = wf_bandpass_mag_ab(bp[f], rate, &mag))) break;
-            st = rows_push(&rows, s.id[i], wf_filter_name((wf_filter)f), ep[e].mjd, mag, rate, flags);
-        }
-        for (int f = 0; f < WF_NFILTER; f++) wf_salt_lc_free(lc[f]);
-        for (int k = 0; k < nplot && !st; k++)
-            if (plot_ids[k] == s.id[i]) {
-                st = plot_sn(&rows, first, rows.n, s.id[i], s.z[i], o.plot_dir ? o.plot_dir : ".");
-                plotted++;
-            }
+    for (int k = 0; k < nplot && !st; k++) {
+        size_t i = 0;
+        while (i < s.n && s.id[i] != plot_ids[k]) i++;
+        if (i == s.n) continue;
+        size_t a = 0;
+        while (a < rows.n && rows.v[a].id != plot_ids[k]) a++;
+        size_t b = a;
+        while (b < rows.n && rows.v[b].id == plot_ids[k]) b++;
+        st = plot_sn(&rows, a, b, plot_ids[k], s.z[i], o.plot_dir ? o.plot_dir : ".");
+        plotted++;
     }
     if (!st && plotted < nplot) st = wf_error(WF_ERR_INPUT, "--plot: %d of the ids are not in %s", nplot - plotted, o.sne);
-    if (!st) st = write_rows(&rows, o.out, o.sne);
-    if (!st) printf("wfisim sn: %zu light-curve points of %zu supernovae; wrote %s\n", rows.n, s.n, o.out);
+    if (!st) st = write_rows(&rows, o.out, o.sne, observed);
+    if (!st)
+        printf("wfisim sn: %zu light-curve points of %zu supernovae (%s); wrote %s\n", rows.n, s.n,
+               observed ? "images whose SCA holds the SN" : o.window ? "plan dates in each model window" : "grid dates",
+               o.out);
     for (int f = 0; f < WF_NFILTER; f++) free(bp[f]);
-    rows_free(&rows);
+    free(rows.v);
     free(ep);
     wf_salt_free(model);
     wf_sn_sample_free(&s);
