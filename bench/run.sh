@@ -5,7 +5,7 @@
 set -eu
 cd "$(dirname "$0")/.."
 B=build/rel/bench
-make -s $B/bench_readout $B/bench_direct_error $B/rss bin/wfisim >/dev/null
+make -s $B/bench_readout $B/bench_direct_error $B/bench_survey $B/rss bin/wfisim >/dev/null
 out=docs/BENCHMARKS.md
 REF="${WFISIM_REFERENCE:-../shared/reference}/galsim"
 DATA="${WFISIM_DATA:-../shared/data}"
@@ -127,6 +127,64 @@ if [ -f "$REF/scene_catalog_sca1_pointingA.csv.gz" ] && [ $N = 4088 ]; then
   echo "| empty scene (sky only), 1 thread | \`wfisim expose --mode single --set scene.kind=grid --set scene.grid.flux=0\` | $(field "$r" wall_s) | $(field "$r" cpu_s) | $(field "$r" peak_rss_MiB) |" >>"$tmp"
   rm -rf "$d"
 fi
+# ---- survey plan, footprint selection, survey run, supernovae ------------------------
+sd=$(mktemp -d)
+rssrow() { # label, shown command, command...
+  label=$1; shown=$2; shift 2
+  r=$($B/rss "$@" 2>&1 >/dev/null | grep '^rss:')
+  echo "| $label | \`$shown\` | $(field "$r" wall_s) | $(field "$r" cpu_s) | $(field "$r" peak_rss_MiB) |" >>"$tmp"
+  echo "  $label: $r" >&2
+}
+{
+  echo
+  echo "## Survey plan, footprint selection, survey run"
+  echo
+  echo "| case | command | wall s | CPU s | peak RSS MiB |"
+  echo "|---|---|---|---|---|"
+} >>"$tmp"
+rssrow "deep-tier plan (146 visits, 9,344 exposures) + coverage + overlap check + PNGs" "wfisim survey plan --out plan.fits" bin/wfisim survey plan --quiet --data "$DATA" --out "$sd/plan.fits"
+NEXP=10; [ "${BENCH_QUICK:-0}" = 1 ] && NEXP=2
+rssrow "survey run: $NEXP exposures x SCA 1, synthetic scene, single frame, 2 threads" "wfisim survey run --plan plan.fits --exposures 0:$((NEXP - 1)) --scas 1 --mode single --threads 2" bin/wfisim survey run --quiet --data "$DATA" --plan "$sd/plan.fits" --exposures 0:$((NEXP - 1)) --scas 1 --mode single --threads 2 --set readout.ncols=$N --set readout.nrows=$N --out "$sd/run"
+rssrow "the same again: every product verifies and is skipped" "wfisim survey run ... (again)" bin/wfisim survey run --quiet --data "$DATA" --plan "$sd/plan.fits" --exposures 0:$((NEXP - 1)) --scas 1 --mode single --threads 2 --set readout.ncols=$N --set readout.nrows=$N --out "$sd/run"
+sel=$($B/bench_survey select "$DATA" 2>/dev/null)
+{
+  echo
+  echo "Footprint selection (\`bench_survey select\`), the 18 SCAs of one pointing out of the whole"
+  echo "synthetic field:"
+  echo
+  echo '```'
+  echo "$sel"
+  echo '```'
+  echo
+  echo "\`case=index\`: the sky index over the whole field, as for a catalog read from a file"
+  echo "(\`select_ms_per_sca\` is one SCA's query); \`case=synth_select\`: the synthetic generator's"
+  echo "own path, which generates only the cells under the SCA (what \`expose\` and \`survey run\` do)."
+} >>"$tmp"
+if [ -d "$DATA/salt3/salt3-k21" ]; then
+  {
+    echo
+    echo "## Supernovae over the full deep-tier plan"
+    echo
+    echo "| case | command | wall s | CPU s | peak RSS MiB |"
+    echo "|---|---|---|---|---|"
+  } >>"$tmp"
+  rssrow "SN sample over the plan's footprint (hosts from the synthetic field)" "wfisim sn generate --plan plan.fits --out sne.fits" bin/wfisim sn generate --data "$DATA" --plan "$sd/plan.fits" --out "$sd/sne.fits"
+  rssrow "truth light curves on every image that holds each SN" "wfisim sn lightcurves --sne sne.fits --plan plan.fits --out lc.fits" bin/wfisim sn lightcurves --data "$DATA" --sne "$sd/sne.fits" --plan "$sd/plan.fits" --out "$sd/lc.fits"
+  rssrow "light curves on every plan date in each SN's model window" "wfisim sn lightcurves ... --window" bin/wfisim sn lightcurves --data "$DATA" --sne "$sd/sne.fits" --plan "$sd/plan.fits" --window --out "$sd/lcw.fits"
+  n=$(bin/wfisim sn generate --data "$DATA" --plan "$sd/plan.fits" --out "$sd/sne2.fits" | sed -n 's/^wfisim sn: \([0-9]*\) supernovae.*/\1/p')
+  inj=$($B/bench_survey inject "$sd/plan.fits" "$sd/sne.fits" "$DATA/salt3/salt3-k21" "$DATA" 200 2>/dev/null)
+  {
+    echo
+    echo "$n SNe. Injection (\`bench_survey inject\`, 200 exposures spread over the plan, all 18 SCAs):"
+    echo "the SN lookup and light-curve evaluation per image and per SN found in a footprint."
+    echo "Drawing an SN then costs what a star costs in the renderer."
+    echo
+    echo '```'
+    echo "$inj"
+    echo '```'
+  } >>"$tmp"
+fi
+rm -rf "$sd"
 if [ -f docs/BENCHMARKS.notes.md ]; then echo >>"$tmp"; cat docs/BENCHMARKS.notes.md >>"$tmp"; fi
 mv "$tmp" "$out"
 echo "wrote $out" >&2
