@@ -432,6 +432,31 @@ static char *slurp(FILE *f, size_t *len)
     return buf;
 }
 
+/* survey.* keys go to the plan's own table from YAML (scalars and lists) and --set; the
+ * values land in cfg.survey and errors name the file and line. */
+START_TEST(test_survey_keys)
+{
+    wf_config cfg;
+    wf_config_defaults(&cfg);
+    ck_assert_int_eq(cfg.survey.visits, 146);
+    const char *path = write_file("survey.yaml", "survey:\n  visits: 12\n  exptimes: [100, 200, 300, 400]\n"
+                                                 "seed: 9\n");
+    ck_assert_int_eq(wf_config_load(&cfg, path), WF_OK);
+    ck_assert_int_eq(cfg.survey.visits, 12);
+    ck_assert_double_eq(cfg.survey.exptime[3], 400.0);
+    ck_assert_uint_eq(cfg.seed, 9);
+    ck_assert_int_eq(wf_config_set(&cfg, "survey.visits=7", NULL), WF_OK);
+    ck_assert_int_eq(cfg.survey.visits, 7);
+    const char *bad = write_file("bad_survey.yaml", "seed: 1\nsurvey:\n  visits: 0\n");
+    ck_assert_int_eq(wf_config_load(&cfg, bad), WF_ERR_RANGE);
+    ck_assert_msg(strstr(wf_error_message(), "bad_survey.yaml:3") && strstr(wf_error_message(), "survey.visits"), "%s",
+                  wf_error_message());
+    ck_assert_int_eq(cfg.survey.visits, 7); /* unchanged on error */
+    ck_assert_int_ne(wf_config_set(&cfg, "survey.vists=3", NULL), WF_OK);
+    ck_assert_msg(strstr(wf_error_message(), "survey.vists"), "%s", wf_error_message());
+}
+END_TEST
+
 START_TEST(test_doc_matches_generated)
 {
     FILE *gen = tmpfile();
@@ -478,6 +503,7 @@ static Suite *config_suite(void)
     tcase_add_loop_test(tc, test_bad_set, 0, (int)(sizeof bad_sets / sizeof *bad_sets));
     tcase_add_test(tc, test_finish_constraints);
     tcase_add_test(tc, test_ma_table_from_file);
+    tcase_add_test(tc, test_survey_keys);
     tcase_add_test(tc, test_doc_matches_generated);
     suite_add_tcase(s, tc);
     return s;

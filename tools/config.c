@@ -639,7 +639,10 @@ void wf_config_defaults(wf_config *cfg)
     for (int i = 0; i < NKEYS; i++)
         if (keys[i].def) (void)set_from_text(cfg, &keys[i], keys[i].def, &w);
     cfg->ro.seed = cfg->seed;
+    wf_survey_defaults(&cfg->survey);
 }
+
+
 
 /* ---- YAML files ---------------------------------------------------------------------- */
 
@@ -649,6 +652,31 @@ typedef struct load_ctx {
     wf_config *cfg;
     int seen_line[NKEYS]; /* line where each key was set in this file, 0 if not */
 } load_ctx;
+
+/* survey.* keys live in sim/survey.c's own table; a YAML value (a scalar, or a sequence of
+ * scalars for lists such as survey.columns) goes there as "key=value" text. */
+static wf_status set_survey_node(load_ctx *lc, const char *name, yaml_node_t *vn, const where *w)
+{
+    char text[1024], origin[WF_PATH_MAX + 32];
+    size_t len = (size_t)snprintf(text, sizeof text, "%s=", name);
+    if (vn->type == YAML_SCALAR_NODE) {
+        len += (size_t)snprintf(text + len, len < sizeof text ? sizeof text - len : 0, "%s",
+                                (const char *)vn->data.scalar.value);
+    } else if (vn->type == YAML_SEQUENCE_NODE) {
+        for (yaml_node_item_t *it = vn->data.sequence.items.start; it < vn->data.sequence.items.top; it++) {
+            yaml_node_t *e = yaml_document_get_node(lc->doc, *it);
+            if (e->type != YAML_SCALAR_NODE)
+                return key_error(WF_ERR_INPUT, w, name, "expected a list of values, got %s in it", node_kind(e));
+            len += (size_t)snprintf(text + len, len < sizeof text ? sizeof text - len : 0, "%s%s",
+                                    it == vn->data.sequence.items.start ? "" : ",", (const char *)e->data.scalar.value);
+        }
+    } else {
+        return key_error(WF_ERR_INPUT, w, name, "expected a value or a list, got %s", node_kind(vn));
+    }
+    if (len >= sizeof text) return key_error(WF_ERR_INPUT, w, name, "value too long");
+    snprintf(origin, sizeof origin, "%s:%d", w->file, w->line);
+    return wf_survey_set(&lc->cfg->survey, text, origin);
+}
 
 static wf_status walk_mapping(load_ctx *lc, yaml_node_t *map, const char *prefix)
 {
@@ -673,7 +701,13 @@ static wf_status walk_mapping(load_ctx *lc, yaml_node_t *map, const char *prefix
                                  yaml_line(qn));
         }
         int i = find_key(name);
-        if (i >= 0) {
+        if (wf_survey_is_key(name) && vn->type != YAML_MAPPING_NODE) {
+            wf_status st = set_survey_node(lc, name, vn, &w);
+            if (st) return st;
+        } else if (!strcmp(name, "survey") && vn->type == YAML_MAPPING_NODE) {
+            wf_status st = walk_mapping(lc, vn, name);
+            if (st) return st;
+        } else if (i >= 0) {
             if (lc->seen_line[i])
                 return key_error(WF_ERR_INPUT, &w, name, "given twice (first at line %d)",
                                  lc->seen_line[i]);
@@ -888,6 +922,11 @@ wf_status wf_config_set(wf_config *cfg, const char *assignment, const char *orig
     char *name = trim(buf), *value = trim(eq + 1);
     if (!*name)
         return wf_error(WF_ERR_INPUT, "%s: '%.80s': no key before '='", w.origin, assignment);
+    if (wf_survey_is_key(name)) {
+        char text[1200];
+        snprintf(text, sizeof text, "%s=%s", name, value);
+        return wf_survey_set(&cfg->survey, text, w.origin);
+    }
     int i = find_key(name);
     if (i < 0) {
         if (is_section(name))
@@ -1172,4 +1211,11 @@ void wf_config_write_doc(FILE *out)
           "- `exposure.exptime` is used in single mode only; in ramp mode the exposure time is\n"
           "  that of the last read of the MA table.\n",
           out);
+    fputs("\n## `survey`\n"
+          "\n"
+          "The deep-tier plan (`wfisim survey plan`, sim/survey.h, docs/SURVEY.md). Lists are YAML\n"
+          "sequences or comma-separated text (`--set survey.exptimes=300,300,300,900`).\n"
+          "\n",
+          out);
+    wf_survey_write_doc(out);
 }

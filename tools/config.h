@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include "firmware/readout.h"
 #include "hal/clock.h"
+#include "sim/survey.h"
 
 #define WF_PATH_MAX 1024
 
@@ -39,6 +40,7 @@ typedef struct wf_config {
     int sky_on;                    /* scene.sky [true] */
     char data_dir[WF_PATH_MAX];    /* paths.data [$WFISIM_DATA or ""] */
     char reference_dir[WF_PATH_MAX]; /* paths.reference [$WFISIM_REFERENCE or ""] */
+    wf_survey_params survey;       /* survey.* (sim/survey.h keeps their table) */
 } wf_config;
 
 /* Every key at its documented default (SPEC values). */

@@ -136,12 +136,12 @@ static int cmd_plan(int argc, char **argv)
         if (!strcmp(a, "--data")) data = val;
         else if (!strcmp(a, "--out")) out = val;
         else if (!strcmp(a, "--set")) {
-            st = wf_survey_is_key(val) ? wf_survey_set(&par, val, "--set")
-                                       : wf_config_set(cfg, val, "--set");
+            st = wf_config_set(cfg, val, "--set"); /* survey.* keys included */
             if (st) rc = fail(st);
         }
     }
     if (!rc && !out) rc = usage_error("%s is required", "--out FILE");
+    par = cfg->survey; /* the configuration file's survey: section and --set survey.* */
     if (!data) data = cfg->data_dir;
     char cov_out[WF_PATH_MAX + 32];
     if (!rc && !coverage_path(out, cov_out, sizeof cov_out))
