@@ -354,3 +354,23 @@ wf_status wf_bandpass_countrate_sed(const wf_bandpass *bp, wf_bandpass_sed_fn se
 {
     return wf_bandpass_countrate_sed_step(bp, sed, ctx, 1.0, rate);
 }
+
+wf_status wf_bandpass_flat_slices(const wf_bandpass *bp, int nl, double *lambda_nm, double *weight)
+{
+    if (nl < 1) return wf_error(WF_ERR_RANGE, "%s: %d wavelength slices", wf_filter_name(bp->filter), nl);
+    double lo = bp->blue_nm, hi = bp->red_nm, width = (hi - lo) / nl, total = 0;
+    for (int k = 0; k < nl; k++) {
+        double a = lo + k * width, s = 0;
+        const int steps = 200;
+        for (int t = 0; t < steps; t++) {
+            double x = a + (t + 0.5) * width / steps;
+            s += wf_bandpass_throughput(bp, x) / x;
+        }
+        lambda_nm[k] = a + 0.5 * width;
+        weight[k] = s * width / steps;
+        total += weight[k];
+    }
+    if (!(total > 0)) return wf_error(WF_ERR_INPUT, "%s: the bandpass has no throughput", wf_filter_name(bp->filter));
+    for (int k = 0; k < nl; k++) weight[k] /= total;
+    return WF_OK;
+}

@@ -106,4 +106,9 @@ wf_status wf_bandpass_countrate_sed(const wf_bandpass *bp, wf_bandpass_sed_fn se
 wf_status wf_bandpass_countrate_sed_step(const wf_bandpass *bp, wf_bandpass_sed_fn sed,
                                          void *ctx, double max_step_nm, double *rate);
 
+/* A flat-f_ν source's photons over the band in nl equal slices of [blue_nm, red_nm]: the
+ * middle wavelength of each slice and its share ∫ T(λ)/λ dλ over the slice (normalised to sum
+ * 1; 200-point midpoint rule per slice). The wavelengths and weights of a chromatic PSF. */
+wf_status wf_bandpass_flat_slices(const wf_bandpass *bp, int nl, double *lambda_nm, double *weight);
+
 #endif

@@ -79,6 +79,7 @@ void wf_scene_setup_default(wf_scene_setup *s)
     s->ncols = s->nrows = 4088;
     s->pupil_bin = 8;
     s->psf_oversample = 4;
+    s->psf_nlambda = 1;
     s->psf_size = 256; /* 7" at 4x: drawing cost grows with its area (docs/BENCHMARKS.md) */
     s->flux_fraction = 0.995;
     s->pool_bytes = (size_t)64 << 20;
@@ -332,16 +333,37 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
             if (v > s->stats.sky_max) s->stats.sky_max = v;
         }
     s->stats.zodi = s->zodi;
-    /* PSF: this SCA and filter only, achromatic at the band's effective wavelength */
+    /* PSF: this SCA and filter only; achromatic at the band's effective wavelength, or the
+     * photon-weighted sum over slices of the band for a flat-f_nu source */
     wf_psf_optics optics;
     wf_psf_optics_default(&optics);
     optics.sca = setup->sca;
     optics.pupil_bin = setup->pupil_bin;
     if ((st = wf_pupil_group_of_filter(setup->filter, &optics.group))) goto bad;
     snprintf(optics.data_dir, sizeof optics.data_dir, "%s", data ? data : "");
-    double lam = s->bp->lambda_eff_nm, w = 1.0;
-    if ((st = wf_psf_build_optics(&optics, &lam, &w, 1, &s->psf))) goto bad;
-    s->stats.psf_lambda_nm = lam;
+    double lams[WF_PSF_MAX_LAMBDAS], ws[WF_PSF_MAX_LAMBDAS];
+    int nl = setup->psf_nlambda;
+    if (nl < 1 || nl > WF_PSF_MAX_LAMBDAS) {
+        st = wf_error(WF_ERR_RANGE, "scene: psf nlambda %d outside 1..%d", nl, WF_PSF_MAX_LAMBDAS);
+        goto bad;
+    }
+    if (!(setup->jitter >= 0) || !(setup->diffusion >= 0)) {
+        st = wf_error(WF_ERR_RANGE, "scene: jitter %g arcsec and diffusion %g pixels must be >= 0", setup->jitter,
+                      setup->diffusion);
+        goto bad;
+    }
+    if (nl == 1) {
+        lams[0] = s->bp->lambda_eff_nm, ws[0] = 1.0;
+    } else if ((st = wf_bandpass_flat_slices(s->bp, nl, lams, ws))) {
+        goto bad;
+    }
+    if ((st = wf_psf_build_optics(&optics, lams, ws, nl, &s->psf))) goto bad;
+    double lam = lams[0], lam_mean = 0.0;
+    for (int k = 0; k < nl; k++) {
+        lam_mean += ws[k] * lams[k];
+        if (lams[k] < lam) lam = lams[k]; /* the bluest slice sets the band limit */
+    }
+    s->stats.psf_lambda_nm = lam_mean;
     int n = setup->psf_size;
     if (!(s->psf_pix = malloc((size_t)n * n * sizeof *s->psf_pix))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF image"); goto bad; }
     wf_psf_draw_opts d;
@@ -350,6 +372,8 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     d.scale = WF_PSF_PIXEL_SCALE / setup->psf_oversample;
     d.cx = d.cy = (n - 1) / 2.0;
     d.pixel = 0; /* the drawer applies the pixel */
+    d.jitter = setup->jitter;
+    d.diffusion = setup->diffusion;
     if ((st = wf_psf_draw(s->psf, &d, s->psf_pix))) goto bad;
     /* The image holds ~99% of the light within its 7" (the rest is far wings and spikes);
      * normalised, every object keeps its whole flux, the wings' share moved inside. */

@@ -1,7 +1,8 @@
 /* One SCA's scene for one exposure: what the renderer draws and what the truth records.
  * From a pointing, an SCA, a filter and a date it builds the WCS, the bandpass, the sky (the
  * zodiacal level at that position and date, times 1 + stray light, over each pixel's own
- * area, plus thermal), the PSF of that SCA and filter (only this one), and one render object
+ * area, plus thermal), the PSF of that SCA and filter (only this one; achromatic or for a
+ * flat-f_nu SED, with optional jitter and charge diffusion), and one render object
  * per catalog entry whose stamp reaches the SCA, with its flux from the bandpass and its
  * shape carried from the sky frame (u west, v north, GalSim's) into the pixel frame through
  * the local WCS. Each readout thread gets its own renderer and drawing state. */
@@ -35,6 +36,10 @@ typedef struct wf_scene_setup {
     int pupil_bin;          /* [8] */
     int psf_oversample;     /* PSF image sampling 0.11/K arcsec [4] */
     int psf_size;           /* PSF image side in samples [256] */
+    int psf_nlambda;        /* 1: achromatic at the band's effective wavelength; n > 1:
+                             * chromatic, a flat-f_nu source over n slices of the band [1] */
+    double jitter;          /* pointing jitter, Gaussian sigma per axis, arcsec [0: off] */
+    double diffusion;       /* charge diffusion, Gaussian sigma per axis, pixels [0: off] */
     double flux_fraction;   /* stamps hold at least this [0.995] */
     size_t pool_bytes;      /* stamp pool per renderer [64 MiB] */
     int threads;            /* renderers to prepare [1] */

@@ -196,12 +196,87 @@ START_TEST(empty_scene_is_sky)
 }
 END_TEST
 
+/* |DFT| of a stamp at (fx, fy) cycles/pixel. */
+static double stamp_dft(const double *pix, int nx, int ny, double fx, double fy)
+{
+    double re = 0, im = 0;
+    for (int j = 0; j < ny; j++)
+        for (int i = 0; i < nx; i++) {
+            double ph = -2.0 * M_PI * (fx * i + fy * j), v = pix[(size_t)j * nx + i];
+            re += v * cos(ph);
+            im += v * sin(ph);
+        }
+    return hypot(re, im);
+}
+
+/* One star drawn with the PSF options of the scene: chromatic keeps the flux and changes the
+ * profile; jitter and diffusion multiply the transfer function by exp(-2 pi^2 sigma^2 f^2)
+ * (Gaussian convolution), checked on the stamp's DFT at low frequency where aliasing of the
+ * undersampled PSF is small (tolerance: that aliasing, ~1-2%). */
+START_TEST(psf_modes_chromatic_jitter_diffusion)
+{
+    const double x[1] = {128.3}, y[1] = {127.6}, mag[1] = {18};
+    char path[4200];
+    wf_scene_setup ss;
+    setup_small(&ss);
+    ss.flux_fraction = 0.9999;
+    snprintf(path, sizeof path, "%s/one.csv", wf_test_tmpdir());
+    write_catalog(path, &ss, 0, 1, x, y, mag);
+    wf_catalog stars;
+    ck_assert_int_eq(wf_catalog_read_stars(path, &stars), WF_OK);
+    wf_bandpass bp;
+    wf_bandpass_load(WF_Y106, NULL, &bp);
+    const double flux = wf_bandpass_countrate_ab(&bp, mag[0]);
+    double *pix[4];
+    int nx[4], ny[4];
+    double lam[4];
+    for (int m = 0; m < 4; m++) {
+        setup_small(&ss);
+        ss.flux_fraction = 0.9999;
+        if (m == 1) ss.psf_nlambda = 8;
+        if (m == 2) ss.jitter = 0.1;
+        if (m == 3) ss.diffusion = 1.0;
+        wf_scene *scene;
+        ck_assert_msg(wf_scene_create(&ss, NULL, &stars, &scene) == WF_OK, "%s", wf_error_message());
+        wf_scene_object info;
+        int x0, y0;
+        ck_assert_int_eq(wf_scene_draw_object(scene, 0, &info, &x0, &y0, &nx[m], &ny[m], &pix[m]), WF_OK);
+        wf_scene_stats st;
+        wf_scene_get_stats(scene, &st);
+        lam[m] = st.psf_lambda_nm;
+        double sum = 0;
+        for (int k = 0; k < nx[m] * ny[m]; k++) sum += pix[m][k];
+        ck_assert_msg(fabs(sum / flux - 1) < 2e-4, "mode %d: stamp holds %.6f of the flux", m, sum / flux);
+        wf_scene_destroy(scene);
+    }
+    /* chromatic: a photon-weighted mean wavelength inside the band, and a different profile */
+    ck_assert(lam[1] > bp.blue_nm && lam[1] < bp.red_nm && lam[1] != lam[0]);
+    double f0 = stamp_dft(pix[0], nx[0], ny[0], 0.25, 0.0), f1 = stamp_dft(pix[1], nx[1], ny[1], 0.25, 0.0);
+    ck_assert_msg(fabs(f1 / f0 - 1) > 1e-4 && fabs(f1 / f0 - 1) < 0.05, "chromatic/achromatic at 0.25 c/px: %.5f", f1 / f0);
+    /* jitter 0.1" = 0.909 px; diffusion 1 px (large, so that 0.1 cycles/px shows it while the
+     * alias from 0.9 cycles/px stays small) */
+    const double sj = 0.1 / 0.11, sd = 1.0;
+    for (int a = 0; a < 2; a++) {
+        double fx = a ? 0.0 : 0.1, fy = a ? 0.1 : 0.0;
+        double r = stamp_dft(pix[2], nx[2], ny[2], fx, fy) / stamp_dft(pix[0], nx[0], ny[0], fx, fy);
+        double want = exp(-2 * M_PI * M_PI * sj * sj * 0.01);
+        ck_assert_msg(fabs(r - want) < 0.02, "jitter: transfer %.4f, Gaussian %.4f", r, want);
+        r = stamp_dft(pix[3], nx[3], ny[3], fx, fy) / stamp_dft(pix[0], nx[0], ny[0], fx, fy);
+        want = exp(-2 * M_PI * M_PI * sd * sd * 0.01);
+        ck_assert_msg(fabs(r - want) < 0.02, "diffusion: transfer %.4f, Gaussian %.4f", r, want);
+    }
+    for (int m = 0; m < 4; m++) free(pix[m]);
+    wf_catalog_free(&stars);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("scene");
     TCase *tc = tcase_create("scene");
     tcase_set_timeout(tc, 120);
     tcase_add_test(tc, star_fluxes_and_positions);
+    tcase_add_test(tc, psf_modes_chromatic_jitter_diffusion);
     tcase_add_test(tc, galaxies_edges_and_extremes);
     tcase_add_test(tc, bright_star_within_budget);
     tcase_add_test(tc, empty_scene_is_sky);

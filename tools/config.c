@@ -203,6 +203,13 @@ static const key_desc keys[] = {
      FIELD(flux_fraction), .doc = "Each stamp holds at least this fraction of its object's flux."},
     {.name = "psf.pupil_bin", .type = KT_ENUM, .unit = "", .def = "8", .choices = pupil_bins,
      FIELD(pupil_bin), .doc = "Pupil-plane binning, as GalSim's pupil_bin (8 fast, 4 or 2 for bright stars)."},
+    {.name = "psf.nlambda", .type = KT_INT, .unit = "", .def = "1", MIN(1), MAX(64), FIELD(psf_nlambda),
+     .doc = "1: achromatic PSF at the band's effective wavelength (GalSim's default); n > 1: chromatic, "
+            "the photon-weighted PSF of a flat-f_nu source over n slices of the band."},
+    {.name = "psf.jitter", .type = KT_DOUBLE, .unit = "arcsec", .def = "0", MIN(0), MAX(1), FIELD(psf_jitter),
+     .doc = "Pointing jitter, Gaussian sigma per axis (0: off; SPEC 2 gives 0.014)."},
+    {.name = "psf.diffusion", .type = KT_DOUBLE, .unit = "pixels", .def = "0", MIN(0), MAX(2), FIELD(psf_diffusion),
+     .doc = "Charge diffusion, Gaussian sigma per axis (0: off; SPEC 2 gives 0.1)."},
     {.name = "psf.oversample", .type = KT_INT, .unit = "", .def = "4", MIN(2), MAX(8),
      FIELD(psf_oversample), .doc = "PSF image sampling: 0.11 / oversample arcsec."},
     {.name = "scene.sky_rate", .type = KT_DOUBLE, .unit = "e-/pixel/s", MIN(0),

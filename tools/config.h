@@ -36,6 +36,9 @@ typedef struct wf_config {
     char stars[WF_PATH_MAX];       /* scene.stars: stars (FITS/CSV) */
     int pupil_bin;                 /* psf.pupil_bin [8] */
     int psf_oversample;            /* psf.oversample [4] */
+    int psf_nlambda;               /* psf.nlambda [1: achromatic] */
+    double psf_jitter;             /* psf.jitter, arcsec [0] */
+    double psf_diffusion;          /* psf.diffusion, pixels [0] */
     double flux_fraction;          /* scene.flux_fraction [0.995] */
     int sky_on;                    /* scene.sky [true] */
     char data_dir[WF_PATH_MAX];    /* paths.data [$WFISIM_DATA or ""] */

@@ -235,6 +235,9 @@ static int cmd_stamp(cli *c)
     snprintf(ss.data_dir, sizeof ss.data_dir, "%s", cfg->data_dir);
     ss.pupil_bin = 1 << cfg->pupil_bin;
     ss.psf_oversample = cfg->psf_oversample;
+    ss.psf_nlambda = cfg->psf_nlambda;
+    ss.jitter = cfg->psf_jitter;
+    ss.diffusion = cfg->psf_diffusion;
     ss.flux_fraction = cfg->flux_fraction;
     ss.sky_on = 0;
     if (!st) st = wf_scene_create(&ss, in.have_gal && in.gal.n ? &in.gal : NULL, in.have_stars && in.stars.n ? &in.stars : NULL, &scene);

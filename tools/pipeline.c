@@ -228,6 +228,9 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         ss.nrows = cfg->ro.nrows;
         ss.pupil_bin = 1 << cfg->pupil_bin;
         ss.psf_oversample = cfg->psf_oversample;
+        ss.psf_nlambda = cfg->psf_nlambda;
+        ss.jitter = cfg->psf_jitter;
+        ss.diffusion = cfg->psf_diffusion;
         ss.flux_fraction = cfg->flux_fraction;
         ss.sky_on = cfg->sky_on;
         ss.threads = T;

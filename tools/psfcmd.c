@@ -136,27 +136,6 @@ static int fail(wf_status st)
     return st == WF_ERR_INPUT || st == WF_ERR_RANGE ? 2 : 1;
 }
 
-/* Wavelengths and weights of the chromatic mode: nl equal slices of the band, each at its
- * middle, weighted by ∫ T(λ)/λ dλ over the slice (photons per unit f_ν). */
-static wf_status flat_sed_weights(const wf_bandpass *bp, int nl, double *lam, double *w)
-{
-    double lo = bp->blue_nm, hi = bp->red_nm, width = (hi - lo) / nl, total = 0;
-    for (int k = 0; k < nl; k++) {
-        double a = lo + k * width, s = 0;
-        int steps = 200;
-        for (int t = 0; t < steps; t++) {
-            double x = a + (t + 0.5) * width / steps;
-            s += wf_bandpass_throughput(bp, x) / x;
-        }
-        lam[k] = a + 0.5 * width;
-        w[k] = s * width / steps;
-        total += w[k];
-    }
-    if (!(total > 0))
-        return wf_error(WF_ERR_INPUT, "%s: the bandpass has no throughput", wf_filter_name(bp->filter));
-    return WF_OK;
-}
-
 static void key_dbl(fitsfile *f, const char *key, double v, const char *comment, int *status)
 {
     fits_write_key_dbl(f, key, v, -wf_fits_double_digits(v), comment, status);
@@ -295,7 +274,7 @@ int wf_cmd_psf(int argc, char **argv)
         }
         if (a.sed) {
             nl = a.nlambda;
-            st = flat_sed_weights(bp, nl, lam, w);
+            st = wf_bandpass_flat_slices(bp, nl, lam, w);
             snprintf(lam_source, sizeof lam_source, "%d slices of the bandpass, T/lambda: %s", nl,
                      bp->source);
         } else {
