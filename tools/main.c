@@ -17,6 +17,7 @@
 #include "sim/skyindex.h"
 #include "sim/synth.h"
 #include "sim/wcs.h"
+#include "tools/accuracy.h"
 #include "tools/assemble.h"
 #include "tools/config.h"
 #include "tools/expose.h"
@@ -38,6 +39,8 @@ static const char *usage_text =
     "  record --rates FILE  write the scene's rate rows to a replay file\n"
     "  stamp --id ID        one catalog object's stamp (PSF, pixel, e-/s) -> DIR/stamp_ID.fits\n"
     "  psf --filter F --sca N --out F   a Roman PSF image (see wfisim psf --help)\n"
+    "  accuracy psf|galaxy|scene|all   error against CPU time of every rendering knob\n"
+    "                       (docs/ACCURACY.md)\n"
     "  survey plan --out F  the deep-tier observation plan and its coverage map (docs/SURVEY.md)\n"
     "  survey run --plan F [--exposures A:B] [--scas 1,2,5-7] [--sne SNE.fits]\n"
     "                       render every (exposure, SCA) of the range; resumable\n"
@@ -350,6 +353,7 @@ int main(int argc, char **argv)
     }
     if (!strcmp(cmd, "survey")) return wf_cmd_survey(argc - 2, argv + 2);
     if (!strcmp(cmd, "psf")) return wf_cmd_psf(argc - 2, argv + 2);
+    if (!strcmp(cmd, "accuracy")) return wf_cmd_accuracy(argc - 1, argv + 1);
     if (!strcmp(cmd, "sn")) return wf_cmd_sn(argc - 2, argv + 2);
     if (!strcmp(cmd, "config")) {
         if (argc >= 3 && !strcmp(argv[2], "doc")) { wf_config_write_doc(stdout); return 0; }
