@@ -18,7 +18,6 @@
 
 #define SKY_GRID 64 /* pixel-area samples every 64 pixels, bilinear between: the area varies
                        by ~3% across the SCA, smoothly, so the interpolation error is ~1e-6 */
-#define STRAY_LIGHT 0.1
 
 typedef enum { OBJ_GALAXY = 0, OBJ_STAR = 1, OBJ_SN = 2 } obj_kind;
 
@@ -80,6 +79,7 @@ void wf_scene_setup_default(wf_scene_setup *s)
     s->pupil_bin = 8;
     s->psf_oversample = 4;
     s->psf_nlambda = 1;
+    s->stray_light = 0.1;
     s->psf_size = 256; /* 7" at 4x: drawing cost grows with its area (docs/BENCHMARKS.md) */
     s->flux_fraction = 0.995;
     s->pool_bytes = (size_t)64 << 20;
@@ -127,7 +127,7 @@ static wf_status sky_row(void *ctx, int y, int ncols, double *out)
     if (j > s->gy - 2) j = s->gy - 2;
     double ty = fy - j;
     const double *a0 = s->area + (size_t)j * s->gx, *a1 = a0 + s->gx;
-    double zodi = s->zodi * (1.0 + STRAY_LIGHT);
+    double zodi = s->zodi * (1.0 + s->setup.stray_light);
     for (int x = 0; x < ncols; x++) {
         double fx = (double)x / SKY_GRID;
         int i = (int)fx;
@@ -328,7 +328,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     for (int j = 0; j < s->gy; j++)
         for (int i = 0; i < s->gx; i++) {
             if ((st = pixel_area(&s->wcs, i * SKY_GRID, j * SKY_GRID, &s->area[j * s->gx + i]))) goto bad;
-            double v = s->zodi * (1 + STRAY_LIGHT) * s->area[j * s->gx + i] + s->thermal;
+            double v = s->zodi * (1 + s->setup.stray_light) * s->area[j * s->gx + i] + s->thermal;
             if (v < s->stats.sky_min) s->stats.sky_min = v;
             if (v > s->stats.sky_max) s->stats.sky_max = v;
         }

@@ -44,6 +44,7 @@ typedef struct wf_scene_setup {
     size_t pool_bytes;      /* stamp pool per renderer [64 MiB] */
     int threads;            /* renderers to prepare [1] */
     int sky_on;             /* add the sky [1] */
+    double stray_light;     /* zodiacal light x (1 + this) [0.1, SPEC 2 / GalSim] */
     const wf_scene_sn *sne; /* supernovae (must outlive the scene) [none] */
     size_t nsne;
 } wf_scene_setup;

@@ -199,6 +199,8 @@ static const key_desc keys[] = {
      .doc = "Star catalog (FITS table or CSV); empty: no stars for scene.kind catalog."},
     {.name = "scene.sky", .type = KT_BOOL, .unit = "", .def = "true", FIELD(sky_on),
      .doc = "Add the sky (zodiacal light, stray light, thermal) to object scenes; false for checks on an empty sky."},
+    {.name = "scene.stray_light", .type = KT_DOUBLE, .unit = "", .def = "0.1", MIN(0), MAX(10), FIELD(stray_light),
+     .doc = "Stray light as a fraction of the zodiacal light (GalSim's stray_light_fraction)."},
     {.name = "scene.flux_fraction", .type = KT_DOUBLE, .unit = "", .def = "0.995", ABOVE(0.5), MAX(0.99999),
      FIELD(flux_fraction), .doc = "Each stamp holds at least this fraction of its object's flux."},
     {.name = "psf.pupil_bin", .type = KT_ENUM, .unit = "", .def = "8", .choices = pupil_bins,

@@ -233,6 +233,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         ss.diffusion = cfg->psf_diffusion;
         ss.flux_fraction = cfg->flux_fraction;
         ss.sky_on = cfg->sky_on;
+        ss.stray_light = cfg->stray_light;
         ss.threads = T;
         if ((st = gather_sne(pj, &inputs, &sne, &nsne))) goto done;
         ss.sne = sne;
