@@ -1,7 +1,10 @@
 /* Firmware-path benchmark: one exposure of a sky-only scene through the readout, packets
  * to a null link (bytes counted, not kept), so that the time and peak RSS are those of the
  * firmware path alone.
- * usage: bench_readout NCOLS NROWS TILE_ROWS per-read|direct|single MA_TABLE THREADS */
+ * usage: bench_readout NCOLS NROWS TILE_ROWS per-read|direct|single MA_TABLE THREADS [raw]
+ * `raw` turns deflate off, to separate the link's compression from the detector chain.
+ * The checksum (sum of the packets' header CRC-32s, which cover the payload's CRC) does not
+ * depend on the order threads send in, so two builds can be compared for identical output. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -12,18 +15,21 @@
 #include "tools/expose.h"
 
 static size_t bytes_out;
+static uint64_t checksum;
 static wf_status null_send(void *ctx, const void *p, size_t len)
 {
     (void)ctx;
-    (void)p;
     __atomic_fetch_add(&bytes_out, len, __ATOMIC_RELAXED);
+    uint32_t crc;
+    memcpy(&crc, (const unsigned char *)p + 44, sizeof crc);
+    __atomic_fetch_add(&checksum, (uint64_t)crc, __ATOMIC_RELAXED);
     return WF_OK;
 }
 
 int main(int argc, char **argv)
 {
-    if (argc != 7) {
-        fprintf(stderr, "usage: %s NCOLS NROWS TILE_ROWS per-read|direct|single MA_TABLE THREADS\n", argv[0]);
+    if (argc != 7 && !(argc == 8 && !strcmp(argv[7], "raw"))) {
+        fprintf(stderr, "usage: %s NCOLS NROWS TILE_ROWS per-read|direct|single MA_TABLE THREADS [raw]\n", argv[0]);
         return 2;
     }
     wf_expose_job job = {0};
@@ -37,7 +43,7 @@ int main(int argc, char **argv)
     ro->exposure = 1;
     ro->sca = 1;
     ro->seed = 1;
-    ro->compress = 1;
+    ro->compress = argc == 7;
     wf_detector_defaults(&ro->det);
     job.clock.frame_time = WF_FRAME_TIME_DEFAULT;
     if (wf_ma_resolve(argv[5], &job.clock.ma)) { fprintf(stderr, "%s\n", wf_error_message()); return 1; }
@@ -65,8 +71,9 @@ int main(int argc, char **argv)
     getrusage(RUSAGE_SELF, &ru);
     double preads = (double)ro->ncols * ro->nrows * reads;
     printf("ncols=%d nrows=%d tile=%d mode=%s ma=%s threads=%d wall_s=%.3f cpu_s=%.3f "
-           "pixel_reads=%.3g Mpixreads_per_cpu_s=%.2f arena_MiB=%.2f peak_rss_MiB=%.1f stream_MiB=%.1f\n",
+           "pixel_reads=%.3g Mpixreads_per_cpu_s=%.2f arena_MiB=%.2f peak_rss_MiB=%.1f stream_MiB=%.1f checksum=%016llx\n",
            ro->ncols, ro->nrows, ro->tile_rows, argv[4], argv[5], job.threads, wall, cpu, preads,
-           preads / cpu / 1e6, job.arena_bytes / 1048576.0, ru.ru_maxrss / 1024.0, bytes_out / 1048576.0);
+           preads / cpu / 1e6, job.arena_bytes / 1048576.0, ru.ru_maxrss / 1024.0, bytes_out / 1048576.0,
+           (unsigned long long)checksum);
     return 0;
 }

@@ -1,7 +1,18 @@
+/* The row functions are the readout's hot loops: O3 and SIMD clones so they vectorise, and
+ * no-trapping-math so that a select may compute both sides. No clone changes a bit: -std=c11
+ * keeps floating-point contraction off and nothing here reassociates, so every lane does the
+ * scalar operations in the same order. */
+#pragma GCC optimize("O3", "no-trapping-math")
 #include "firmware/detector.h"
 
 #include <math.h>
 #include <string.h>
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
+#define WF_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#define WF_CLONES
+#endif
 
 /* SPEC §2 (GalSim ipc_kernel), before normalisation. */
 static const double ipc_raw[3][3] = {{0.001269938, 0.015399776, 0.001199862},
@@ -58,12 +69,29 @@ double wf_det_reciprocity_rate(double rate, double alpha, double f0)
     return rate * pow(rate / f0, alpha / M_LN10);
 }
 
+WF_CLONES
 void wf_det_ipc_row(const double *above, const double *row, const double *below, int ncols,
                     const double k[3][3], double *out)
 {
     const double *in[3] = {above, row, below};
     if (ncols <= 0)
         return; /* the edge terms below would touch out[0], out[-1] and r[1] */
+    if (above && below && ncols >= 3) {
+        /* one pass, summed in the order of the three passes below (0 + row above + row +
+         * row below), so the bits are theirs */
+        const double a0 = k[0][0], a1 = k[0][1], a2 = k[0][2], b0 = k[1][0], b1 = k[1][1],
+                     b2 = k[1][2], c0 = k[2][0], c1 = k[2][1], c2 = k[2][2];
+        const double *u = above, *m = row, *d = below;
+        for (int x = 1; x < ncols - 1; x++)
+            out[x] = ((0.0 + (a0 * u[x - 1] + a1 * u[x] + a2 * u[x + 1])) +
+                      (b0 * m[x - 1] + b1 * m[x] + b2 * m[x + 1])) +
+                     (c0 * d[x - 1] + c1 * d[x] + c2 * d[x + 1]);
+        const int e = ncols - 1;
+        out[0] = ((0.0 + (a1 * u[0] + a2 * u[1])) + (b1 * m[0] + b2 * m[1])) + (c1 * d[0] + c2 * d[1]);
+        out[e] = ((0.0 + (a0 * u[e - 1] + a1 * u[e])) + (b0 * m[e - 1] + b1 * m[e])) +
+                 (c0 * d[e - 1] + c1 * d[e]);
+        return;
+    }
     for (int x = 0; x < ncols; x++) out[x] = 0.0;
     for (int a = 0; a < 3; a++) {
         const double *r = in[a];
@@ -81,6 +109,102 @@ void wf_det_ipc_row(const double *above, const double *row, const double *below,
     }
 }
 
+WF_CLONES
+void wf_det_measure_row(const wf_detector *det, const double *q, int n, double *out)
+{
+    const double fw = det->full_well, beta = det->nl_beta;
+    const int sat = det->on.saturation, nl = det->on.nonlinearity;
+    for (int i = 0; i < n; i++) {
+        double v = q[i];
+        if (sat) v = v > fw ? fw : v;
+        if (nl) v = wf_det_nonlinearity(v, beta);
+        out[i] = v;
+    }
+}
+
+WF_CLONES
+int wf_det_first_nonfinite(const float *v, int n)
+{
+    int bad = 0;
+    for (int i = 0; i < n; i++) { /* no early exit, so that it vectorises: all finite is the rule */
+        uint32_t u;
+        memcpy(&u, &v[i], sizeof u);
+        bad |= (u & 0x7f800000u) == 0x7f800000u;
+    }
+    if (!bad) return -1;
+    for (int i = 0; i < n; i++)
+        if (!isfinite(v[i])) return i;
+    return -1;
+}
+
+WF_CLONES
+void wf_det_exposure_row(const float *rate, double exptime, int n, double *e)
+{
+    for (int i = 0; i < n; i++) e[i] = rate[i] > 0.0f ? rate[i] * exptime : 0.0;
+}
+
+WF_CLONES
+void wf_det_reciprocity_counts(const wf_detector *det, double exptime, const double *restrict table,
+                               int ntable, const double *restrict add, int n, double *restrict q)
+{
+    const double top = (double)(ntable - 1);
+    int beyond = 0;
+    for (int i = 0; i < n; i++) beyond |= !(q[i] >= 0.0 && q[i] <= top);
+    if (beyond) { /* a bright star in the row: the row goes one pixel at a time */
+        for (int i = 0; i < n; i++) {
+            double r = q[i] >= 0.0 && q[i] <= top
+                           ? table[(int)q[i]]
+                           : wf_det_reciprocity(q[i], exptime, det->recip_alpha, det->recip_f0);
+            q[i] = add ? r + add[i] : r;
+        }
+        return;
+    }
+    if (add)
+        for (int i = 0; i < n; i++) q[i] = table[(int)q[i]] + add[i];
+    else
+        for (int i = 0; i < n; i++) q[i] = table[(int)q[i]];
+}
+
+/* The body of wf_det_single_row with the unit gain known at compile time: v / 1.0 is v, so
+ * the division (the loop's costliest step) goes without changing a bit. */
+static inline __attribute__((always_inline)) void single_row_body(
+    const wf_detector *det, const double *restrict e, const double *restrict q,
+    const float *restrict z, int n, float *restrict out, uint8_t *restrict sat, int unit_gain)
+{
+    const double sigma = det->read_noise_e, gain = det->gain, bias = det->bias_adu;
+    const double fw = det->full_well, adc = det->adc_max;
+    const int rn = det->on.read_noise, quant = det->on.quantize, satur = det->on.saturation;
+    const double magic = 6755399441055744.0, big = 2251799813685248.0; /* 1.5 * 2^52, 2^51 */
+    for (int i = 0; i < n; i++) {
+        double v = e[i];
+        if (rn) v += sigma * (double)z[i];
+        double adu = (unit_gain ? v : v / gain) + bias;
+        if (quant) {
+            /* wf_det_quantize without its volatile: GCC never folds (x + c) - c unless told
+             * -fassociative-math, and a select keeps the row branch-free */
+            double r = __builtin_copysign((adu + magic) - magic, adu);
+            adu = (adu > -big) & (adu < big) ? r : adu;
+        }
+        if (satur) {
+            /* a mask, not a select: a select on the 8-bit store stops the vectoriser */
+            uint8_t clipped = (uint8_t)((q[i] >= fw) | (adu >= adc));
+            sat[i] = (uint8_t)(sat[i] & (uint8_t)(clipped - 1u));
+            adu = adu >= adc ? adc : adu;
+            adu = adu < 0.0 ? 0.0 : adu;
+        }
+        out[i] = (float)adu;
+    }
+}
+
+WF_CLONES
+void wf_det_single_row(const wf_detector *det, const double *e, const double *q,
+                       const float *z, int n, float *out, uint8_t *sat)
+{
+    if (det->gain == 1.0)
+        single_row_body(det, e, q, z, n, out, sat, 1);
+    else
+        single_row_body(det, e, q, z, n, out, sat, 0);
+}
 
 double wf_det_saturation_adu(const wf_detector *det)
 {

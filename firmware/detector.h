@@ -5,6 +5,7 @@
 #define WF_DETECTOR_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 typedef struct wf_detector {
     struct {              /* switches (1 on, 0 off) */
@@ -63,6 +64,31 @@ static inline double wf_det_quantize(double adu)
     volatile double shifted = adu + magic; /* volatile: no algebraic shortcut, even at -O3 */
     return __builtin_copysign(shifted - magic, adu);
 }
+
+/* Index of the first value that is not finite (a scene's rates), -1 when all are. */
+int wf_det_first_nonfinite(const float *v, int n);
+
+/* Expected electrons of a row: rate x exptime, negative rates set to zero first (GalSim). */
+void wf_det_exposure_row(const float *rate, double exptime, int n, double *e);
+
+/* Reciprocity failure of whole electron counts q[i] (Poisson draws), in place, then + add[i]
+ * (when add is not NULL): table[k] = wf_det_reciprocity(k, exptime, recip_alpha, recip_f0)
+ * for k < ntable, tabulated by the caller for the exposure; other values are computed. Same
+ * bits as wf_det_reciprocity on every count. */
+void wf_det_reciprocity_counts(const wf_detector *det, double exptime, const double *restrict table,
+                               int ntable, const double *restrict add, int n, double *restrict q);
+
+/* Full well (when saturation is on) and nonlinearity (when on) of a row of charge: what the
+ * read-out would measure; out may be q. */
+void wf_det_measure_row(const wf_detector *det, const double *q, int n, double *out);
+
+/* One row of single-frame output from the measured charge after IPC, e[x], and the collected
+ * charge q[x]: read noise (when on) sigma z[x] with sigma = read_noise_e, gain and bias,
+ * quantization (when on, round half to even as wf_det_quantize), the ADC range (when
+ * saturation is on), rounded to float; sat[x] = 0 where the pixel reached the full well or
+ * the ADC ceiling, untouched elsewhere. The five arrays must not overlap. */
+void wf_det_single_row(const wf_detector *det, const double *e, const double *q,
+                       const float *z, int n, float *out, uint8_t *sat);
 
 /* Smallest ADU value that means saturated: the lower of the ADC ceiling and the full well
  * after nonlinearity and gain, plus the bias. */

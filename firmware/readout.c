@@ -30,6 +30,15 @@ struct wf_readout {
     double *sum;                   /* tile rows, ADU summed over the resultant's reads */
     uint16_t *res_out;             /* [nres][tile_rows][ncols] */
     float *single_out;             /* [tile_rows][ncols] */
+    double *recip;                 /* single frame: reciprocity failure of 0 .. RECIP_TABLE-1 e- */
+    int recip_ready;               /* recip filled (Poisson counts are whole numbers) */
+    wf_poisson_table dark;         /* single frame: dark-current inversion (mean in (0, 10)) */
+    int dark_table;                /* dark holds the table */
+    double *expect;                /* one row: expected photo-electrons */
+    double *dark_e;                /* one row: dark electrons */
+    uint32_t *retry_x, *retry_px;  /* one row: columns (and pixel ids) whose PTRS draw goes on */
+    double *retry_mean, *retry_k;  /*   their means and draws */
+    uint16_t *next_block;          /* one row: where each photon stream stopped (dark >= 10) */
     uint8_t *sat;                  /* [tile_rows][ncols] */
     wf_cosmic cosmic;
     int cosmic_on;
@@ -46,15 +55,24 @@ static double exposure_time(const wf_readout_config *cfg, const wf_clock *clock)
     return cfg->mode == WF_MODE_RAMP ? wf_clock_exposure_time(clock) : cfg->exptime;
 }
 
+/* The META text goes through the same packet buffer: small tiles (test sizes) still leave it
+ * this much room, or an uncompressed META would not fit. */
+#define META_MIN_BYTES 65536u
+
 static size_t tile_payload_max(const wf_readout_config *cfg, const wf_clock *clock)
 {
     size_t px = (size_t)cfg->tile_rows * (size_t)cfg->ncols;
     size_t res = px * sizeof(uint16_t) * (size_t)nres_of(cfg, clock);
     size_t single = px * sizeof(float);
-    return res > single ? res : single;
+    size_t n = res > single ? res : single;
+    return n > META_MIN_BYTES ? n : META_MIN_BYTES;
 }
 
 static int direct_blocks(const wf_ma_table *ma);
+
+/* Single frame: reciprocity failure is tabulated for the Poisson counts below this (512 KiB
+ * of doubles per instance; counts above, only in bright stars, take pow). */
+#define RECIP_TABLE 65536
 
 /* Noise blocks per row the mode needs at once: one, or enough for a whole group. */
 static int words_blocks(const wf_readout_config *cfg, const wf_clock *clock)
@@ -79,6 +97,16 @@ static wf_status check_config(const wf_readout_config *cfg, const wf_clock *cloc
     return WF_OK;
 }
 
+/* The single-frame mode's own buffers: the reciprocity table and rows of scratch. */
+static size_t single_arena_need(const wf_readout_config *cfg)
+{
+    size_t nc = (size_t)cfg->ncols;
+    size_t n = 4 * wf_arena_cost(nc * sizeof(double)) + 2 * wf_arena_cost(nc * sizeof(uint32_t)) +
+               wf_arena_cost(nc * sizeof(uint16_t));
+    if (cfg->det.on.reciprocity) n += wf_arena_cost(RECIP_TABLE * sizeof(double));
+    return n;
+}
+
 wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *clock,
                                 size_t *bytes)
 {
@@ -88,7 +116,7 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     size_t tile = (size_t)cfg->tile_rows * (size_t)cfg->ncols;
     size_t n = wf_arena_cost(sizeof(wf_readout));
     n += wf_arena_cost(halo * sizeof(float));
-    n += 4 * wf_arena_cost(halo * sizeof(double));
+    n += (cfg->mode == WF_MODE_RAMP ? 4 : 2) * wf_arena_cost(halo * sizeof(double));
     n += wf_arena_cost(tile * sizeof(float));
     n += wf_arena_cost(4 * (size_t)words_blocks(cfg, clock) * (size_t)cfg->ncols * sizeof(uint32_t));
     n += wf_arena_cost((size_t)cfg->ncols * sizeof(double));
@@ -96,7 +124,7 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     if (cfg->mode == WF_MODE_RAMP)
         n += wf_arena_cost(tile * sizeof(uint16_t) * (size_t)clock->ma.nresultants);
     else
-        n += wf_arena_cost(tile * sizeof(float));
+        n += wf_arena_cost(tile * sizeof(float)) + single_arena_need(cfg);
     n += wf_arena_cost(tile);
     n += wf_packer_arena_need(tile_payload_max(cfg, clock), cfg->compress);
     if (cfg->det.on.cosmic_rays && cfg->mode == WF_MODE_RAMP) {
@@ -115,6 +143,36 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
         if (st) return st;                                                            \
         (ptr) = p_;                                                                   \
     } while (0)
+
+/* Single-frame buffers (single_arena_need) and the tables fixed for the exposure. */
+static wf_status single_init(wf_readout *ro, wf_arena *arena)
+{
+    const wf_readout_config *cfg = &ro->cfg;
+    const wf_detector *d = &cfg->det;
+    size_t nc = (size_t)cfg->ncols;
+    wf_status st;
+    TAKE(ro->expect, nc, "expected photo-electrons row");
+    TAKE(ro->dark_e, nc, "dark electrons row");
+    TAKE(ro->retry_mean, nc, "PTRS retry means");
+    TAKE(ro->retry_k, nc, "PTRS retry draws");
+    TAKE(ro->retry_x, nc, "PTRS retry columns");
+    TAKE(ro->retry_px, nc, "PTRS retry pixels");
+    TAKE(ro->next_block, nc, "photon stream positions");
+    int photons = d->on.photon_noise && !ro->noise_off;
+    if (d->on.reciprocity) {
+        TAKE(ro->recip, RECIP_TABLE, "reciprocity table");
+        /* exactly the values wf_det_reciprocity gives the whole counts it will be asked for */
+        if (photons) {
+            for (int k = 0; k < RECIP_TABLE; k++)
+                ro->recip[k] = wf_det_reciprocity((double)k, cfg->exptime, d->recip_alpha, d->recip_f0);
+            ro->recip_ready = 1;
+        }
+    }
+    double dark = d->dark_current * cfg->exptime;
+    ro->dark_table = photons && d->on.dark && dark > 0.0 && dark < 10.0;
+    if (ro->dark_table && (st = wf_poisson_table_init(&ro->dark, dark))) return st;
+    return WF_OK;
+}
 
 wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
                             const wf_scene_source *scene, const wf_noise *noise,
@@ -135,10 +193,12 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     size_t halo = (size_t)ro->halo_cap * (size_t)cfg->ncols;
     size_t tile = (size_t)cfg->tile_rows * (size_t)cfg->ncols;
     TAKE(ro->rate, halo, "rate rows");
-    TAKE(ro->mean, halo, "expected electrons");
+    if (cfg->mode == WF_MODE_RAMP) {
+        TAKE(ro->mean, halo, "expected electrons");
+        TAKE(ro->expm, halo, "Poisson inversion start");
+    }
     TAKE(ro->charge, halo, "collected charge");
     TAKE(ro->meas, halo, "measured charge");
-    TAKE(ro->expm, halo, "Poisson inversion start");
     TAKE(ro->gauss, tile, "read-noise normals");
     TAKE(ro->words, 4 * (size_t)words_blocks(cfg, clock) * (size_t)cfg->ncols, "noise words");
     ro->noise_off = noise->kind == WF_NOISE_OFF;
@@ -153,6 +213,7 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
                 ro->resultant_of_read[clock->ma.read[j]] = (int16_t)r;
     } else {
         TAKE(ro->single_out, tile, "single-frame tile");
+        if ((st = single_init(ro, arena))) return st;
     }
     TAKE(ro->sat, tile, "saturation map");
     st = wf_packer_init(&ro->packer, arena, tile_payload_max(cfg, clock), cfg->compress);
@@ -506,46 +567,133 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
 
 /* ---- single frame (GalSim allDetectorEffects order) ------------------------------------ */
 
-static wf_status single_frame(wf_readout *ro, int y0, int y1, int h0, int h1)
+/* Photon electrons of row y from their expectations e (>= 0), into q. Each pixel's stream
+ * (pixel, read 0, photon) is used as before this path was batched: words 1 and 2 of its first
+ * block give inversion below a mean of 10 or the first PTRS attempt above; a rejected attempt
+ * goes on at block 1, 2, ... (two 53-bit uniforms per block, as wf_rng_poisson would draw
+ * them). The first attempt and the retries run a row at a time (wf_poisson_ptrs_row,
+ * wf_poisson_ptrs_row53); the retries, ~15% at a mean of 120, are compacted between rounds
+ * and overwrite ro->words. next_block (when asked for) is where each stream stopped, for a
+ * dark draw that goes on. */
+static void single_photons(wf_readout *ro, int y, const double *e, double *q, uint16_t *next_block)
+{
+    const int nc = ro->cfg.ncols;
+    const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
+    uint32_t *rx = ro->retry_x, *rpx = ro->retry_px;
+    double *rm = ro->retry_mean, *rk = ro->retry_k;
+    wf_poisson_ptrs_row(e, w1, w2, nc, q);
+    int nl = 0, nr = 0;
+    for (int x = 0; x < nc; x++) { /* the columns left over, without a branch per column */
+        rx[nl] = (uint32_t)x;
+        nl += q[x] < 0.0;
+    }
+    for (int i = 0; i < nl; i++) {
+        int x = (int)rx[i];
+        double m = e[x];
+        if (m < 10.0) { /* inversion from word 1 (no further stream); mean 0 gives 0 */
+            more_noise unused = {0};
+            q[x] = poisson_word(w1[x], NULL, m, exp(-m), &unused);
+        } else { /* i >= nr: the list compacts onto itself */
+            rx[nr] = (uint32_t)x;
+            rpx[nr] = pixel_id(ro, y, x);
+            rm[nr] = m;
+            nr++;
+        }
+    }
+    if (next_block)
+        for (int x = 0; x < nc; x++) next_block[x] = 1;
+    uint32_t *b0 = ro->words, *b1 = b0 + nc, *b2 = b1 + nc, *b3 = b2 + nc; /* row words are spent */
+    for (uint32_t b = 1; nr > 0; b++) {
+        wf_noise_block_list(&ro->noise, rpx, nr, 0, WF_PURPOSE_PHOTON, b, b0, b1, b2, b3);
+        wf_poisson_ptrs_row53(rm, b0, b1, b2, b3, nr, rk);
+        int left = 0;
+        for (int i = 0; i < nr; i++) {
+            if (rk[i] >= 0.0) {
+                q[rx[i]] = rk[i];
+                if (next_block) next_block[rx[i]] = (uint16_t)(b + 1);
+                continue;
+            }
+            rx[left] = rx[i];
+            rpx[left] = rpx[i];
+            rm[left] = rm[i];
+            left++;
+        }
+        nr = left;
+    }
+}
+
+/* Row y (a halo row) up to its measured charge: Poisson of rate x t (negative rates set to
+ * zero first), reciprocity failure on the counts, dark current (Poisson), full well,
+ * nonlinearity. Tile rows also get their read-noise normals. */
+static void single_charge_row(wf_readout *ro, int y, int y0, int y1, int h0)
 {
     const wf_detector *d = &ro->cfg.det;
     const int nc = ro->cfg.ncols;
     const double t = ro->cfg.exptime;
+    const float *rate = ro->rate + (size_t)(y - h0) * nc;
+    double *q = ro->charge + (size_t)(y - h0) * nc;
+    double *e = ro->expect;
+    float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
+    const int photons = d->on.photon_noise && !ro->noise_off;
+    if (photons || (z && d->on.read_noise && !ro->noise_off)) {
+        row_noise(ro, y, 0, WF_PURPOSE_PHOTON, 1, z && d->on.read_noise ? z : NULL);
+    } else if (z) {
+        memset(z, 0, (size_t)nc * sizeof *z);
+    }
+    wf_det_exposure_row(rate, t, nc, e);
+    const double dark = d->dark_current * t;
+    /* a dark mean >= 10 draws on from where the photon draw left the stream */
+    const int dark_more = photons && d->on.dark && dark >= 10.0;
+    if (d->on.dark && ro->dark_table) /* from word 3, before the photon retries reuse the words */
+        wf_poisson_table_row(&ro->dark, ro->words + 3 * nc, nc, ro->dark_e);
+    if (photons)
+        single_photons(ro, y, e, q, dark_more ? ro->next_block : NULL);
+    else
+        memcpy(q, e, (size_t)nc * sizeof *q);
+    int dark_done = 0;
+    if (d->on.reciprocity) {
+        if (ro->recip_ready) { /* whole counts; the dark electrons added on the way */
+            dark_done = d->on.dark && ro->dark_table;
+            wf_det_reciprocity_counts(d, t, ro->recip, RECIP_TABLE, dark_done ? ro->dark_e : NULL, nc, q);
+        } else {
+            for (int x = 0; x < nc; x++) q[x] = wf_det_reciprocity(q[x], t, d->recip_alpha, d->recip_f0);
+        }
+    }
+    if (d->on.dark && !dark_done) {
+        if (ro->dark_table) {
+            for (int x = 0; x < nc; x++) q[x] += ro->dark_e[x];
+        } else if (dark_more) {
+            for (int x = 0; x < nc; x++) {
+                wf_rng rng;
+                wf_rng_init(&rng, &ro->noise, pixel_id(ro, y, x), 0, WF_PURPOSE_PHOTON);
+                wf_rng_seek(&rng, ro->next_block[x]);
+                q[x] += wf_rng_poisson(&rng, dark);
+            }
+        } else if (!photons) { /* with photons on, a dark mean of 0 draws no electrons */
+            for (int x = 0; x < nc; x++) q[x] += dark;
+        }
+    }
+    wf_det_measure_row(d, q, nc, ro->meas + (size_t)(y - h0) * nc);
+}
+
+/* Output row y: IPC from the measured rows around it, then read noise, gain, ADC. */
+static void single_out_row(wf_readout *ro, int y, int y0, int h0, int h1)
+{
+    const int nc = ro->cfg.ncols;
+    wf_det_single_row(&ro->cfg.det, ipc_row(ro, y, h0, h1), ro->charge + (size_t)(y - h0) * nc,
+                      ro->gauss + (size_t)(y - y0) * nc, nc, ro->single_out + (size_t)(y - y0) * nc,
+                      ro->sat + (size_t)(y - y0) * nc);
+}
+
+/* Row by row, so that a row's planes are still in cache when IPC and the ADC take it: each
+ * output row goes out as soon as the row below it is measured. */
+static wf_status single_frame(wf_readout *ro, int y0, int y1, int h0, int h1)
+{
     for (int y = h0; y < h1; y++) {
-        const float *rate = ro->rate + (size_t)(y - h0) * nc;
-        double *q = ro->charge + (size_t)(y - h0) * nc;
-        float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
-        int photons = d->on.photon_noise && !ro->noise_off;
-        if (photons || (z && d->on.read_noise && !ro->noise_off)) {
-            row_noise(ro, y, 0, WF_PURPOSE_PHOTON, 1, z && d->on.read_noise ? z : NULL);
-        } else if (z) {
-            memset(z, 0, (size_t)nc * sizeof *z);
-        }
-        const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc, *w3 = ro->words + 3 * nc;
-        const double dark = d->dark_current * t, edark = exp(-dark);
-        for (int x = 0; x < nc; x++) {
-            double e = rate[x] > 0.0f ? rate[x] * t : 0.0; /* negative set to zero before Poisson */
-            more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = 0,
-                             .purpose = WF_PURPOSE_PHOTON};
-            if (photons) e = poisson_word(w1[x], &w2[x], e, e < 10.0 ? exp(-e) : 0.0, &mn);
-            if (d->on.reciprocity) e = wf_det_reciprocity(e, t, d->recip_alpha, d->recip_f0);
-            if (d->on.dark) e += photons ? poisson_word(w3[x], NULL, dark, edark, &mn) : dark;
-            q[x] = e;
-        }
+        single_charge_row(ro, y, y0, y1, h0);
+        if (y - 1 >= y0 && y - 1 < y1) single_out_row(ro, y - 1, y0, h0, h1);
     }
-    measure(ro, ro->charge, (h1 - h0) * nc);
-    for (int y = y0; y < y1; y++) {
-        const double *v = ipc_row(ro, y, h0, h1);
-        const double *q = ro->charge + (size_t)(y - h0) * nc;
-        float *out = ro->single_out + (size_t)(y - y0) * nc;
-        uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
-        const float *z = ro->gauss + (size_t)(y - y0) * nc;
-        for (int x = 0; x < nc; x++) {
-            int clipped = d->on.saturation && q[x] >= d->full_well;
-            out[x] = (float)digitise(d, v[x], d->read_noise_e, z[x], &clipped);
-            if (clipped) sat[x] = 0;
-        }
-    }
+    if (h1 == y1) single_out_row(ro, y1 - 1, y0, h0, h1); /* the SCA's last row: none below */
     return WF_OK;
 }
 
@@ -560,12 +708,14 @@ wf_status wf_readout_run_tile(wf_readout *ro, int tile)
     int nc = cfg->ncols, rows = y1 - y0, hn = (h1 - h0) * nc;
     wf_status st = wf_scene_fill(&ro->scene, h0, h1, nc, ro->rate);
     if (st) return st;
-    for (int i = 0; i < hn; i++)
-        if (!isfinite(ro->rate[i]))
-            return wf_error(WF_ERR_INPUT, "scene: rate at row %d, column %d is not finite",
-                            h0 + i / nc, i % nc);
-    memset(ro->charge, 0, (size_t)hn * sizeof *ro->charge);
-    memset(ro->sum, 0, (size_t)rows * nc * sizeof *ro->sum);
+    int bad = wf_det_first_nonfinite(ro->rate, hn);
+    if (bad >= 0)
+        return wf_error(WF_ERR_INPUT, "scene: rate at row %d, column %d is not finite",
+                        h0 + bad / nc, bad % nc);
+    if (cfg->mode == WF_MODE_RAMP) { /* single frame writes every charge and sums nothing */
+        memset(ro->charge, 0, (size_t)hn * sizeof *ro->charge);
+        memset(ro->sum, 0, (size_t)rows * nc * sizeof *ro->sum);
+    }
     memset(ro->sat, 255, (size_t)rows * nc);
     if (cfg->mode == WF_MODE_SINGLE) {
         if ((st = single_frame(ro, y0, y1, h0, h1))) return st;
@@ -610,6 +760,8 @@ wf_status wf_readout_send_meta(wf_readout *ro, const char *extra)
     /* The resultant tile buffer is idle between tiles and large enough for the text. */
     char *buf = (char *)ro->sum;
     size_t cap = (size_t)c->tile_rows * c->ncols * sizeof(double), len = 0;
+    size_t room = tile_payload_max(c, &ro->clock); /* what one packet carries */
+    if (cap > room) cap = room;
     int bad = 0;
     bad |= append(buf, cap, &len,
                   "ncols = %d\nnrows = %d\nmode = %s\nsampling = %s\nexposure = %u\nsca = %u\n"

@@ -170,3 +170,32 @@ double wf_rng_poisson(wf_rng *rng, double mean)
     }
     return k;
 }
+
+wf_status wf_poisson_table_init(wf_poisson_table *t, double mean)
+{
+    if (!(mean > 0.0 && mean < 10.0))
+        return wf_error(WF_ERR_RANGE, "noise: Poisson table for mean %g outside (0, 10)", mean);
+    t->mean = mean;
+    /* The first three terms are summed as the readout's branch-free k <= 2 step does. */
+    double p1 = exp(-mean) * mean, p = p1 * mean * 0.5;
+    t->cdf[0] = exp(-mean);
+    t->cdf[1] = t->cdf[0] + p1;
+    t->cdf[2] = t->cdf[1] + p;
+    int n = 3;
+    for (double k = 3.0; n < WF_POISSON_TABLE_MAX; k += 1.0) {
+        p *= mean / k;
+        double next = t->cdf[n - 1] + p;
+        if (next == t->cdf[n - 1]) break;
+        t->cdf[n++] = next;
+    }
+    t->n = n;
+    /* (w + 0.5) 2^-32 > c  <=>  w > c 2^32 - 0.5  <=>  w >= floor(c 2^32 - 0.5) + 1; c 2^32 and
+     * c 2^32 - 0.5 are exact (c >= e^-10 keeps 0.5 a multiple of their last place) */
+    t->nword = 0;
+    for (int j = 0; j < n; j++) {
+        double first = floor(ldexp(t->cdf[j], 32) - 0.5) + 1.0;
+        if (first > 4294967295.0) break;
+        t->word[t->nword++] = (uint32_t)first;
+    }
+    return WF_OK;
+}

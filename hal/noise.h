@@ -13,6 +13,7 @@
 #define WF_NOISE_H
 
 #include <stdint.h>
+#include "hal/status.h"
 
 typedef enum {
     WF_PURPOSE_PHOTON = 1,    /* Poisson electrons from sky, objects and dark */
@@ -77,5 +78,53 @@ int wf_poisson_ptrs_try(double mean, uint32_t wu, uint32_t wv, double *k);
 
 /* Inverse of the standard normal CDF, relative error < 1.2e-9 (Acklam's rational form). */
 double wf_norm_ppf(double p);
+
+/* ---- row batches of Poisson draws (hal/noise_batch.c) ------------------------------------
+ * The same draws as the scalar calls above, a row at a time, so that a whole row's
+ * arithmetic runs in SIMD lanes and only the rare leftovers take a scalar path. */
+
+/* The first PTRS attempt of wf_poisson_ptrs_try for a row: k[i] = the draw when mean[i] >= 10
+ * and (wu[i], wv[i]) is accepted; -1 when it is rejected, and for mean[i] < 10 or NaN (not
+ * PTRS's range: the caller draws those). The log-likelihood test uses its own branch-free
+ * log (< 1 ulp) in place of libm's, so a decision can differ from wf_poisson_ptrs_try only
+ * where the two sides agree to ~1e-15: the accepted distribution is the same. */
+void wf_poisson_ptrs_row(const double *mean, const uint32_t *wu, const uint32_t *wv, int n,
+                         double *k);
+
+/* wf_noise_block_row for a list of pixels (stream pixel[i], at one read and purpose). */
+void wf_noise_block_list(const wf_noise *noise, const uint32_t *pixel, int n, uint32_t read,
+                         wf_purpose purpose, uint32_t block, uint32_t *w0, uint32_t *w1,
+                         uint32_t *w2, uint32_t *w3);
+
+/* A PTRS attempt from a whole block per draw, as wf_rng_poisson makes them: u and v at 53 bits
+ * from words (w0, w1) and (w2, w3) (wf_rng_uniform53's construction); k[i] = the draw for
+ * mean[i] >= 10 when accepted, -1 when rejected or mean[i] < 10. With the blocks of a
+ * stream from wf_rng_seek's position on (wf_noise_block_list), attempts on the streams still
+ * rejected give wf_rng_poisson's draws (same test as wf_poisson_ptrs_row). */
+void wf_poisson_ptrs_row53(const double *mean, const uint32_t *w0, const uint32_t *w1,
+                           const uint32_t *w2, const uint32_t *w3, int n, double *k);
+
+/* Inversion for one fixed mean m in (0, 10) from 32-bit words, with the cumulative sums
+ * built once: c0 = e^-m, c1 = c0 + p1, c2 = c1 + p2 with p1 = c0 m, p2 = p1 m 0.5, then
+ * c_k = c_{k-1} + p_k, p_k = p_{k-1} (m / k), kept while a term still moves the sum and for
+ * k < 200 (the readout's inversion from a word, firmware/readout.c, sums exactly these).
+ * A draw is the count of entries below the uniform (w + 0.5) / 2^32: the first k with
+ * u <= c_k, or the table length past its end. */
+#define WF_POISSON_TABLE_MAX 200
+typedef struct wf_poisson_table {
+    double mean;
+    int n;                              /* entries used */
+    double cdf[WF_POISSON_TABLE_MAX];   /* strictly increasing */
+    /* u > cdf[j] exactly when w >= word[j] (u = (w + 0.5) / 2^32 is exact in a double); past
+     * the largest word an entry is never passed, and the table ends there */
+    uint32_t word[WF_POISSON_TABLE_MAX];
+    int nword;
+} wf_poisson_table;
+
+/* WF_ERR_RANGE unless 0 < mean < 10. */
+wf_status wf_poisson_table_init(wf_poisson_table *t, double mean);
+
+/* k[i] = Poisson(t->mean) by inversion of (w[i] + 0.5) / 2^32. */
+void wf_poisson_table_row(const wf_poisson_table *t, const uint32_t *w, int n, double *k);
 
 #endif

@@ -1,11 +1,15 @@
-/* Row-at-a-time noise for the readout's hot loop: the same Philox blocks and normals as the
- * scalar stream API (hal/noise.c), computed for a run of consecutive pixels so that the
- * compiler can spread the lanes over SIMD registers. Clones for AVX-512, AVX2 and baseline
- * x86-64 are picked at load time; every clone gives the same bits (integer arithmetic, and
- * for the normals the same double-precision formula, rounded to float). */
-#pragma GCC optimize("O3")
+/* Row-at-a-time noise for the readout's hot loops: the same Philox blocks, normals and
+ * Poisson draws as the scalar stream API (hal/noise.c), computed for a run of pixels so that
+ * the lanes spread over SIMD registers. Clones (or hand-written variants) for AVX-512, AVX2
+ * and baseline x86-64 are picked at run time; every one gives the same bits (integer
+ * arithmetic, and IEEE double operations in the same order: -std=c11 keeps contraction off).
+ * no-trapping-math lets a select compute both of its sides; it changes no value. */
+#pragma GCC optimize("O3", "no-trapping-math")
 #include "hal/noise.h"
 #include "hal/philox.h"
+
+#include <math.h>
+#include <string.h>
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
 #define WF_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
@@ -13,22 +17,273 @@
 #define WF_CLONES
 #endif
 
-WF_CLONES
-void wf_noise_block_row(const wf_noise *noise, uint32_t pixel0, int n, uint32_t read,
-                        wf_purpose purpose, uint32_t block, uint32_t *w0, uint32_t *w1,
-                        uint32_t *w2, uint32_t *w3)
+/* ---- branch-free arithmetic for the row loops ------------------------------------------------
+ * Every clone gives the same bits: IEEE +, -, *, /, sqrt only, no contraction under -std=c11,
+ * no reassociation, no libm inside the loops. */
+
+#define WF_INLINE static inline __attribute__((always_inline))
+
+/* out[i] = sqrt(max(in[i], lo)) (NaN in gives lo). A separate pass with intrinsics: under
+ * -fmath-errno (the default, and `#pragma GCC optimize` cannot lift it) GCC guards every
+ * sqrt with an errno branch, which keeps a loop that takes one from vectorising. Hardware
+ * sqrt is correctly rounded, as libm's, so the bits do not depend on the variant. */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
+#include <immintrin.h>
+__attribute__((target("avx512f"))) static void sqrt_clamped_avx512(const double *in, double lo, int n, double *out)
 {
-    const uint32_t key0 = (uint32_t)noise->seed, key1 = (uint32_t)(noise->seed >> 32);
-    const uint32_t c2in = noise->exposure;
-    const uint32_t c3in = ((noise->sca & 0xffu) << 24) | (((uint32_t)purpose & 0xffu) << 16) |
-                          (block & 0xffffu);
-    for (int i = 0; i < n; i++) {
-        uint32_t c0 = pixel0 + (uint32_t)i, c1 = read, c2 = c2in, c3 = c3in;
+    int i = 0;
+    const __m512d l = _mm512_set1_pd(lo);
+    for (; i + 8 <= n; i += 8) /* max_pd(x, lo) returns lo for NaN x */
+        _mm512_storeu_pd(out + i, _mm512_sqrt_pd(_mm512_max_pd(_mm512_loadu_pd(in + i), l)));
+    for (; i < n; i++) out[i] = sqrt(in[i] >= lo ? in[i] : lo);
+}
+__attribute__((target("avx2"))) static void sqrt_clamped_avx2(const double *in, double lo, int n, double *out)
+{
+    int i = 0;
+    const __m256d l = _mm256_set1_pd(lo);
+    for (; i + 4 <= n; i += 4)
+        _mm256_storeu_pd(out + i, _mm256_sqrt_pd(_mm256_max_pd(_mm256_loadu_pd(in + i), l)));
+    for (; i < n; i++) out[i] = sqrt(in[i] >= lo ? in[i] : lo);
+}
+static void sqrt_clamped(const double *in, double lo, int n, double *out)
+{
+    if (__builtin_cpu_supports("avx512f")) { sqrt_clamped_avx512(in, lo, n, out); return; }
+    if (__builtin_cpu_supports("avx2")) { sqrt_clamped_avx2(in, lo, n, out); return; }
+    int i = 0;
+    const __m128d l = _mm_set1_pd(lo);
+    for (; i + 2 <= n; i += 2) _mm_storeu_pd(out + i, _mm_sqrt_pd(_mm_max_pd(_mm_loadu_pd(in + i), l)));
+    for (; i < n; i++) out[i] = sqrt(in[i] >= lo ? in[i] : lo);
+}
+#else
+static void sqrt_clamped(const double *in, double lo, int n, double *out)
+{
+    for (int i = 0; i < n; i++) out[i] = sqrt(in[i] >= lo ? in[i] : lo);
+}
+#endif
+
+WF_INLINE uint64_t bits_of(double x)
+{
+    uint64_t u;
+    memcpy(&u, &x, sizeof u);
+    return u;
+}
+
+WF_INLINE double double_of(uint64_t u)
+{
+    double x;
+    memcpy(&x, &u, sizeof x);
+    return x;
+}
+
+/* floor(x), exactly, from the adding-and-removing 1.5 * 2^52 trick (round to nearest, then
+ * one down where that went up): libm's floor is a call in the baseline target. */
+WF_INLINE double vfloor(double x)
+{
+    const double magic = 6755399441055744.0, big = 2251799813685248.0; /* 1.5 * 2^52, 2^51 */
+    double r = (x + magic) - magic;
+    r = r > x ? r - 1.0 : r;
+    return x > -big && x < big ? r : x; /* beyond 2^51 every double is whole */
+}
+
+/* log(x) for finite x > 0, fdlibm's e_log.c algorithm (error < 1 ulp) without its branches
+ * for special inputs and without libm: x = z 2^e with z in [sqrt(2)/2, sqrt(2)), then
+ * log(z) from s = (z-1)/(z+1). Only +, -, *, / and bit moves on 64-bit lanes (no int64 to
+ * double conversion, which AVX2 lacks). Zero, negative, subnormal and non-finite x give
+ * values the callers mask out. */
+WF_INLINE double vlog(double x)
+{
+    const double ln2_hi = 6.93147180369123816490e-01, ln2_lo = 1.90821492927058770002e-10;
+    const double Lg1 = 6.666666666666735130e-01, Lg2 = 3.999999999940941908e-01,
+                 Lg3 = 2.857142874366239149e-01, Lg4 = 2.222219843214978396e-01,
+                 Lg5 = 1.818357216161805012e-01, Lg6 = 1.531383769920937332e-01,
+                 Lg7 = 1.479819860511658591e-01;
+    const uint64_t off = 0x3fe6a09e667f3bcdull; /* sqrt(2)/2 */
+    uint64_t ix = bits_of(x), tmp = ix - off;
+    /* the exponent e, a signed 12-bit field, as a double: offset binary in a 2^52 mantissa */
+    double dk = double_of(0x4330000000000000ull | ((tmp >> 52) ^ 0x800u)) - 4503599627372544.0;
+    double z = double_of(ix - (tmp & 0xfff0000000000000ull));
+    double f = z - 1.0, hfsq = 0.5 * f * f, s = f / (2.0 + f), s2 = s * s, w = s2 * s2;
+    double t1 = w * (Lg2 + w * (Lg4 + w * Lg6));
+    double t2 = s2 * (Lg1 + w * (Lg3 + w * (Lg5 + w * Lg7)));
+    return s * (hfsq + (t1 + t2)) + dk * ln2_lo - hfsq + f + dk * ln2_hi;
+}
+
+/* log(1 + x) for x > -1 to full relative precision: the rounding of 1 + x is put back. */
+WF_INLINE double vlog1p(double x)
+{
+    double u = 1.0 + x;
+    return vlog(u) - ((u - 1.0) - x) / u;
+}
+
+/* ---- Philox row batches --------------------------------------------------------------------- */
+
+/* Philox4x32-10 on n counters {pixel, c1, c2, c3}, pixel = pix[i] or, when pix is NULL,
+ * pixel0 + i. The SIMD variants keep 16 (8) 32-bit lanes in one register and take each
+ * 32x32 -> 64-bit product as even lanes and odd lanes (vpmuludq), then blend the halves back:
+ * the compiler's own vectorisation of wf_philox_rounds widens every lane to 64 bits and
+ * spends more on shuffles than on the multiplies. Integer arithmetic: the same words as the
+ * scalar rounds, whichever variant runs. */
+static void philox_span_scalar(uint32_t key0, uint32_t key1, const uint32_t *pix, uint32_t pixel0,
+                               uint32_t c1in, uint32_t c2in, uint32_t c3in, int i, int n,
+                               uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3)
+{
+    for (; i < n; i++) {
+        uint32_t c0 = pix ? pix[i] : pixel0 + (uint32_t)i, c1 = c1in, c2 = c2in, c3 = c3in;
         wf_philox_rounds(&c0, &c1, &c2, &c3, key0, key1);
         w0[i] = c0;
         w1[i] = c1;
         w2[i] = c2;
         w3[i] = c3;
+    }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
+#define WF_PHILOX_SIMD 1
+
+__attribute__((target("avx512f")))
+static void philox_span_avx512(uint32_t key0, uint32_t key1, const uint32_t *pix, uint32_t pixel0,
+                               uint32_t c1in, uint32_t c2in, uint32_t c3in, int n,
+                               uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3)
+{
+    const __m512i m0 = _mm512_set1_epi64(0xD2511F53), m1 = _mm512_set1_epi64(0xCD9E8D57);
+    const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const __mmask16 odd = 0xAAAA;
+    int i = 0;
+    for (; i + 16 <= n; i += 16) {
+        __m512i a = pix ? _mm512_loadu_si512((const void *)(pix + i))
+                        : _mm512_add_epi32(_mm512_set1_epi32((int)(pixel0 + (uint32_t)i)), lane);
+        __m512i b = _mm512_set1_epi32((int)c1in), c = _mm512_set1_epi32((int)c2in),
+                d = _mm512_set1_epi32((int)c3in);
+        uint32_t k0 = key0, k1 = key1;
+        for (int r = 0; r < 10; r++) {
+            __m512i pe0 = _mm512_mul_epu32(a, m0), po0 = _mm512_mul_epu32(_mm512_srli_epi64(a, 32), m0);
+            __m512i pe1 = _mm512_mul_epu32(c, m1), po1 = _mm512_mul_epu32(_mm512_srli_epi64(c, 32), m1);
+            __m512i hi0 = _mm512_mask_blend_epi32(odd, _mm512_srli_epi64(pe0, 32), po0);
+            __m512i lo0 = _mm512_mask_blend_epi32(odd, pe0, _mm512_slli_epi64(po0, 32));
+            __m512i hi1 = _mm512_mask_blend_epi32(odd, _mm512_srli_epi64(pe1, 32), po1);
+            __m512i lo1 = _mm512_mask_blend_epi32(odd, pe1, _mm512_slli_epi64(po1, 32));
+            a = _mm512_xor_si512(_mm512_xor_si512(hi1, b), _mm512_set1_epi32((int)k0));
+            c = _mm512_xor_si512(_mm512_xor_si512(hi0, d), _mm512_set1_epi32((int)k1));
+            b = lo1;
+            d = lo0;
+            k0 += 0x9E3779B9u;
+            k1 += 0xBB67AE85u;
+        }
+        _mm512_storeu_si512((void *)(w0 + i), a);
+        _mm512_storeu_si512((void *)(w1 + i), b);
+        _mm512_storeu_si512((void *)(w2 + i), c);
+        _mm512_storeu_si512((void *)(w3 + i), d);
+    }
+    philox_span_scalar(key0, key1, pix, pixel0, c1in, c2in, c3in, i, n, w0, w1, w2, w3);
+}
+
+__attribute__((target("avx2")))
+static void philox_span_avx2(uint32_t key0, uint32_t key1, const uint32_t *pix, uint32_t pixel0,
+                             uint32_t c1in, uint32_t c2in, uint32_t c3in, int n,
+                             uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3)
+{
+    const __m256i m0 = _mm256_set1_epi64x(0xD2511F53), m1 = _mm256_set1_epi64x(0xCD9E8D57);
+    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    int i = 0;
+    for (; i + 8 <= n; i += 8) {
+        __m256i a = pix ? _mm256_loadu_si256((const __m256i *)(pix + i))
+                        : _mm256_add_epi32(_mm256_set1_epi32((int)(pixel0 + (uint32_t)i)), lane);
+        __m256i b = _mm256_set1_epi32((int)c1in), c = _mm256_set1_epi32((int)c2in),
+                d = _mm256_set1_epi32((int)c3in);
+        uint32_t k0 = key0, k1 = key1;
+        for (int r = 0; r < 10; r++) {
+            __m256i pe0 = _mm256_mul_epu32(a, m0), po0 = _mm256_mul_epu32(_mm256_srli_epi64(a, 32), m0);
+            __m256i pe1 = _mm256_mul_epu32(c, m1), po1 = _mm256_mul_epu32(_mm256_srli_epi64(c, 32), m1);
+            __m256i hi0 = _mm256_blend_epi32(_mm256_srli_epi64(pe0, 32), po0, 0xAA);
+            __m256i lo0 = _mm256_blend_epi32(pe0, _mm256_slli_epi64(po0, 32), 0xAA);
+            __m256i hi1 = _mm256_blend_epi32(_mm256_srli_epi64(pe1, 32), po1, 0xAA);
+            __m256i lo1 = _mm256_blend_epi32(pe1, _mm256_slli_epi64(po1, 32), 0xAA);
+            a = _mm256_xor_si256(_mm256_xor_si256(hi1, b), _mm256_set1_epi32((int)k0));
+            c = _mm256_xor_si256(_mm256_xor_si256(hi0, d), _mm256_set1_epi32((int)k1));
+            b = lo1;
+            d = lo0;
+            k0 += 0x9E3779B9u;
+            k1 += 0xBB67AE85u;
+        }
+        _mm256_storeu_si256((__m256i *)(w0 + i), a);
+        _mm256_storeu_si256((__m256i *)(w1 + i), b);
+        _mm256_storeu_si256((__m256i *)(w2 + i), c);
+        _mm256_storeu_si256((__m256i *)(w3 + i), d);
+    }
+    philox_span_scalar(key0, key1, pix, pixel0, c1in, c2in, c3in, i, n, w0, w1, w2, w3);
+}
+#endif
+
+static void philox_span(const wf_noise *noise, const uint32_t *pix, uint32_t pixel0, int n,
+                        uint32_t read, wf_purpose purpose, uint32_t block, uint32_t *w0,
+                        uint32_t *w1, uint32_t *w2, uint32_t *w3)
+{
+    const uint32_t key0 = (uint32_t)noise->seed, key1 = (uint32_t)(noise->seed >> 32);
+    const uint32_t c2 = noise->exposure;
+    const uint32_t c3 = ((noise->sca & 0xffu) << 24) | (((uint32_t)purpose & 0xffu) << 16) |
+                        (block & 0xffffu);
+#ifdef WF_PHILOX_SIMD
+    if (__builtin_cpu_supports("avx512f")) {
+        philox_span_avx512(key0, key1, pix, pixel0, read, c2, c3, n, w0, w1, w2, w3);
+        return;
+    }
+    if (__builtin_cpu_supports("avx2")) {
+        philox_span_avx2(key0, key1, pix, pixel0, read, c2, c3, n, w0, w1, w2, w3);
+        return;
+    }
+#endif
+    philox_span_scalar(key0, key1, pix, pixel0, read, c2, c3, 0, n, w0, w1, w2, w3);
+}
+
+void wf_noise_block_row(const wf_noise *noise, uint32_t pixel0, int n, uint32_t read,
+                        wf_purpose purpose, uint32_t block, uint32_t *w0, uint32_t *w1,
+                        uint32_t *w2, uint32_t *w3)
+{
+    philox_span(noise, NULL, pixel0, n, read, purpose, block, w0, w1, w2, w3);
+}
+
+void wf_noise_block_list(const wf_noise *noise, const uint32_t *pixel, int n, uint32_t read,
+                         wf_purpose purpose, uint32_t block, uint32_t *w0, uint32_t *w1,
+                         uint32_t *w2, uint32_t *w3)
+{
+    philox_span(noise, pixel, 0, n, read, purpose, block, w0, w1, w2, w3);
+}
+
+/* The tails (p < 0.02425 or p > 0.97575, ~5% of words) of wf_norm_from_u32: wf_norm_ppf's
+ * tail formula, q = sqrt(-2 log p) into a rational function, on the words gathered a chunk at
+ * a time, so that it runs in SIMD lanes too. Its log is vlog, not libm's; the result, rounded
+ * to float, is the same for every one of the 2^32 words (checked exhaustively when this was
+ * written, and on a sample by tests/test_single_fast.c). */
+#define NORM_CHUNK 2048 /* ~100 tails: enough for whole SIMD iterations; 24 KiB of stack */
+WF_INLINE void norm_tails(const uint32_t *w, int n, float *out)
+{
+    const double c0 = -7.784894002430293e-03, c1 = -3.223964580411365e-01,
+                 c2 = -2.400758277161838e+00, c3 = -2.549732539343734e+00,
+                 c4 = 4.374664141464968e+00, c5 = 2.938163982698783e+00;
+    const double d0 = 7.784695709041462e-03, d1 = 3.224671290700398e-01,
+                 d2 = 2.445134137142996e+00, d3 = 3.754408661907416e+00;
+    const double plow = 0.02425;
+    const uint32_t lo = 104152845u, hi = 4294967295u - 104152845u; /* 0.02425 * 2^32 */
+    int at[NORM_CHUNK];
+    double t[NORM_CHUNK];
+    for (int i0 = 0; i0 < n; i0 += NORM_CHUNK) {
+        const int len = n - i0 < NORM_CHUNK ? n - i0 : NORM_CHUNK;
+        int m = 0;
+        for (int j = 0; j < len; j++) { /* compaction without a branch per word */
+            at[m] = i0 + j;
+            m += (w[i0 + j] < lo) | (w[i0 + j] > hi);
+        }
+        for (int j = 0; j < m; j++) {
+            const double p = ((double)w[at[j]] + 0.5) * (1.0 / 4294967296.0);
+            t[j] = -2.0 * vlog(p < plow ? p : 1.0 - p);
+        }
+        sqrt_clamped(t, 0.0, m, t);
+        for (int j = 0; j < m; j++) {
+            const double p = ((double)w[at[j]] + 0.5) * (1.0 / 4294967296.0), q = t[j];
+            const double x = (((((c0 * q + c1) * q + c2) * q + c3) * q + c4) * q + c5) /
+                             ((((d0 * q + d1) * q + d2) * q + d3) * q + 1.0);
+            out[at[j]] = (float)(p < plow ? x : -x);
+        }
     }
 }
 
@@ -49,9 +304,153 @@ void wf_norm_from_u32(const uint32_t *w, int n, float *out)
         double den = ((((b0 * r + b1) * r + b2) * r + b3) * r + b4) * r + 1.0;
         out[i] = (float)(num / den);
     }
-    /* the tails (p < 0.02425 or p > 0.97575, ~5% of words) take the scalar path */
-    const uint32_t lo = 104152845u, hi = 4294967295u - 104152845u; /* 0.02425 * 2^32 */
-    for (int i = 0; i < n; i++)
-        if (w[i] < lo || w[i] > hi)
-            out[i] = (float)wf_norm_ppf(((double)w[i] + 0.5) * (1.0 / 4294967296.0));
+    norm_tails(w, n, out);
+}
+
+/* ---- Poisson row batches ------------------------------------------------------------------ */
+
+/* log k! - (k log k - k) - log(2 pi k) / 2 for k = 1 .. 9 (Stirling's remainder, exact). */
+static const double stirling_rest[10] = {
+    0.0, 0.08106146679532725821967026, 0.04134069595540929409382208,
+    0.02767792568499833914878929, 0.02079067210376509311152277, 0.01664469118982119216319487,
+    0.01387612882307074799874573, 0.01189670994589177009505572, 0.01041126526197209649747857,
+    0.009255462182712732917728637};
+
+/* PTRS (Hörmann 1993, as hal/noise.c's ptrs_attempt) for mean mu >= 10, smu = sqrt(mu), in
+ * two steps so that the costly test runs only where needed: ptrs_quick takes the cheap
+ * decisions (accept in the central region, ~68% of attempts at a mean of 120; reject outside
+ * the hat's support) and leaves PTRS_UNDECIDED; ptrs_lane decides everything. */
+#define PTRS_UNDECIDED -2.0
+
+WF_INLINE double ptrs_quick(double mu, double smu, double u01, double v)
+{
+    const double b = 0.931 + 2.53 * smu;
+    const double a = -0.059 + 0.02483 * b;
+    const double vr = 0.9277 - 3.6224 / (b - 2.0);
+    const double u = u01 - 0.5;
+    const double us = 0.5 - fabs(u);
+    const double k = vfloor((2.0 * a / us + b) * u + mu + 0.43);
+    /* selects on double compares only: no branches, and masks of one width for the
+     * vectoriser (32-bit lanes beside these cannot convert int flags) */
+    double r = k < 0.0 ? -1.0 : PTRS_UNDECIDED;
+    const double r_tail = v > us ? -1.0 : r;
+    r = us < 0.013 ? r_tail : r;
+    const double r_quick = v <= vr ? k : r;
+    return us >= 0.07 ? r_quick : r;
+}
+
+/* The whole attempt: k >= 0 when (u01, v) is accepted, -1 otherwise. The test
+ *   log(v inv_alpha / (a / us^2 + b)) <= log P(k | mu)
+ * is rearranged so that a lane takes two logs: with
+ *   log P = (k - mu) - k log1p((k - mu) / mu) - log(2 pi k) / 2 - R(k)   (k >= 1)
+ * and R(k) Stirling's series 1/(12k) - 1/(360k^3) + 1/(1260k^5) (error < 1e-10, as
+ * hal/noise.c) from k = 10, exact below, the log(2 pi k) / 2 joins the left side's log (as
+ * a factor under a square root); k = 0 has log P = -mu. The arithmetic differs from the
+ * scalar test only by roundings (~1e-15), so the accepted distribution is the same. */
+WF_INLINE double ptrs_lane(double mu, double smu, double u01, double v)
+{
+    const double quick = ptrs_quick(mu, smu, u01, v);
+    const double b = 0.931 + 2.53 * smu;
+    const double a = -0.059 + 0.02483 * b;
+    const double u = u01 - 0.5;
+    const double us = 0.5 - fabs(u);
+    const double k = vfloor((2.0 * a / us + b) * u + mu + 0.43);
+    const double inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
+    const double kk = k >= 1.0 ? k : 1.0;
+    /* log(v inv_alpha / (a / us^2 + b)) + log(2 pi k) / 2, in one division */
+    const double num = v * inv_alpha * (us * us), den = a + b * (us * us);
+    const double lhs = 0.5 * vlog((num * num) * ((2.0 * M_PI) * kk) / (den * den));
+    const double ik = 1.0 / kk, ik2 = ik * ik;
+    double rest = (1.0 / 12.0 - (1.0 / 360.0 - ik2 * (1.0 / 1260.0)) * ik2) * ik;
+#pragma GCC unroll 9
+    for (int j = 1; j < 10; j++) rest = k == (double)j ? stirling_rest[j] : rest;
+    const double delta = kk - mu;
+    double rhs = delta - kk * vlog1p(delta / mu) - rest;
+    rhs = k < 1.0 ? 0.9189385332046727417803297 - mu : rhs; /* k = 0: -mu, + log(2 pi)/2 as lhs */
+    const double r = lhs <= rhs ? k : -1.0;
+    return quick == PTRS_UNDECIDED ? r : quick;
+}
+
+/* (0, 1) at 53 bits from two words, as wf_rng_uniform53: 27 + 26 bits, each part exact in a
+ * double, so the sum is the same integer the scalar code converts. */
+WF_INLINE double uniform53(uint32_t w0, uint32_t w1)
+{
+    double u = ((double)(w0 >> 5) * 67108864.0 + (double)(w1 >> 6) + 0.5) *
+               (1.0 / 9007199254740992.0);
+    return u < 1.0 ? u : 0x1.fffffffffffffp-1;
+}
+
+/* u and v of lane i: from one word each (wide = 0: w0, w1), or 53 bits from two (wide = 1). */
+WF_INLINE double ptrs_u(int wide, const uint32_t *w0, const uint32_t *w1, int i)
+{
+    return wide ? uniform53(w0[i], w1[i]) : ((double)w0[i] + 0.5) * (1.0 / 4294967296.0);
+}
+
+WF_INLINE double ptrs_v(int wide, const uint32_t *w1, const uint32_t *w2, const uint32_t *w3, int i)
+{
+    return wide ? uniform53(w2[i], w3[i]) : ((double)w1[i] + 0.5) * (1.0 / 4294967296.0);
+}
+
+#define PTRS_CHUNK 1024 /* undecided lanes gathered at a time: 28 KiB of stack */
+
+/* One attempt for every lane of a row: k[i] = the draw when accepted, -1 when rejected or
+ * mean[i] < 10 (or NaN). The cheap decisions run over the row; the undecided lanes (~32%)
+ * are gathered a chunk at a time and take the full test. */
+WF_INLINE void ptrs_batch(const double *mean, const uint32_t *w0, const uint32_t *w1,
+                          const uint32_t *w2, const uint32_t *w3, int wide, int n, double *k)
+{
+    sqrt_clamped(mean, 10.0, n, k); /* k holds sqrt(mean) until each lane's draw replaces it */
+    for (int i = 0; i < n; i++) {
+        const double m = mean[i];
+        const double mu = m >= 10.0 ? m : 10.0; /* other lanes (and NaN) compute on a harmless value */
+        const double d = ptrs_quick(mu, k[i], ptrs_u(wide, w0, w1, i), ptrs_v(wide, w1, w2, w3, i));
+        k[i] = m >= 10.0 ? d : -1.0;
+    }
+    int at[PTRS_CHUNK];
+    double tm[PTRS_CHUNK], ts[PTRS_CHUNK];
+    for (int i0 = 0; i0 < n; i0 += PTRS_CHUNK) {
+        const int len = n - i0 < PTRS_CHUNK ? n - i0 : PTRS_CHUNK;
+        int m = 0;
+        for (int j = 0; j < len; j++) { /* compaction without a branch per lane */
+            at[m] = i0 + j;
+            m += k[i0 + j] == PTRS_UNDECIDED;
+        }
+        for (int j = 0; j < m; j++) tm[j] = mean[at[j]];
+        sqrt_clamped(tm, 10.0, m, ts);
+        for (int j = 0; j < m; j++) {
+            const int i = at[j];
+            ts[j] = ptrs_lane(tm[j], ts[j], ptrs_u(wide, w0, w1, i), ptrs_v(wide, w1, w2, w3, i));
+        }
+        for (int j = 0; j < m; j++) k[at[j]] = ts[j];
+    }
+}
+
+WF_CLONES
+void wf_poisson_ptrs_row(const double *mean, const uint32_t *wu, const uint32_t *wv, int n,
+                         double *k)
+{
+    ptrs_batch(mean, wu, wv, NULL, NULL, 0, n, k);
+}
+
+WF_CLONES
+void wf_poisson_ptrs_row53(const double *mean, const uint32_t *w0, const uint32_t *w1,
+                           const uint32_t *w2, const uint32_t *w3, int n, double *k)
+{
+    ptrs_batch(mean, w0, w1, w2, w3, 1, n, k);
+}
+
+WF_CLONES
+void wf_poisson_table_row(const wf_poisson_table *t, const uint32_t *w, int n, double *k)
+{
+    uint32_t wmax = 0;
+    for (int i = 0; i < n; i++) {
+        k[i] = 0.0;
+        wmax = w[i] > wmax ? w[i] : wmax;
+    }
+    /* entry-major, so that each pass is one integer compare-and-add across the row; entries
+     * past the row's largest word count for no pixel (the table is increasing) */
+    for (int j = 0; j < t->nword && wmax >= t->word[j]; j++) {
+        const uint32_t first = t->word[j];
+        for (int i = 0; i < n; i++) k[i] += w[i] >= first ? 1.0 : 0.0;
+    }
 }
