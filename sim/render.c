@@ -31,9 +31,30 @@ static int by_row(const void *a, const void *b)
     return p->id < q->id ? -1 : p->id > q->id;
 }
 
+/* Stamps are drawn in double and kept as float (7 significant digits, far below any noise;
+ * half the memory): pool bytes of a kept stamp, rounded up so that the next stamp can be
+ * drawn in double at an aligned address. */
 static size_t stamp_bytes(const wf_render_object *o)
 {
+    return ((size_t)o->nx * (size_t)o->ny * sizeof(float) + 7u) & ~(size_t)7u;
+}
+
+static size_t draw_bytes(const wf_render_object *o)
+{
     return (size_t)o->nx * (size_t)o->ny * sizeof(double);
+}
+
+/* Doubles to floats in place: float k lands at bytes [4k, 4k+4), below double k+1's, so
+ * nothing is overwritten before it is read. Whole stamps and pieces both go through it, so a
+ * row is the same whichever way it was drawn. */
+static const float *to_float_in_place(double *buf, size_t n)
+{
+    float *f = (float *)(void *)buf;
+    for (size_t k = 0; k < n; k++) {
+        float v = (float)buf[k];
+        memcpy(f + k, &v, sizeof v);
+    }
+    return f;
 }
 
 wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_object *objs,
@@ -128,16 +149,17 @@ static void compact(wf_renderer *r)
 
 /* A pointer to rows [ya, yb) of object i's stamp: the cached whole stamp when it fits the
  * pool, else a piece drawn now. */
-static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const double **rows)
+static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const float **rows)
 {
     const wf_render_object *o = &r->objs[i];
-    size_t bytes = stamp_bytes(o);
-    if (r->stamp_off[i] == NO_STAMP && bytes <= r->cfg.pool_bytes) {
-        if (r->pool_used + bytes > r->cfg.pool_bytes) compact(r);
-        if (r->pool_used + bytes <= r->cfg.pool_bytes) {
+    size_t bytes = stamp_bytes(o), dbytes = draw_bytes(o);
+    if (r->stamp_off[i] == NO_STAMP && dbytes <= r->cfg.pool_bytes) {
+        if (r->pool_used + dbytes > r->cfg.pool_bytes) compact(r);
+        if (r->pool_used + dbytes <= r->cfg.pool_bytes) {
             double *dst = (double *)(void *)(r->pool + r->pool_used);
             wf_status st = r->draw(r->draw_ctx, o, o->y0, o->y0 + o->ny, dst);
             if (st) return st;
+            to_float_in_place(dst, (size_t)o->nx * (size_t)o->ny);
             r->stamp_off[i] = r->pool_used;
             r->pool_used += bytes;
             if (r->pool_used > r->stats.pool_high_water) r->stats.pool_high_water = r->pool_used;
@@ -145,7 +167,7 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const doub
         }
     }
     if (r->stamp_off[i] != NO_STAMP) {
-        *rows = (const double *)(const void *)(r->pool + r->stamp_off[i]) + (size_t)(ya - o->y0) * o->nx;
+        *rows = (const float *)(const void *)(r->pool + r->stamp_off[i]) + (size_t)(ya - o->y0) * o->nx;
         return WF_OK;
     }
     size_t need = (size_t)(yb - ya) * (size_t)o->nx;
@@ -157,7 +179,7 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const doub
     if (st) return st;
     if ((st = r->draw(r->draw_ctx, o, ya, yb, r->piece))) return st;
     r->stats.pieces_drawn++;
-    *rows = r->piece;
+    *rows = to_float_in_place(r->piece, need);
     return WF_OK;
 }
 
@@ -203,11 +225,11 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
         const wf_render_object *o = &r->objs[i];
         int ya = o->y0 > y0 ? o->y0 : y0, yb = o->y0 + o->ny < y1 ? o->y0 + o->ny : y1;
         if (ya >= yb) continue;
-        const double *src = NULL;
+        const float *src = NULL;
         if ((st = stamp_rows(r, i, ya, yb, &src))) return st;
         int xa = o->x0 > 0 ? o->x0 : 0, xb = o->x0 + o->nx < ncols ? o->x0 + o->nx : ncols;
         for (int y = ya; y < yb; y++) {
-            const double *s = src + (size_t)(y - ya) * o->nx - o->x0;
+            const float *s = src + (size_t)(y - ya) * o->nx - o->x0;
             double *acc = r->acc + (size_t)(y - y0) * ncols;
             for (int x = xa; x < xb; x++) acc[x] += s[x];
         }

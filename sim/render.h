@@ -3,9 +3,9 @@
  * the first tile that touches it asks, its rows are added to every tile it overlaps, and it
  * is dropped once the tiles have passed it. Stamps live in a pool of fixed size; an object
  * whose stamp does not fit is drawn in pieces (the rows a tile needs), never dropped.
- * Objects entirely off the SCA are never drawn. The rate of a pixel is the sky plus the
- * objects in (first row, id) order, summed in double, so it does not depend on how the rows
- * are split into tiles. */
+ * Objects entirely off the SCA are never drawn. Stamps are drawn in double and kept in the
+ * pool as float. The rate of a pixel is the sky plus the objects in (first row, id) order,
+ * summed in double, so it does not depend on how the rows are split into tiles. */
 #ifndef WF_RENDER_H
 #define WF_RENDER_H
 

@@ -82,7 +82,7 @@ void wf_scene_setup_default(wf_scene_setup *s)
     s->stray_light = 0.1;
     s->psf_size = 256; /* 7" at 4x: drawing cost grows with its area (docs/BENCHMARKS.md) */
     s->flux_fraction = 0.995;
-    s->pool_bytes = (size_t)64 << 20;
+    s->pool_bytes = (size_t)32 << 20; /* float stamps: as many as 64 MiB of doubles held */
     s->threads = 1;
     s->sky_on = 1;
 }

@@ -41,7 +41,7 @@ typedef struct wf_scene_setup {
     double jitter;          /* pointing jitter, Gaussian sigma per axis, arcsec [0: off] */
     double diffusion;       /* charge diffusion, Gaussian sigma per axis, pixels [0: off] */
     double flux_fraction;   /* stamps hold at least this [0.995] */
-    size_t pool_bytes;      /* stamp pool per renderer [64 MiB] */
+    size_t pool_bytes;      /* stamp pool per renderer (float stamps) [32 MiB] */
     int threads;            /* renderers to prepare [1] */
     int sky_on;             /* add the sky [1] */
     double stray_light;     /* zodiacal light x (1 + this) [0.1, SPEC 2 / GalSim] */
