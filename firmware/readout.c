@@ -23,6 +23,10 @@ struct wf_readout {
     double *charge;                /* halo block, collected e- */
     double *meas;                  /* halo block, measured e- at this read */
     double *expm;                  /* halo block, exp(-mean) for one-frame Poisson inversion */
+    float *slope;                  /* halo block, d rate / dt (time_variable only) */
+    double *dmean;                 /* halo block, d mean / dt: e- per frame per second */
+    int slope_any;                 /* this tile has a nonzero slope */
+    double t_mid;                  /* s after the reset: the time the rates are for */
     float *gauss;                  /* tile rows, this read's standard normal for read noise */
     uint32_t *words;               /* [4][ncols]: first Philox block of each pixel's stream */
     int noise_off;                 /* WF_NOISE_OFF: draws are expectations */
@@ -117,6 +121,8 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     size_t n = wf_arena_cost(sizeof(wf_readout));
     n += wf_arena_cost(halo * sizeof(float));
     n += (cfg->mode == WF_MODE_RAMP ? 4 : 2) * wf_arena_cost(halo * sizeof(double));
+    if (cfg->mode == WF_MODE_RAMP && cfg->time_variable)
+        n += wf_arena_cost(halo * sizeof(float)) + wf_arena_cost(halo * sizeof(double));
     n += wf_arena_cost(tile * sizeof(float));
     n += wf_arena_cost(4 * (size_t)words_blocks(cfg, clock) * (size_t)cfg->ncols * sizeof(uint32_t));
     n += wf_arena_cost((size_t)cfg->ncols * sizeof(double));
@@ -196,6 +202,11 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     if (cfg->mode == WF_MODE_RAMP) {
         TAKE(ro->mean, halo, "expected electrons");
         TAKE(ro->expm, halo, "Poisson inversion start");
+        if (cfg->time_variable) {
+            TAKE(ro->slope, halo, "rate slopes");
+            TAKE(ro->dmean, halo, "expected-electron slopes");
+        }
+        ro->t_mid = 0.5 * wf_clock_exposure_time(clock);
     }
     TAKE(ro->charge, halo, "collected charge");
     TAKE(ro->meas, halo, "measured charge");
@@ -265,6 +276,24 @@ static void expected_per_frame(wf_readout *ro, int npix)
         ro->mean[i] = r * ft;
         ro->expm[i] = exp(-ro->mean[i]);
     }
+    if (!ro->slope_any) return;
+    for (int i = 0; i < npix; i++) {
+        /* reciprocity failure scales a source by f(r)/r at its mid-time rate; the slope rides
+         * with the same factor */
+        double r = ro->rate[i] > 0.0f ? ro->rate[i] : 0.0, g = ro->slope[i];
+        if (d->on.reciprocity && r > 0.0) g *= wf_det_reciprocity_rate(r, d->recip_alpha, d->recip_f0) / r;
+        ro->dmean[i] = g * ft;
+    }
+}
+
+/* Expected electrons of a pixel over `frames` frame times centred tau seconds from the
+ * mid-time: the mean rate over the interval times its length, for a rate linear in time
+ * (never below zero: a source cannot give negative light). */
+static inline double interval_mean(const wf_readout *ro, size_t i, double frames, double tau)
+{
+    double m = ro->mean[i];
+    if (ro->slope_any) m += ro->dmean[i] * tau;
+    return m > 0.0 ? m * frames : 0.0;
 }
 
 /* Each (pixel, read) has one stream. Its first block, computed a row at a time by
@@ -393,11 +422,14 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
         int r = ro->resultant_of_read[k];
         if (r < 0) continue; /* charge of skipped reads is drawn with the next digitised one */
         double frames = k - prev_read;
+        /* the interval's centre, relative to the mid-time the rates are for */
+        double tau = 0.5 * (wf_clock_read_time(&ro->clock, prev_read) + wf_clock_read_time(&ro->clock, k)) - ro->t_mid;
         prev_read = k;
         for (int y = h0; y < h1; y++) {
             double *q = ro->charge + (size_t)(y - h0) * nc;
             const double *m = ro->mean + (size_t)(y - h0) * nc;
             const double *em = ro->expm + (size_t)(y - h0) * nc;
+            const size_t row0 = (size_t)(y - h0) * nc;
             float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
             int photons = d->on.photon_noise && !ro->noise_off;
             if (photons || (z && d->on.read_noise && !ro->noise_off)) {
@@ -406,14 +438,22 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
                 memset(z, 0, (size_t)nc * sizeof *z);
             }
             if (!photons) {
-                for (int x = 0; x < nc; x++) q[x] += m[x] * frames;
+                if (ro->slope_any)
+                    for (int x = 0; x < nc; x++) q[x] += interval_mean(ro, row0 + (size_t)x, frames, tau);
+                else
+                    for (int x = 0; x < nc; x++) q[x] += m[x] * frames;
                 continue;
             }
             const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
             for (int x = 0; x < nc; x++) {
-                double mean = m[x] * frames;
                 more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)k,
                                  .purpose = WF_PURPOSE_PHOTON};
+                if (ro->slope_any) {
+                    double mean = interval_mean(ro, row0 + (size_t)x, frames, tau);
+                    q[x] += poisson_word(w1[x], &w2[x], mean, exp(-mean), &mn);
+                    continue;
+                }
+                double mean = m[x] * frames;
                 q[x] += poisson_word(w1[x], &w2[x], mean, frames == 1.0 ? em[x] : exp(-mean), &mn);
             }
         }
@@ -485,6 +525,8 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
         const int *reads = ma->read + ma->first[r];
         int n = ma->first[r + 1] - ma->first[r];
         double lead = reads[0] - prev_read, span = reads[n - 1] - reads[0];
+        const wf_clock *ck = &ro->clock;
+        double tau_lead = 0.5 * (wf_clock_read_time(ck, prev_read) + wf_clock_read_time(ck, reads[0])) - ro->t_mid;
         prev_read = reads[n - 1];
         double seen = 0.0; /* frames of charge each read of the group adds, averaged */
         for (int j = 1; j < n; j++) seen += (reads[j] - reads[j - 1]) * (double)(n - j) / n;
@@ -501,7 +543,21 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
             } else if (z) {
                 memset(z, 0, (size_t)nc * sizeof *z);
             }
+            const size_t row0 = (size_t)(y - h0) * nc;
             for (int x = 0; x < nc; x++) {
+                if (!photons && ro->slope_any) { /* each interval at its own mean rate */
+                    q[x] += interval_mean(ro, row0 + (size_t)x, lead, tau_lead);
+                    double within = 0.0, total = 0.0;
+                    for (int j = 1; j < n; j++) {
+                        double tj = 0.5 * (wf_clock_read_time(ck, reads[j - 1]) + wf_clock_read_time(ck, reads[j])) - ro->t_mid;
+                        double dj = interval_mean(ro, row0 + (size_t)x, reads[j] - reads[j - 1], tj);
+                        within += dj * (double)(n - j);
+                        total += dj;
+                    }
+                    a[x] = q[x] + within / n;
+                    q[x] += total;
+                    continue;
+                }
                 if (!photons) {
                     q[x] += m[x] * lead;
                     a[x] = q[x] + m[x] * seen;
@@ -513,13 +569,18 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
                 /* Exact for a linear pixel: the charge before the group's first read, then
                  * each interval's Poisson electrons, seen by the n - j reads from j on. */
                 int c = 1;
-                double lm = m[x] * lead;
-                q[x] += draw_at(ro->words, (size_t)nc, x, &c, lm, lead == 1.0 ? em[x] : exp(-lm), &mn);
+                const int var = ro->slope_any;
+                double lm = var ? interval_mean(ro, row0 + (size_t)x, lead, tau_lead) : m[x] * lead;
+                q[x] += draw_at(ro->words, (size_t)nc, x, &c, lm, lead == 1.0 && !var ? em[x] : exp(-lm), &mn);
                 double within = 0.0, total = 0.0;
                 for (int j = 1; j < n; j++) {
                     int gap = reads[j] - reads[j - 1];
                     double mj = m[x] * gap;
-                    double dj = draw_at(ro->words, (size_t)nc, x, &c, mj, gap == 1 ? em[x] : exp(-mj), &mn);
+                    if (var) {
+                        double tj = 0.5 * (wf_clock_read_time(ck, reads[j - 1]) + wf_clock_read_time(ck, reads[j])) - ro->t_mid;
+                        mj = interval_mean(ro, row0 + (size_t)x, gap, tj);
+                    }
+                    double dj = draw_at(ro->words, (size_t)nc, x, &c, mj, gap == 1 && !var ? em[x] : exp(-mj), &mn);
                     within += dj * (double)(n - j);
                     total += dj;
                 }
@@ -722,6 +783,14 @@ wf_status wf_readout_run_tile(wf_readout *ro, int tile)
         if ((st = send(ro, WF_PK_SINGLE, y0, rows, 1, ro->single_out, (size_t)rows * nc * sizeof(float))))
             return st;
     } else {
+        ro->slope_any = 0;
+        if (ro->slope && ro->scene.fill_slope) {
+            if ((st = ro->scene.fill_slope(ro->scene.ctx, h0, h1, nc, ro->slope, &ro->slope_any))) return st;
+            bad = ro->slope_any ? wf_det_first_nonfinite(ro->slope, hn) : -1;
+            if (bad >= 0)
+                return wf_error(WF_ERR_INPUT, "scene: rate slope at row %d, column %d is not finite", h0 + bad / nc,
+                                bad % nc);
+        }
         expected_per_frame(ro, hn);
         if (ro->cosmic_on && (st = wf_cosmic_tile(&ro->cosmic, h0, h1, y0, y1))) return st;
         st = cfg->sampling == WF_SAMPLE_DIRECT ? ramp_direct(ro, y0, y1, h0, h1)

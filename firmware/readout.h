@@ -45,6 +45,9 @@ typedef struct wf_readout_config {
     uint32_t sca;        /* 1..18 */
     uint64_t seed;
     int compress;        /* deflate packet payloads */
+    int time_variable;   /* up the ramp: follow the scene's fill_slope (hal/scene.h); reserves
+                          * two more halo planes. Single frame needs nothing: a linear rate
+                          * integrates to its mid-time value times the exposure time. */
     wf_detector det;
 } wf_readout_config;
 

@@ -50,6 +50,7 @@ wf_status wf_scene_grid_source(wf_scene_grid *grid, wf_scene_source *out)
     out->ctx = grid;
     out->fill_rate = grid_fill;
     out->rows_empty = NULL;
+    out->fill_slope = NULL;
     return WF_OK;
 }
 
@@ -116,6 +117,7 @@ wf_status wf_scene_replay_open(wf_scene_replay *rp, const char *path, wf_scene_s
     out->ctx = rp;
     out->fill_rate = replay_fill;
     out->rows_empty = NULL;
+    out->fill_slope = NULL;
     return WF_OK;
 }
 

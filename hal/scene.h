@@ -15,6 +15,13 @@ typedef struct wf_scene_source {
     /* Optional; a NULL means "the whole SCA may hold signal". Lets the firmware skip
      * nothing today, kept for renderers that know a tile is empty. */
     int (*rows_empty)(void *ctx, int y0, int y1);
+    /* Optional (NULL: the scene is constant in time): sources whose brightness changes over
+     * the exposure (supernovae). The rate of a pixel at time t after the reset is
+     * rate + slope (t - T/2), T the exposure time, rate as fill_rate gives it for the mid-time;
+     * fill_slope writes slope (e-/pixel/s²) for rows [y0, y1), called right after fill_rate
+     * for the same rows, and sets *any to 0 when every value is 0 (the firmware then does
+     * nothing extra). Over a 900 s exposure a light curve is linear to ~1e-6. */
+    wf_status (*fill_slope)(void *ctx, int y0, int y1, int ncols, float *slope, int *any);
 } wf_scene_source;
 
 static inline wf_status wf_scene_fill(const wf_scene_source *s, int y0, int y1, int ncols,

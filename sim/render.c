@@ -238,9 +238,44 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
     return WF_OK;
 }
 
+/* Rows [y0, y1) of the varying objects' slopes, right after fill() for the same rows: the
+ * active set is the one fill() left, the stamps are the ones it used. */
+static wf_status fill_slope(void *ctx, int y0, int y1, int ncols, float *slope, int *any)
+{
+    wf_renderer *r = ctx;
+    *any = 0;
+    if (ncols != r->cfg.ncols || y0 != r->last_start)
+        return wf_error(WF_ERR_INTERNAL, "renderer: slopes of rows %d-%d asked without their rates", y0, y1);
+    memset(slope, 0, (size_t)(y1 - y0) * (size_t)ncols * sizeof *slope);
+    for (size_t a = 0; a < r->nactive; a++) {
+        size_t i = r->active[a];
+        const wf_render_object *o = &r->objs[i];
+        if (o->rel_slope == 0.0) continue;
+        int ya = o->y0 > y0 ? o->y0 : y0, yb = o->y0 + o->ny < y1 ? o->y0 + o->ny : y1;
+        if (ya >= yb) continue;
+        const float *src = NULL;
+        wf_status st = stamp_rows(r, i, ya, yb, &src);
+        if (st) return st;
+        int xa = o->x0 > 0 ? o->x0 : 0, xb = o->x0 + o->nx < ncols ? o->x0 + o->nx : ncols;
+        for (int y = ya; y < yb; y++) {
+            const float *sr = src + (size_t)(y - ya) * o->nx - o->x0;
+            float *dst = slope + (size_t)(y - y0) * ncols;
+            for (int x = xa; x < xb; x++) dst[x] += (float)(o->rel_slope * sr[x]);
+        }
+        *any = 1;
+    }
+    return WF_OK;
+}
+
 void wf_renderer_source(wf_renderer *r, wf_scene_source *out)
 {
     out->ctx = r;
     out->fill_rate = fill;
     out->rows_empty = NULL;
+    out->fill_slope = NULL;
+    for (size_t i = 0; i < r->n; i++)
+        if (r->objs[i].rel_slope != 0.0) {
+            out->fill_slope = fill_slope;
+            break;
+        }
 }

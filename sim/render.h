@@ -17,6 +17,8 @@ typedef struct wf_render_object {
     uint64_t id;
     int x0, y0, nx, ny; /* stamp footprint in SCA pixels (0-based), may reach past the edges */
     const void *data;   /* the drawing function's description of the object */
+    double rel_slope;   /* d ln(brightness) / dt at the exposure mid-time, 1/s (0: constant;
+                         * a supernova): feeds the source's fill_slope (hal/scene.h) */
 } wf_render_object;
 
 /* Draws rows [ya, yb) (absolute SCA rows inside the footprint) of the object's stamp, in
@@ -53,7 +55,8 @@ wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_obje
                              size_t n, wf_draw_fn draw, void *draw_ctx, wf_renderer **out);
 void wf_renderer_destroy(wf_renderer *r);
 
-/* The HAL scene source reading this renderer (one renderer per readout thread). */
+/* The HAL scene source reading this renderer (one renderer per readout thread). It has a
+ * fill_slope (the objects' rel_slope times their stamps) when any object varies. */
 void wf_renderer_source(wf_renderer *r, wf_scene_source *out);
 
 void wf_renderer_get_stats(const wf_renderer *r, wf_renderer_stats *out);

@@ -61,6 +61,7 @@ struct wf_scene {
     size_t nobj;
     wf_render_object *robj;
     size_t nrobj;            /* objects the renderer draws (SNe of zero flux are not drawn) */
+    int time_variable;       /* some drawn object has a flux slope */
     thread_state *ts;
     const wf_catalog *gal, *stars;
     wf_scene_stats stats;
@@ -422,7 +423,13 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
                                    : wf_profile_point_bounds(&s->ts[0].work, &s->ppsf, o->x, o->y, &b, NULL);
         if (st) goto bad;
         uint64_t id = (uint64_t)object_id(s, o);
-        s->robj[kept++] = (wf_render_object){id * 4u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o};
+        double rel = o->kind == OBJ_SN ? setup->sne[o->row].dlnf_dt : 0.0;
+        if (!isfinite(rel)) {
+            st = wf_error(WF_ERR_RANGE, "scene: supernova %lld: flux slope is not finite", object_id(s, o));
+            goto bad;
+        }
+        s->robj[kept++] = (wf_render_object){id * 4u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o, rel};
+        if (rel != 0.0) s->time_variable = 1;
         if (b.x0 < setup->ncols && b.x0 + b.nx > 0 && b.y0 < setup->nrows && b.y0 + b.ny > 0) {
             if (o->kind == OBJ_GALAXY) s->stats.galaxies++;
             else if (o->kind == OBJ_STAR) s->stats.stars++;
@@ -475,6 +482,8 @@ wf_status wf_scene_source_for(wf_scene *s, int t, wf_scene_source *out)
 void wf_scene_get_stats(const wf_scene *s, wf_scene_stats *out) { *out = s->stats; }
 
 size_t wf_scene_object_count(const wf_scene *s) { return s->nrobj; }
+
+int wf_scene_time_variable(const wf_scene *s) { return s->time_variable; }
 
 wf_status wf_scene_draw_object(wf_scene *s, size_t k, wf_scene_object *info, int *x0, int *y0,
                                int *nx, int *ny, double **pix)

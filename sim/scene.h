@@ -23,6 +23,8 @@ typedef struct wf_scene_sn {
     double z;
     double phase;           /* rest-frame days from peak at the exposure mid-time */
     double mag;             /* AB magnitude at mid-exposure (>= 99: no flux) */
+    double dlnf_dt;         /* d ln(flux) / dt at mid-exposure, 1/s (0: constant); drawn
+                             * up the ramp as a rate linear in time */
     unsigned flags;         /* WF_SALT_* flags of the light-curve evaluation */
 } wf_scene_sn;
 
@@ -84,6 +86,10 @@ typedef struct wf_scene_object {
 size_t wf_scene_object_count(const wf_scene *scene);
 wf_status wf_scene_draw_object(wf_scene *scene, size_t k, wf_scene_object *info, int *x0, int *y0,
                                int *nx, int *ny, double **pix);
+
+/* 1 when some drawn object's brightness changes over the exposure (the readout must then
+ * follow the sources' fill_slope: wf_readout_config.time_variable). */
+int wf_scene_time_variable(const wf_scene *scene);
 
 /* Renderer totals over all threads: stamps drawn whole and in pieces, pool high water. */
 void wf_scene_render_stats(const wf_scene *scene, long *stamps, long *pieces, size_t *pool_high);

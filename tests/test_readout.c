@@ -461,6 +461,87 @@ START_TEST(replay_equals_source)
 }
 END_TEST
 
+/* A source whose rate changes linearly in time: rate r0 at the mid-time, slope g. */
+typedef struct linear_source {
+    double r0, g;
+} linear_source;
+
+static wf_status linear_rate(void *ctx, int y0, int y1, int ncols, float *rate)
+{
+    const linear_source *l = ctx;
+    for (size_t i = 0; i < (size_t)(y1 - y0) * ncols; i++) rate[i] = (float)l->r0;
+    return WF_OK;
+}
+
+static wf_status linear_slope(void *ctx, int y0, int y1, int ncols, float *slope, int *any)
+{
+    const linear_source *l = ctx;
+    for (size_t i = 0; i < (size_t)(y1 - y0) * ncols; i++) slope[i] = (float)l->g;
+    *any = l->g != 0.0;
+    return WF_OK;
+}
+
+/* Up the ramp with every effect but the ADC off, a rate r0 + g (t - T/2) gives the charge
+ * Q(t) = r0 t + g (t^2/2 - t T/2) at read time t: each resultant is the mean of Q over its
+ * reads plus the bias, rounded. Per-read and direct sampling both, and a zero slope is the
+ * constant source to the bit. */
+static void check_linear(wf_sampling sampling)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 24, 20);
+    cfg.sampling = sampling;
+    cfg.time_variable = 1;
+    memset(&cfg.det.on, 0, sizeof cfg.det.on); /* the ADC still rounds the resultants */
+    const double r0 = 50.0, g = 0.02; /* -49 e- at mid-time against a constant rate */
+    linear_source ls = {r0, g};
+    wf_scene_source src = {&ls, linear_rate, NULL, linear_slope};
+    size_t len;
+    unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
+    decoded d;
+    decode(buf, len, &d);
+    free(buf);
+    double T = wf_clock_exposure_time(&clock), tm = 0.5 * T;
+    double maxdev = 0, maxeffect = 0;
+    for (int r = 0; r < clock.ma.nresultants; r++) {
+        double sum = 0, flat = 0;
+        int n = clock.ma.first[r + 1] - clock.ma.first[r];
+        for (int j = clock.ma.first[r]; j < clock.ma.first[r + 1]; j++) {
+            double t = wf_clock_read_time(&clock, clock.ma.read[j]);
+            sum += r0 * t + g * (t * t / 2 - t * tm);
+            flat += r0 * t;
+        }
+        double want = sum / n / cfg.det.gain + cfg.det.bias_adu;
+        if (fabs((sum - flat) / n) > maxeffect) maxeffect = fabs((sum - flat) / n);
+        for (int i = 0; i < d.ncols * d.nrows; i++) {
+            double got = d.res[(size_t)r * d.ncols * d.nrows + i];
+            if (fabs(got - want) > maxdev) maxdev = fabs(got - want);
+        }
+    }
+    ck_assert_msg(maxeffect > 40, "the slope should move some resultant by ~49 e- (%.1f)", maxeffect);
+    ck_assert_msg(maxdev <= 0.5 + 1e-6, "resultants off the closed form by %.3f ADU", maxdev);
+    free_decoded(&d);
+    /* slope 0: the same bytes as a constant source without fill_slope */
+    ls.g = 0.0;
+    buf = run_stream(&cfg, &clock, &src, 1, &len);
+    decode(buf, len, &d);
+    free(buf);
+    wf_scene_source flat_src = {&ls, linear_rate, NULL, NULL};
+    cfg.time_variable = 0;
+    decoded e;
+    buf = run_stream(&cfg, &clock, &flat_src, 1, &len);
+    decode(buf, len, &e);
+    free(buf);
+    assert_same(&d, &e, "zero slope");
+    free_decoded(&d);
+    free_decoded(&e);
+}
+
+START_TEST(linear_rate_per_read) { check_linear(WF_SAMPLE_PER_READ); }
+END_TEST
+START_TEST(linear_rate_direct) { check_linear(WF_SAMPLE_DIRECT); }
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("readout");
@@ -477,6 +558,8 @@ static Suite *suite(void)
     tcase_add_test(tc, single_frame_closed_form);
     tcase_add_test(tc, cosmic_ray_count);
     tcase_add_test(tc, replay_equals_source);
+    tcase_add_test(tc, linear_rate_per_read);
+    tcase_add_test(tc, linear_rate_direct);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -38,7 +38,7 @@ static void make_objects(int n, int ncols, int nrows, gauss *g, wf_render_object
         g[i].sigma = 0.5 + 4.0 * rand() / (double)RAND_MAX;
         g[i].flux = 10.0 + 1000.0 * rand() / (double)RAND_MAX;
         int h = (int)ceil(6 * g[i].sigma);
-        o[i] = (wf_render_object){(uint64_t)i, (int)floor(g[i].x) - h, (int)floor(g[i].y) - h, 2 * h + 2, 2 * h + 2, &g[i]};
+        o[i] = (wf_render_object){(uint64_t)i, (int)floor(g[i].x) - h, (int)floor(g[i].y) - h, 2 * h + 2, 2 * h + 2, &g[i], 0.0};
     }
 }
 

@@ -14,6 +14,7 @@
 #include "sim/salt.h"
 #include "sim/sncat.h"
 #include "sim/wcs.h"
+#include "tools/sninject.h"
 #include "tests/testutil.h"
 
 #define NOEFFECTS                                                                                    \
@@ -211,6 +212,56 @@ START_TEST(injected_flux_and_truth)
 }
 END_TEST
 
+/* The injector's light-curve slope (for the up-the-ramp reads) against the model's direct
+ * path: d ln f / dt = -0.4 ln 10 dm/dt, dm/dt by a central difference over +-0.5 d. */
+START_TEST(injector_slope)
+{
+    const char *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(data, "the Roman and SALT data");
+    const char *d = wf_test_tmpdir();
+    char model[4200], sne[4200];
+    snprintf(model, sizeof model, "%s/salt3/salt3-k21", data);
+    snprintf(sne, sizeof sne, "%s/one.fits", d);
+    wf_sn_sample s;
+    memset(&s, 0, sizeof s);
+    size_t r;
+    ck_assert_int_eq(wf_sn_sample_push(&s, &r), 0);
+    s.id[r] = 1, s.host_id[r] = -1, s.z[r] = 0.6, s.t0[r] = 61500.0, s.x1[r] = 0.5, s.c[r] = 0.02;
+    s.x0[r] = 2e-5, s.ra[r] = 71.0, s.dec[r] = -53.0;
+    ck_assert_int_eq(wf_sn_sample_write(&s, sne), 0);
+    wf_sn_injector *inj;
+    ck_assert_int_eq(wf_sn_injector_open(sne, model, data, &inj), 0);
+    wf_skyregion reg;
+    ck_assert_int_eq(wf_skyindex_circle(71.0, -53.0, 0.01, 0.0, &reg), 0);
+    wf_salt_model *m;
+    wf_bandpass bp;
+    ck_assert_int_eq(wf_salt_load(model, &m), 0);
+    ck_assert_int_eq(wf_bandpass_load(WF_J129, data, &bp), 0);
+    wf_salt_params p = {0.6, 61500.0, 2e-5, 0.5, 0.02};
+    const double dates[3] = {61480.0, 61500.0, 61510.0}; /* rising, peak, fading (before the
+                                                          * rest-frame I secondary maximum) */
+    for (int k = 0; k < 3; k++) {
+        wf_scene_sn *v;
+        size_t n;
+        ck_assert_int_eq(wf_sn_injector_select(inj, "J129", dates[k], &reg, &v, &n), 0);
+        ck_assert_uint_eq(n, 1);
+        double m1, m2;
+        unsigned f1, f2;
+        ck_assert_int_eq(wf_salt_bandmag(m, &p, WF_SALT_INTERP_BICUBIC, &bp, dates[k] - 0.5, &m1, &f1), 0);
+        ck_assert_int_eq(wf_salt_bandmag(m, &p, WF_SALT_INTERP_BICUBIC, &bp, dates[k] + 0.5, &m2, &f2), 0);
+        double want = -0.4 * log(10.0) * (m2 - m1) / 86400.0;
+        ck_assert_msg(fabs(v[0].dlnf_dt - want) < 0.05 * fabs(want) + 1e-9,
+                      "MJD %.0f: slope %.4g /s, the model's %.4g /s", dates[k], v[0].dlnf_dt, want);
+        if (k == 0) ck_assert(v[0].dlnf_dt > 0); /* rising */
+        if (k == 2) ck_assert(v[0].dlnf_dt < 0); /* fading */
+        free(v);
+    }
+    wf_salt_free(m);
+    wf_sn_injector_free(inj);
+    wf_sn_sample_free(&s);
+}
+END_TEST
+
 START_TEST(sample_roundtrip_and_bad_values)
 {
     const char *d = wf_test_tmpdir();
@@ -251,6 +302,7 @@ static Suite *suite(void)
     tcase_set_timeout(tc, 300);
     tcase_add_test(tc, injected_flux_and_truth);
     tcase_add_test(tc, sample_roundtrip_and_bad_values);
+    tcase_add_test(tc, injector_slope);
     suite_add_tcase(s, tc);
     return s;
 }

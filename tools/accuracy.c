@@ -854,7 +854,7 @@ static wf_status scene_readout(const acc_run *run, const scene_in *in, const flo
     wf_status st = wf_config_finish(&cfg, &clock);
     if (st) return st;
     rate_source rs = {rate, in->n};
-    wf_scene_source src = {&rs, rate_fill, NULL};
+    wf_scene_source src = {&rs, rate_fill, NULL, NULL};
     wf_expose_job job;
     memset(&job, 0, sizeof job);
     job.ro = cfg.ro;

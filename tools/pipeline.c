@@ -288,6 +288,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
 
     wf_expose_job job = {0};
     job.ro = cfg->ro;
+    job.ro.time_variable = objscene && wf_scene_time_variable(objscene);
     job.clock = *pj->clock;
     job.noise = (wf_noise){WF_NOISE_PHILOX, cfg->seed, cfg->ro.exposure, cfg->ro.sca};
     job.scenes = scenes;

@@ -130,7 +130,17 @@ wf_status wf_sn_injector_select(wf_sn_injector *inj, const char *filter, double 
         unsigned flags;
         if ((st = wf_salt_lc_rate(slot->lc, mjd, &rate, &flags))) break;
         sn->flags = flags;
-        if (rate > 0) st = wf_bandpass_mag_ab(inj->bp[f], rate, &sn->mag);
+        if (rate > 0) {
+            st = wf_bandpass_mag_ab(inj->bp[f], rate, &sn->mag);
+            /* the light curve's slope at mid-exposure, central difference over +-0.01 d (the
+             * template is smooth on that scale: its grid is 1 rest-frame day) */
+            const double h = 0.01;
+            double rm, rp;
+            unsigned fm, fp;
+            if (!st) st = wf_salt_lc_rate(slot->lc, mjd - h, &rm, &fm);
+            if (!st) st = wf_salt_lc_rate(slot->lc, mjd + h, &rp, &fp);
+            if (!st && !(fm | fp)) sn->dlnf_dt = (rp - rm) / (2.0 * h * 86400.0) / rate;
+        }
         k++;
     }
     wf_skyindex_selection_free(&sel);

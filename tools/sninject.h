@@ -19,7 +19,8 @@ wf_status wf_sn_injector_open(const char *sne_path, const char *model_dir, const
                               wf_sn_injector **out);
 void wf_sn_injector_free(wf_sn_injector *inj);
 
-/* The SNe inside reg with their magnitudes in filter at mjd (*out malloc'd, *n may be 0).
+/* The SNe inside reg with their magnitudes in filter at mjd and the light curve's relative
+ * slope there (dlnf_dt, for the up-the-ramp reads) (*out malloc'd, *n may be 0).
  * Not thread-safe (light curves are cached): one exposure at a time. */
 wf_status wf_sn_injector_select(wf_sn_injector *inj, const char *filter, double mjd,
                                 const wf_skyregion *reg, wf_scene_sn **out, size_t *n);
