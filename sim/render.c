@@ -19,6 +19,8 @@ struct wf_renderer {
     int last_start;
     unsigned char *pool;
     size_t pool_used;
+    size_t live_bytes;      /* bytes of the stamps still kept: pool_used - live_bytes is garbage */
+    size_t *order;          /* compaction scratch: active objects by offset */
     double *acc, *piece, *skyrow;
     size_t acc_cap, piece_cap;
     wf_renderer_stats stats;
@@ -73,9 +75,10 @@ wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_obje
     r->objs = malloc((n ? n : 1) * sizeof *r->objs);
     r->stamp_off = malloc((n ? n : 1) * sizeof *r->stamp_off);
     r->active = malloc((n ? n : 1) * sizeof *r->active);
+    r->order = malloc((n ? n : 1) * sizeof *r->order);
     r->pool = cfg->pool_bytes ? malloc(cfg->pool_bytes) : NULL;
     r->skyrow = malloc((size_t)cfg->ncols * sizeof *r->skyrow);
-    if (!r->objs || !r->stamp_off || !r->active || (cfg->pool_bytes && !r->pool) || !r->skyrow) {
+    if (!r->objs || !r->stamp_off || !r->active || !r->order || (cfg->pool_bytes && !r->pool) || !r->skyrow) {
         wf_renderer_destroy(r);
         return wf_error(WF_ERR_NOMEM, "renderer: cannot reserve %zu objects and a %zu-byte pool", n,
                         cfg->pool_bytes);
@@ -105,6 +108,7 @@ void wf_renderer_destroy(wf_renderer *r)
     free(r->objs);
     free(r->stamp_off);
     free(r->active);
+    free(r->order);
     free(r->pool);
     free(r->acc);
     free(r->piece);
@@ -128,19 +132,23 @@ static wf_status grow(double **buf, size_t *cap, size_t count, const char *what)
  * contents do not). Live stamps belong to active objects only. */
 static void compact(wf_renderer *r)
 {
-    size_t used = 0;
-    for (;;) { /* take live stamps in offset order */
-        size_t best = r->nactive, best_off = NO_STAMP;
-        for (size_t a = 0; a < r->nactive; a++) {
-            size_t off = r->stamp_off[r->active[a]];
-            if (off != NO_STAMP && off >= used && (best_off == NO_STAMP || off < best_off)) {
-                best = a;
-                best_off = off;
-            }
+    size_t n = 0;
+    for (size_t a = 0; a < r->nactive; a++)
+        if (r->stamp_off[r->active[a]] != NO_STAMP) r->order[n++] = r->active[a];
+    /* the active list is nearly in offset order already (stamps are stored as objects are
+     * admitted, in the same order), so insertion sort is close to linear */
+    for (size_t i = 1; i < n; i++) {
+        size_t v = r->order[i], off = r->stamp_off[v], j = i;
+        while (j > 0 && r->stamp_off[r->order[j - 1]] > off) {
+            r->order[j] = r->order[j - 1];
+            j--;
         }
-        if (best == r->nactive) break;
-        size_t obj = r->active[best], bytes = stamp_bytes(&r->objs[obj]);
-        if (best_off != used) memmove(r->pool + used, r->pool + best_off, bytes);
+        r->order[j] = v;
+    }
+    size_t used = 0;
+    for (size_t k = 0; k < n; k++) {
+        size_t obj = r->order[k], bytes = stamp_bytes(&r->objs[obj]), off = r->stamp_off[obj];
+        if (off != used) memmove(r->pool + used, r->pool + off, bytes);
         r->stamp_off[obj] = used;
         used += bytes;
     }
@@ -154,7 +162,9 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
     const wf_render_object *o = &r->objs[i];
     size_t bytes = stamp_bytes(o), dbytes = draw_bytes(o);
     if (r->stamp_off[i] == NO_STAMP && dbytes <= r->cfg.pool_bytes) {
-        if (r->pool_used + dbytes > r->cfg.pool_bytes) compact(r);
+        /* compact only when that makes room: a futile compaction per request would cost
+         * O(active) each time on a crowded tile */
+        if (r->pool_used + dbytes > r->cfg.pool_bytes && r->live_bytes + dbytes <= r->cfg.pool_bytes) compact(r);
         if (r->pool_used + dbytes <= r->cfg.pool_bytes) {
             double *dst = (double *)(void *)(r->pool + r->pool_used);
             wf_status st = r->draw(r->draw_ctx, o, o->y0, o->y0 + o->ny, dst);
@@ -162,6 +172,7 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
             to_float_in_place(dst, (size_t)o->nx * (size_t)o->ny);
             r->stamp_off[i] = r->pool_used;
             r->pool_used += bytes;
+            r->live_bytes += bytes;
             if (r->pool_used > r->stats.pool_high_water) r->stats.pool_high_water = r->pool_used;
             r->stats.stamps_drawn++;
         }
@@ -191,6 +202,7 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
                         ncols, r->cfg.nrows);
     if (y0 < r->last_start) { /* went backwards: start the scan again */
         for (size_t a = 0; a < r->nactive; a++) r->stamp_off[r->active[a]] = NO_STAMP;
+        r->live_bytes = 0;
         r->nactive = 0;
         r->next = 0;
         r->pool_used = 0;
@@ -200,7 +212,10 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
     size_t keep = 0;
     for (size_t a = 0; a < r->nactive; a++) {
         const wf_render_object *o = &r->objs[r->active[a]];
-        if (o->y0 + o->ny <= y0) r->stamp_off[r->active[a]] = NO_STAMP;
+        if (o->y0 + o->ny <= y0) {
+            if (r->stamp_off[r->active[a]] != NO_STAMP) r->live_bytes -= stamp_bytes(o);
+            r->stamp_off[r->active[a]] = NO_STAMP;
+        }
         else r->active[keep++] = r->active[a];
     }
     r->nactive = keep;
