@@ -262,6 +262,49 @@ START_TEST(lightcurve_command)
 }
 END_TEST
 
+/* SPEC 5's extreme cases through the single-SN command: the lowest redshift (every WFI band
+ * lies beyond SALT3's red end: no flux, flag 2), the highest, the ends of the x1 and c ranges
+ * at the model's first and last phases (finite, non-negative), and dates far outside. */
+START_TEST(extreme_parameters)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the SALT model data");
+    const char *d = wf_test_tmpdir();
+    char out[4200];
+    snprintf(out, sizeof out, "%s/x.txt", d);
+    struct { double z, x1, c; const char *band; int covered; } cases[] = {
+        {0.06, 0.0, 0.0, "Y106", 0}, {2.99, 0.0, 0.0, "F184", 1}, {2.99, 0.0, 0.0, "Y106", 1},
+        {1.0, -3.0, 0.5, "J129", 1}, {1.0, 2.0, -0.3, "J129", 1}, {0.5, -3.0, -0.3, "Y106", 1}};
+    for (size_t k = 0; k < sizeof cases / sizeof *cases; k++) {
+        double zp1 = 1.0 + cases[k].z, t0 = 61500.0;
+        /* just inside the first and last model phases (-20, +50 rest days; the edges themselves
+         * are tests/test_salt.c's), then far outside */
+        ck_assert_int_eq(run("%s sn lightcurve --data %s --z %g --t0 %g --x1 %g --c %g --band %s "
+                             "--mjd %.9f,%.9f,%.9f,%.9f > %s", bin, data, cases[k].z, t0, cases[k].x1, cases[k].c,
+                             cases[k].band, t0 - 19.999 * zp1, t0 + 49.999 * zp1, t0 - 1e5, t0 + 1e6, out), 0);
+        char *t = wf_test_slurp(out, NULL);
+        ck_assert_ptr_nonnull(t);
+        int line = 0;
+        for (const char *p = t; p && *p; p = strchr(p, '\n') ? strchr(p, '\n') + 1 : NULL) {
+            double mjd, mag, flux;
+            unsigned flag;
+            if (*p == '#' || sscanf(p, "%lf %lf %lf %u", &mjd, &mag, &flux, &flag) != 4) continue;
+            ck_assert_msg(isfinite(mag) && isfinite(flux) && flux >= 0, "z %g %s: mag %g flux %g", cases[k].z,
+                          cases[k].band, mag, flux);
+            if (line >= 2) ck_assert_msg(flag & 1u, "z %g: date %.1f outside the model not flagged", cases[k].z, mjd);
+            else if (!cases[k].covered) ck_assert_msg(flag == 2u && mag == 99.0 && flux == 0.0, "z %g %s: flag %u",
+                                                      cases[k].z, cases[k].band, flag);
+            else ck_assert_msg(flag == 0u || flag == 4u, "z %g %s x1 %g c %g: flag %u at a model edge", cases[k].z,
+                               cases[k].band, cases[k].x1, cases[k].c, flag);
+            line++;
+        }
+        ck_assert_int_eq(line, 4);
+        free(t);
+    }
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("sncmd");
@@ -272,6 +315,7 @@ static Suite *suite(void)
     tcase_add_test(tc, host_catalog_without_mass_is_named);
     tcase_add_test(tc, lightcurves_agree_with_lightcurve);
     tcase_add_test(tc, lightcurve_command);
+    tcase_add_test(tc, extreme_parameters);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -23,7 +23,7 @@
     "--set detector.effects.ipc=false --set detector.effects.read_noise=false "                     \
     "--set detector.effects.quantize=false --set detector.effects.cosmic_rays=false "               \
     "--set scene.sky=false --set scene.flux_fraction=0.9999 "                                         \
-    "--set readout.ncols=128 --set readout.nrows=128 --mode single"
+    "--mode single"
 
 static int run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 static int run(const char *fmt, ...)
@@ -143,7 +143,7 @@ START_TEST(injected_flux_and_truth)
     fprintf(f, "id,ra,dec,mag_Y106,mag_J129,mag_H158,mag_F184\n1,%.6f,%.6f,20,20,20,20\n", fmod(ra + 20.0, 360.0), dec);
     fclose(f);
     ck_assert_int_eq(run("%s survey run --quiet --data %s --plan %s --exposures 0 --scas 1,2,3 --sne %s --model %s "
-                         "--set scene.kind=catalog --stars %s " NOEFFECTS " --out %s/out",
+                         "--set scene.kind=catalog --stars %s " NOEFFECTS " --set readout.ncols=128 --set readout.nrows=128 --out %s/out",
                          bin, data, plan, sne, model, stars, d), 0);
 
     /* the magnitude by the model's direct path at the exposure's mid-time */
@@ -262,6 +262,72 @@ START_TEST(injector_slope)
 }
 END_TEST
 
+/* 3,000 SNe on one 256² SCA (the same injection path as one SN): every one is in the truth,
+ * and the image holds the sum of their light-curve fluxes. */
+START_TEST(thousands_on_one_sca)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the Roman and SALT data");
+    const char *d = wf_test_tmpdir();
+    char model[4200], sne[4200], stars[4200], truth[4200], img[4200];
+    snprintf(model, sizeof model, "%s/salt3/salt3-k21", data);
+    snprintf(sne, sizeof sne, "%s/many.fits", d);
+    snprintf(stars, sizeof stars, "%s/stars.csv", d);
+    const double ra0 = 71.0, dec0 = -53.0, pa = 30.0, mjd = 61500.0;
+    wf_focal_plane fp;
+    wf_wcs w;
+    ck_assert_int_eq(wf_wcs_focal_plane(data, &fp), 0);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, ra0, dec0, pa, 1, &w), 0);
+    wf_sn_sample s;
+    memset(&s, 0, sizeof s);
+    enum { NSN = 3000 };
+    unsigned seed = 7;
+    for (int k = 0; k < NSN; k++) {
+        size_t r;
+        ck_assert_int_eq(wf_sn_sample_push(&s, &r), 0);
+        seed = seed * 1103515245u + 12345u;
+        double x = 8 + 240.0 * ((seed >> 8) & 0xffff) / 65536.0;
+        seed = seed * 1103515245u + 12345u;
+        double y = 8 + 240.0 * ((seed >> 8) & 0xffff) / 65536.0;
+        s.id[r] = k + 1, s.host_id[r] = -1, s.z[r] = 0.3 + 0.5 * k / NSN, s.t0[r] = mjd - 5 + 10.0 * k / NSN;
+        s.x0[r] = 1e-4, s.x1[r] = 0, s.c[r] = 0;
+        ck_assert_int_eq(wf_wcs_pix2world(&w, x, y, &s.ra[r], &s.dec[r]), 0);
+    }
+    ck_assert_int_eq(wf_sn_sample_write(&s, sne), 0);
+    FILE *f = fopen(stars, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "id,ra,dec,mag_Y106\n1,%.6f,%.6f,20\n", fmod(ra0 + 20.0, 360.0), dec0);
+    fclose(f);
+    ck_assert_int_eq(run("%s expose --quiet --data %s --sne %s --model %s --ra %g --dec %g --pa %g --mjd %g --sca 1 "
+                         "--filter Y106 --set scene.kind=catalog --stars %s " NOEFFECTS " --set readout.ncols=256 "
+                         "--set readout.nrows=256 --set scene.flux_fraction=0.995 --out %s/out", bin, data, sne, model,
+                         ra0, dec0, pa, mjd, stars, d), 0);
+    snprintf(truth, sizeof truth, "%s/out/wfisim_e000001_sca01_truth.fits", d);
+    snprintf(img, sizeof img, "%s/out/wfisim_e000001_sca01.fits", d);
+    fitsfile *ff;
+    int status = 0, cf;
+    long nrows = 0;
+    fits_open_file(&ff, truth, READONLY, &status);
+    fits_movnam_hdu(ff, BINARY_TBL, "SNE", 0, &status);
+    fits_get_num_rows(ff, &nrows, &status);
+    fits_get_colnum(ff, CASEINSEN, "FLUX", &cf, &status);
+    double total = 0;
+    for (long r = 1; r <= nrows && !status; r++) {
+        double fl;
+        fits_read_col(ff, TDOUBLE, cf, r, 1, 1, NULL, &fl, NULL, &status);
+        total += fl;
+    }
+    fits_close_file(ff, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_int_eq(nrows, NSN);
+    /* the stamps keep >= 99.5% of each SN; those within 8 px of an edge lose a little more */
+    double sum = image_sum(img);
+    ck_assert_msg(sum / total > 0.98 && sum / total <= 1.0 + 1e-4, "image %.6g e-/s, truth %.6g", sum, total);
+    wf_sn_sample_free(&s);
+}
+END_TEST
+
 START_TEST(sample_roundtrip_and_bad_values)
 {
     const char *d = wf_test_tmpdir();
@@ -303,6 +369,7 @@ static Suite *suite(void)
     tcase_add_test(tc, injected_flux_and_truth);
     tcase_add_test(tc, sample_roundtrip_and_bad_values);
     tcase_add_test(tc, injector_slope);
+    tcase_add_test(tc, thousands_on_one_sca);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -25,7 +25,8 @@
 static const char *sn_usage =
     "usage: wfisim sn generate (--plan plan.fits | --area DEG2 --start MJD --days N [--ra R --dec D])\n"
     "                          [--catalog FILE | --hostless] [--seed S] [--model DIR] [--data DIR]\n"
-    "                          [--h0 H --om OM] [--alpha A --beta B --sigma-int S] [--dz DZ]\n"
+    "                          [--h0 H --om OM] [--alpha A --beta B --sigma-int S]\n"
+    "                          [--dz DZ | --dztol A0,A1,A2]\n"
     "                          [--rate 'A B zmin zmax' ...] [--zmin Z --zmax Z] --out sne.fits\n"
     "       wfisim sn lightcurves --sne sne.fits (--plan plan.fits [--window] | --grid START:END:STEP\n"
     "                          [--filters Y106,J129,...]) [--model DIR] [--data DIR] --out lc.fits\n"
@@ -66,7 +67,7 @@ static int usage_error(const char *fmt, const char *arg)
 
 typedef struct opts {
     const char *plan, *out, *catalog, *model, *data, *sne, *grid, *filters, *plot, *plot_dir;
-    const char *band, *mjd, *interp;
+    const char *band, *mjd, *interp, *dztol;
     const char *rate[MAX_RATE_LINES];
     int nrate, hostless, window;
     double area, start, days, ra, dec, seed;
@@ -101,7 +102,7 @@ static int parse(int argc, char **argv, opts *o)
         {"--grid", offsetof(opts, grid)},       {"--filters", offsetof(opts, filters)},
         {"--plot", offsetof(opts, plot)},       {"--plot-dir", offsetof(opts, plot_dir)},
         {"--band", offsetof(opts, band)},       {"--mjd", offsetof(opts, mjd)},
-        {"--interp", offsetof(opts, interp)},
+        {"--interp", offsetof(opts, interp)},   {"--dztol", offsetof(opts, dztol)},
     };
     static const struct { const char *flag; size_t off; } nums[] = {
         {"--area", offsetof(opts, area)},   {"--start", offsetof(opts, start)},
@@ -388,6 +389,14 @@ static int cmd_generate(int argc, char **argv)
     if (isfinite(o.beta)) pop.beta = o.beta;
     if (isfinite(o.sigma_int)) pop.sigma_int = o.sigma_int;
     if (isfinite(o.dz)) hc.dztol[0] = o.dz;
+    if (o.dztol) { /* SNANA's HOSTLIB_DZTOL: dz(z) = a0 + a1 z + a2 z^2 */
+        char *e1, *e2, *e3;
+        double a0 = strtod(o.dztol, &e1), a1 = *e1 == ',' ? strtod(e1 + 1, &e2) : NAN, a2 = NAN;
+        if (isfinite(a1) && *e2 == ',') a2 = strtod(e2 + 1, &e3);
+        if (e1 == o.dztol || !isfinite(a0) || !isfinite(a1) || !isfinite(a2) || *e3)
+            return usage_error("--dztol '%s': expected a0,a1,a2 (SNANA HOSTLIB_DZTOL)", o.dztol);
+        hc.dztol[0] = a0, hc.dztol[1] = a1, hc.dztol[2] = a2;
+    }
     if (isfinite(o.zmin)) sv.zmin = o.zmin;
     if (isfinite(o.zmax)) sv.zmax = o.zmax;
     if ((st = wf_cosmo_init(&cosmo, o.h0, o.om))) return fail(st);
@@ -487,11 +496,11 @@ static int cmd_generate(int argc, char **argv)
                          "ZMAX = %.6g / \n"
                          "NEXPECT = %.6f / expected number (rate x volume x time)\n"
                          "NHOSTLSS = %ld / hostless supernovae\n"
-                         "DZTOL = %.6g / host redshift tolerance\n"
+                         "DZTOL = '%.6g %.6g %.6g' / host |dz| <= a0 + a1 z + a2 z^2\n"
                          "HOSTFMAX = %.6g / largest enclosed-flux fraction\n",
                          o.seed, o.h0, o.om, pop.alpha, pop.beta, pop.sigma_int, fp.area, sv.mjd_start,
                          sv.mjd_end, gen.peak_min, gen.peak_max, sv.zmin, sv.zmax, gen.expected, nhostless,
-                         hc.dztol[0], hc.fmax);
+                         hc.dztol[0], hc.dztol[1], hc.dztol[2], hc.fmax);
         for (int k = 0; k < law.n && n > 0 && (size_t)n < sizeof out.cards; k++)
             n += snprintf(out.cards + n, sizeof out.cards - (size_t)n, "RATE%d = '%.6g %.6g %.6g %.6g' / A B zmin zmax\n",
                           k + 1, law.p[k].a, law.p[k].b, law.p[k].zlo, law.p[k].zhi);
