@@ -305,6 +305,37 @@ START_TEST(extreme_parameters)
 }
 END_TEST
 
+/* sn.* keys from a configuration file and --set: a rate law with both pieces doubled doubles
+ * the expected count; a narrower x1 range holds every drawn x1; a wrong key is named. */
+START_TEST(configuration_keys)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the SALT model data");
+    const char *d = wf_test_tmpdir();
+    char yaml[4200], a[4200], b[4200], log[4200];
+    snprintf(yaml, sizeof yaml, "%s/sn.yaml", d);
+    snprintf(a, sizeof a, "%s/a.fits", d);
+    snprintf(b, sizeof b, "%s/b.fits", d);
+    snprintf(log, sizeof log, "%s/log", d);
+    FILE *f = fopen(yaml, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "sn:\n  rate: \"POWERLAW2 5.0e-5 1.5 0 1; POWERLAW2 19.4e-5 -0.5 1 3\"\n  x1:\n    max: 1.0\n");
+    fclose(f);
+    const char *common = "--area 0.2 --start 61420 --days 100 --hostless";
+    ck_assert_int_eq(run("%s sn generate --data %s %s --out %s >/dev/null", bin, data, common, a), 0);
+    ck_assert_int_eq(run("%s sn generate --data %s %s --config %s --set sn.x1.min=-1.5 --out %s >/dev/null", bin, data,
+                         common, yaml, b), 0);
+    ck_assert_double_eq_tol(header_double(b, "NEXPECT") / header_double(a, "NEXPECT"), 2.0, 1e-9);
+    wf_sn_sample s;
+    ck_assert_int_eq(wf_sn_sample_read(b, &s), 0);
+    for (size_t i = 0; i < s.n; i++) ck_assert_msg(s.x1[i] >= -1.5 && s.x1[i] <= 1.0, "x1 %g outside [-1.5, 1]", s.x1[i]);
+    wf_sn_sample_free(&s);
+    ck_assert_int_eq(run("%s sn generate --data %s %s --set sn.x1.maxx=1 --out %s 2>%s", bin, data, common, b, log), 2);
+    ck_assert(grep_file(log, "sn.x1.maxx"));
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("sncmd");
@@ -316,6 +347,7 @@ static Suite *suite(void)
     tcase_add_test(tc, lightcurves_agree_with_lightcurve);
     tcase_add_test(tc, lightcurve_command);
     tcase_add_test(tc, extreme_parameters);
+    tcase_add_test(tc, configuration_keys);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -45,6 +45,17 @@ typedef struct wf_config {
     char data_dir[WF_PATH_MAX];    /* paths.data [$WFISIM_DATA or ""] */
     char reference_dir[WF_PATH_MAX]; /* paths.reference [$WFISIM_REFERENCE or ""] */
     wf_survey_params survey;       /* survey.* (sim/survey.h keeps their table) */
+    struct {                       /* sn.*: supernova generation (docs/SUPERNOVAE.md) */
+        char model[WF_PATH_MAX];   /* SALT model directory ["": data/salt3/salt3-k21] */
+        double h0, om;             /* flat LCDM [70, 0.315] */
+        char rate[512];            /* POWERLAW2 pieces separated by ';' */
+        double zmin, zmax;         /* [0.06, 2.99] */
+        double alpha, beta, sigma_int;
+        double x1[5], c[5];        /* peak, sigma-, sigma+, min, max */
+        char dztol[128];           /* "a0,a1,a2" */
+        double fmax;
+        int hostless;
+    } sn;
 } wf_config;
 
 /* Every key at its documented default (SPEC values). */

@@ -27,7 +27,8 @@ static const char *sn_usage =
     "                          [--catalog FILE | --hostless] [--seed S] [--model DIR] [--data DIR]\n"
     "                          [--h0 H --om OM] [--alpha A --beta B --sigma-int S]\n"
     "                          [--dz DZ | --dztol A0,A1,A2]\n"
-    "                          [--rate 'A B zmin zmax' ...] [--zmin Z --zmax Z] --out sne.fits\n"
+    "                          [--rate 'A B zmin zmax' ...] [--zmin Z --zmax Z]\n"
+    "                          [--config FILE] [--set sn.KEY=VALUE ...] --out sne.fits\n"
     "       wfisim sn lightcurves --sne sne.fits (--plan plan.fits [--window] | --grid START:END:STEP\n"
     "                          [--filters Y106,J129,...]) [--model DIR] [--data DIR] --out lc.fits\n"
     "                          [--plot ID,ID,... [--plot-dir DIR]]\n"
@@ -43,8 +44,10 @@ static const char *sn_usage =
     "               plan date in its model window); or on a regular grid in the listed filters\n"
     "  lightcurve   one SN's AB magnitudes and e-/s at given dates (sncosmo's bandmag)\n"
     "\n"
-    "  --model DIR  SALT model directory (default DATA/salt3/salt3-k21); --data DIR Roman data\n"
-    "               (default $WFISIM_DATA; without it the built-in top-hat bandpasses)\n";
+    "  --model DIR  SALT model directory (default sn.model, else DATA/salt3/salt3-k21); --data DIR\n"
+    "               Roman data (default paths.data / $WFISIM_DATA; without it the built-in\n"
+    "               top-hat bandpasses). Every sn.* key of docs/CONFIG.md can come from --config\n"
+    "               or --set; the options above override them.\n";
 
 static int fail(wf_status st)
 {
@@ -74,7 +77,13 @@ typedef struct opts {
     double h0, om, alpha, beta, sigma_int, dz, zmin, zmax;
     double z, t0, x1, c, x0, mu;
     char model_buf[WF_PATH_MAX + 32];
+    double fmax;
+    char rate_buf[MAX_RATE_LINES][160];
 } opts;
+
+/* The configuration (sn.*, paths.data) the options start from: defaults, then --config FILE,
+ * then --set KEY=VALUE; explicit options override it. One per process. */
+static wf_config sn_cfg;
 
 static int number(const char *flag, const char *text, double *out)
 {
@@ -93,8 +102,14 @@ static int parse(int argc, char **argv, opts *o)
     memset(o, 0, sizeof *o);
     o->area = o->start = o->days = o->x0 = o->mu = o->z = o->t0 = NAN;
     o->ra = 71.0, o->dec = -53.0, o->seed = 1;
-    o->h0 = WF_COSMO_H0_DEFAULT, o->om = WF_COSMO_OM_DEFAULT;
+    o->h0 = o->om = o->fmax = NAN;
     o->alpha = o->beta = o->sigma_int = o->dz = o->zmin = o->zmax = NAN;
+    wf_config_defaults(&sn_cfg);
+    for (int i = 0; i < argc; i++) /* the file first, wherever it stands */
+        if (!strcmp(argv[i], "--config")) {
+            if (i + 1 >= argc) return usage_error("%s needs a file", "--config");
+            if (wf_config_load(&sn_cfg, argv[i + 1])) return fail(WF_ERR_INPUT);
+        }
     static const struct { const char *flag; size_t off; } strs[] = {
         {"--plan", offsetof(opts, plan)},       {"--out", offsetof(opts, out)},
         {"--catalog", offsetof(opts, catalog)}, {"--model", offsetof(opts, model)},
@@ -120,6 +135,14 @@ static int parse(int argc, char **argv, opts *o)
         const char *a = argv[i], *val = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--help") || !strcmp(a, "-h")) { fputs(sn_usage, stdout); exit(0); }
         if (!strcmp(a, "--hostless")) { o->hostless = 1; continue; }
+        if (!strcmp(a, "--config")) { i++; continue; }
+        if (!strcmp(a, "--set")) {
+            if (!val) return usage_error("%s needs KEY=VALUE", a);
+            wf_status st = wf_config_set(&sn_cfg, val, "--set");
+            if (st) return fail(st);
+            i++;
+            continue;
+        }
         if (!strcmp(a, "--window")) { o->window = 1; continue; }
         int done = 0;
         for (size_t k = 0; k < sizeof strs / sizeof *strs && !done; k++)
@@ -137,13 +160,42 @@ static int parse(int argc, char **argv, opts *o)
         if (!done && !strcmp(a, "--rate")) {
             if (!val) return usage_error("%s needs 'A B zmin zmax'", a);
             if (o->nrate == MAX_RATE_LINES) return usage_error("at most 8 %s pieces", a);
-            o->rate[o->nrate++] = val;
+            /* 'A B zmin zmax' as SNANA writes it after POWERLAW2 */
+            snprintf(o->rate_buf[o->nrate], sizeof o->rate_buf[o->nrate], "%s%s",
+                     strstr(val, "POWERLAW2") ? "" : "POWERLAW2 ", val);
+            o->rate[o->nrate] = o->rate_buf[o->nrate];
+            o->nrate++;
             done = 1;
         }
         if (!done) return usage_error("unknown option '%s'", a);
         i++;
     }
-    if (!o->data) o->data = getenv("WFISIM_DATA") ? getenv("WFISIM_DATA") : "";
+    const wf_config *c = &sn_cfg;
+    if (!o->data) o->data = c->data_dir;
+    if (!o->model && c->sn.model[0]) o->model = c->sn.model;
+    if (isnan(o->h0)) o->h0 = c->sn.h0;
+    if (isnan(o->om)) o->om = c->sn.om;
+    if (isnan(o->alpha)) o->alpha = c->sn.alpha;
+    if (isnan(o->beta)) o->beta = c->sn.beta;
+    if (isnan(o->sigma_int)) o->sigma_int = c->sn.sigma_int;
+    if (isnan(o->zmin)) o->zmin = c->sn.zmin;
+    if (isnan(o->zmax)) o->zmax = c->sn.zmax;
+    if (isnan(o->fmax)) o->fmax = c->sn.fmax;
+    if (!o->dztol && isnan(o->dz)) o->dztol = c->sn.dztol;
+    o->hostless |= c->sn.hostless;
+    if (!o->nrate) { /* the configuration's pieces, ';'-separated */
+        const char *p = c->sn.rate;
+        while (*p && o->nrate < MAX_RATE_LINES) {
+            const char *e = strchr(p, ';');
+            size_t len = e ? (size_t)(e - p) : strlen(p);
+            if (len >= sizeof o->rate_buf[0]) return usage_error("sn.rate: a piece of '%s' is too long", c->sn.rate);
+            memcpy(o->rate_buf[o->nrate], p, len);
+            o->rate_buf[o->nrate][len] = '\0';
+            o->rate[o->nrate] = o->rate_buf[o->nrate];
+            o->nrate++;
+            p += len + (e ? 1 : 0);
+        }
+    }
     if (!o->model) {
         if (!o->data[0]) {
             fprintf(stderr, "wfisim sn: no SALT model: give --model DIR, or a data folder (--data DIR or "
@@ -385,10 +437,11 @@ static int cmd_generate(int argc, char **argv)
     wf_snrate_survey_default(&sv);
     wf_snpop_default(&pop);
     wf_snhost_config_default(&hc);
-    if (isfinite(o.alpha)) pop.alpha = o.alpha;
-    if (isfinite(o.beta)) pop.beta = o.beta;
-    if (isfinite(o.sigma_int)) pop.sigma_int = o.sigma_int;
-    if (isfinite(o.dz)) hc.dztol[0] = o.dz;
+    pop.alpha = o.alpha, pop.beta = o.beta, pop.sigma_int = o.sigma_int;
+    pop.x1 = (wf_snpop_agauss){sn_cfg.sn.x1[0], sn_cfg.sn.x1[1], sn_cfg.sn.x1[2], sn_cfg.sn.x1[3], sn_cfg.sn.x1[4]};
+    pop.c = (wf_snpop_agauss){sn_cfg.sn.c[0], sn_cfg.sn.c[1], sn_cfg.sn.c[2], sn_cfg.sn.c[3], sn_cfg.sn.c[4]};
+    hc.fmax = o.fmax;
+    if (isfinite(o.dz)) hc.dztol[0] = o.dz, hc.dztol[1] = hc.dztol[2] = 0.0;
     if (o.dztol) { /* SNANA's HOSTLIB_DZTOL: dz(z) = a0 + a1 z + a2 z^2 */
         char *e1, *e2, *e3;
         double a0 = strtod(o.dztol, &e1), a1 = *e1 == ',' ? strtod(e1 + 1, &e2) : NAN, a2 = NAN;
@@ -397,16 +450,12 @@ static int cmd_generate(int argc, char **argv)
             return usage_error("--dztol '%s': expected a0,a1,a2 (SNANA HOSTLIB_DZTOL)", o.dztol);
         hc.dztol[0] = a0, hc.dztol[1] = a1, hc.dztol[2] = a2;
     }
-    if (isfinite(o.zmin)) sv.zmin = o.zmin;
-    if (isfinite(o.zmax)) sv.zmax = o.zmax;
+    sv.zmin = o.zmin;
+    sv.zmax = o.zmax;
     if ((st = wf_cosmo_init(&cosmo, o.h0, o.om))) return fail(st);
-    if (o.nrate) {
-        wf_snrate_clear(&law);
-        for (int k = 0; k < o.nrate; k++)
-            if ((st = wf_snrate_add_line(&law, o.rate[k], "--rate", k + 1))) return fail(st);
-    } else {
-        wf_snrate_default(&law);
-    }
+    wf_snrate_clear(&law);
+    for (int k = 0; k < o.nrate; k++)
+        if ((st = wf_snrate_add_line(&law, o.rate[k], "rate", k + 1))) return fail(st);
     if ((st = wf_snpop_validate(&pop)) || (st = wf_snhost_config_check(&hc))) return fail(st);
     wf_salt_model *model = NULL;
     if ((st = wf_salt_load(o.model, &model))) return fail(st);
@@ -886,8 +935,7 @@ static int cmd_lightcurve(int argc, char **argv)
     if (st) return fail(st);
     wf_snpop pop;
     wf_snpop_default(&pop);
-    if (isfinite(o.alpha)) pop.alpha = o.alpha;
-    if (isfinite(o.beta)) pop.beta = o.beta;
+    pop.alpha = o.alpha, pop.beta = o.beta;
     double x0 = o.x0;
     if (!isfinite(x0)) {
         double mu = o.mu;
