@@ -1,8 +1,10 @@
 #include "sim/fitsout.h"
 
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #define CHECKSUM_ZERO "0000000000000000"
 #define CHECKSUM_COMMENT "HDU checksum"
@@ -83,4 +85,26 @@ int wf_fits_double_digits(double v)
         if (strtod(buf, NULL) == v) return d;
     }
     return 17;
+}
+
+wf_status wf_fits_begin(const char *path, char *tmp, size_t tmp_size, fitsfile **f)
+{
+    if ((size_t)snprintf(tmp, tmp_size, "%s.tmp", path) >= tmp_size)
+        return wf_error(WF_ERR_INPUT, "%s: path too long", path);
+    unlink(tmp);
+    int status = 0;
+    fits_create_diskfile(f, tmp, &status); /* the name as given: no cfitsio filename syntax */
+    return wf_fits_error(status, tmp, "creating the file");
+}
+
+wf_status wf_fits_finish(fitsfile *f, const char *tmp, const char *path, wf_status st)
+{
+    int status = 0;
+    if (!st) st = wf_fits_checksum_all(f, tmp);
+    fits_close_file(f, &status);
+    if (!st) st = wf_fits_error(status, tmp, "closing");
+    if (!st && rename(tmp, path) != 0)
+        st = wf_error(WF_ERR_IO, "%s: cannot rename to %s: %s", tmp, path, strerror(errno));
+    if (st) unlink(tmp);
+    return st;
 }

@@ -23,6 +23,14 @@ wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path);
 /* The same for every HDU of the file; leaves the last HDU current. */
 wf_status wf_fits_checksum_all(fitsfile *f, const char *path);
 
+/* Products are written to "<path>.tmp" and renamed into place only when complete, so a
+ * failure never leaves a partial product. wf_fits_begin creates the temporary file (an old
+ * one is removed; tmp receives its name); wf_fits_finish checksums every HDU (unless st is
+ * already an error), closes, renames onto path, and removes the temporary file on any
+ * error. Returns the first error. */
+wf_status wf_fits_begin(const char *path, char *tmp, size_t tmp_size, fitsfile **f);
+wf_status wf_fits_finish(fitsfile *f, const char *tmp, const char *path, wf_status st);
+
 /* Fewest significant digits (1..17) that print v so that it reads back exactly: with
  * fits_write_key_dbl(..., -digits, ...) a header shows 0.015, not 0.014999999999999999. */
 int wf_fits_double_digits(double v);

@@ -572,11 +572,10 @@ static int write_table(fitsfile *f, const wf_scene *s, obj_kind kind, const char
 wf_status wf_scene_write_truth(const wf_scene *s, const char *path)
 {
     char tmp[2048];
-    snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    remove(tmp);
     fitsfile *f;
     int status = 0;
-    if (fits_create_diskfile(&f, tmp, &status)) return wf_error(WF_ERR_IO, "%s: cannot create", tmp);
+    wf_status st = wf_fits_begin(path, tmp, sizeof tmp, &f);
+    if (st) return st;
     fits_create_img(f, BYTE_IMG, 0, NULL, &status);
     fits_write_key_str(f, "FILTER", s->setup.filter, "optical element", &status);
     fits_write_key_dbl(f, "MJD-OBS", s->setup.mjd, 9, "exposure mid-time", &status);
@@ -585,24 +584,7 @@ wf_status wf_scene_write_truth(const wf_scene *s, const char *path)
     write_table(f, s, OBJ_STAR, "STARS", &status);
     write_table(f, s, OBJ_SN, "SNE", &status);
     /* checksums with fixed comments: the truth is byte-identical run to run */
-    wf_status cst = status ? WF_OK : wf_fits_checksum_all(f, tmp);
-    int close_status = 0;
-    fits_close_file(f, &close_status);
-    if (cst) {
-        remove(tmp);
-        return cst;
-    }
-    if (status || close_status) {
-        char msg[FLEN_STATUS];
-        fits_get_errstatus(status ? status : close_status, msg);
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: writing truth: %s", path, msg);
-    }
-    if (rename(tmp, path) != 0) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
-    }
-    return WF_OK;
+    return wf_fits_finish(f, tmp, path, wf_fits_error(status, tmp, "writing the truth tables"));
 }
 
 wf_status wf_scene_wcs_meta(const wf_scene *s, char *buf, size_t cap)

@@ -104,11 +104,10 @@ static void write_cards(fitsfile *f, const char *cards, int *status)
 wf_status wf_sn_sample_write(const wf_sn_sample *s, const char *path)
 {
     char tmp[4200];
-    snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    remove(tmp);
     fitsfile *f;
     int status = 0;
-    if (fits_create_diskfile(&f, tmp, &status)) return wf_error(WF_ERR_IO, "%s: cannot create", tmp);
+    wf_status st = wf_fits_begin(path, tmp, sizeof tmp, &f);
+    if (st) return st;
     fits_create_img(f, BYTE_IMG, 0, NULL, &status);
     fits_write_key_str(f, "ORIGIN", "wfisim", "supernova sample (wfisim sn generate)", &status);
     char model[72];
@@ -128,19 +127,7 @@ wf_status wf_sn_sample_write(const wf_sn_sample *s, const char *path)
             if (d) fits_write_col(f, TDOUBLE, c + 1, 1, 1, n, *d, &status);
         }
     }
-    wf_status st = status ? wf_fits_error(status, tmp, "writing the SN table") : wf_fits_checksum_all(f, tmp);
-    int cs = 0;
-    fits_close_file(f, &cs);
-    if (!st && cs) st = wf_fits_error(cs, tmp, "closing");
-    if (st) {
-        remove(tmp);
-        return st;
-    }
-    if (rename(tmp, path) != 0) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
-    }
-    return WF_OK;
+    return wf_fits_finish(f, tmp, path, wf_fits_error(status, tmp, "writing the SN table"));
 }
 
 wf_status wf_sn_sample_read(const char *path, wf_sn_sample *out)

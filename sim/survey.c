@@ -772,28 +772,6 @@ wf_status wf_survey_check_overlap(const wf_survey_plan *plan, const wf_focal_pla
 
 /* ---- FITS products --------------------------------------------------------------------------- */
 
-static wf_status open_tmp(const char *path, char *tmp, size_t size, fitsfile **f)
-{
-    if ((size_t)snprintf(tmp, size, "%s.tmp", path) >= size)
-        return wf_error(WF_ERR_INPUT, "%s: path too long", path);
-    unlink(tmp);
-    int status = 0;
-    fits_create_file(f, tmp, &status);
-    return wf_fits_error(status, tmp, "creating the file");
-}
-
-static wf_status finish(fitsfile *f, const char *tmp, const char *path, wf_status st)
-{
-    int status = 0;
-    if (!st) st = wf_fits_checksum_all(f, tmp);
-    fits_close_file(f, &status);
-    if (!st) st = wf_fits_error(status, tmp, "closing");
-    if (!st && rename(tmp, path) != 0)
-        st = wf_error(WF_ERR_IO, "%s: cannot rename to %s: %s", tmp, path, strerror(errno));
-    if (st) unlink(tmp);
-    return st;
-}
-
 /* Shortest exact digits, but never fewer than the integer part needs: 61420, not 6.142E+04. */
 static int key_digits(double v)
 {
@@ -829,7 +807,7 @@ wf_status wf_survey_write_plan(const wf_survey_plan *plan, const wf_survey_overl
     const wf_survey_params *p = &plan->par;
     char tmp[4200], list[256];
     fitsfile *f = NULL;
-    wf_status st = open_tmp(path, tmp, sizeof tmp, &f);
+    wf_status st = wf_fits_begin(path, tmp, sizeof tmp, &f);
     if (st) return st;
     int status = 0;
     fits_create_img(f, BYTE_IMG, 0, NULL, &status);
@@ -868,7 +846,7 @@ wf_status wf_survey_write_plan(const wf_survey_plan *plan, const wf_survey_overl
     }
     fits_write_comment(f, "PA: GalSim galsim.roman.getWCS observatory position angle at the "
                        "boresight (deg E of N)", &status);
-    if ((st = wf_fits_error(status, tmp, "writing the primary header"))) return finish(f, tmp, path, st);
+    if ((st = wf_fits_error(status, tmp, "writing the primary header"))) return wf_fits_finish(f, tmp, path, st);
 
     char *ttype[] = {"EXPID", "VISIT", "ORIENT", "POINTING", "PASS", "FILTER", "RA", "DEC", "PA",
                      "ORIENTPA", "MJD_START", "MJD_MID", "EXPTIME"};
@@ -884,7 +862,7 @@ wf_status wf_survey_write_plan(const wf_survey_plan *plan, const wf_survey_overl
         free(ib);
         free(db);
         free(names);
-        return finish(f, tmp, path, wf_error(WF_ERR_NOMEM, "%s: out of memory", tmp));
+        return wf_fits_finish(f, tmp, path, wf_error(WF_ERR_NOMEM, "%s: out of memory", tmp));
     }
     for (int col = 1; col <= 13 && !status && !st; col++) {
         for (size_t i = 0; i < n; i++) {
@@ -913,7 +891,7 @@ wf_status wf_survey_write_plan(const wf_survey_plan *plan, const wf_survey_overl
     free(db);
     free(names);
     if (!st) st = wf_fits_error(status, tmp, "writing the PLAN table");
-    if (st) return finish(f, tmp, path, st);
+    if (st) return wf_fits_finish(f, tmp, path, st);
 
     char *pt[] = {"POINTING", "COLUMN", "DU", "DV"};
     char *pf[] = {"1J", "1J", "1D", "1D"};
@@ -930,14 +908,14 @@ wf_status wf_survey_write_plan(const wf_survey_plan *plan, const wf_survey_overl
         fits_write_col(f, TDOUBLE, 4, i + 1, 1, 1, (void *)&plan->dv[i], &status);
     }
     if (!st) st = wf_fits_error(status, tmp, "writing the POINTINGS table");
-    return finish(f, tmp, path, st);
+    return wf_fits_finish(f, tmp, path, st);
 }
 
 wf_status wf_survey_write_coverage(const wf_survey_coverage *cov, const char *path)
 {
     char tmp[4200];
     fitsfile *f = NULL;
-    wf_status st = open_tmp(path, tmp, sizeof tmp, &f);
+    wf_status st = wf_fits_begin(path, tmp, sizeof tmp, &f);
     if (st) return st;
     int status = 0;
     fits_create_img(f, BYTE_IMG, 0, NULL, &status);
@@ -981,5 +959,5 @@ wf_status wf_survey_write_coverage(const wf_survey_coverage *cov, const char *pa
             fits_write_img(f, TINT, 1, (LONGLONG)plane, (void *)(cov->count + fi * plane), &status);
         if (!st) st = wf_fits_error(status, tmp, "writing a coverage image");
     }
-    return finish(f, tmp, path, st);
+    return wf_fits_finish(f, tmp, path, st);
 }

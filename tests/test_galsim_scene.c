@@ -27,18 +27,6 @@
 
 #define N 1024
 
-static int run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-static int run(const char *fmt, ...)
-{
-    char cmd[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(cmd, sizeof cmd, fmt, ap);
-    va_end(ap);
-    int rc = system(cmd);
-    return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
-}
-
 static double *read_image(const char *path, const char *ext, int hdu)
 {
     fitsfile *f;
@@ -116,7 +104,7 @@ START_TEST(objects_noiseless)
     snprintf(cat, sizeof cat, "%s/scene_catalog_sca1_pointingA.csv.gz", ref);
     snprintf(gs, sizeof gs, "%s/scene_phot_cut1024.fits.gz", ref);
     snprintf(ours, sizeof ours, "%s/nl/wfisim_e000001_sca01.fits", d);
-    ck_assert_int_eq(run("%s expose " SCENE_ARGS " " NOEFFECTS " --out %s/nl", bin, cat, data, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose " SCENE_ARGS " " NOEFFECTS " --out %s/nl", bin, cat, data, d), 0);
     double *g = read_image(gs, NULL, 2), *w = read_image(ours, "SCI", 0);
     for (size_t i = 0; i < (size_t)N * N; i++) g[i] /= 300.0; /* e- -> e-/s */
     double sg = 0, sw = 0;
@@ -176,7 +164,7 @@ START_TEST(final_image_statistics)
     snprintf(cat, sizeof cat, "%s/scene_catalog_sca1_pointingA.csv.gz", ref);
     snprintf(gs, sizeof gs, "%s/scene_phot_cut1024.fits.gz", ref);
     snprintf(ours, sizeof ours, "%s/full/wfisim_e000001_sca01.fits", d);
-    ck_assert_int_eq(run("%s expose " SCENE_ARGS " --out %s/full", bin, cat, data, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose " SCENE_ARGS " --out %s/full", bin, cat, data, d), 0);
     double *g = read_image(gs, NULL, 1), *w = read_image(ours, "SCI", 0);
     for (size_t i = 0; i < (size_t)N * N; i++) g[i] /= 300.0; /* ADU, gain 1 (facts.json) -> e-/s */
     double lg, sgm, lw, sw;

@@ -16,19 +16,6 @@
               "--set detector.cr_rate=500 --set scene.grid.spacing=20 --set scene.grid.flux=2e4"
 
 
-static int run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-#include <stdarg.h>
-static int run(const char *fmt, ...)
-{
-    char cmd[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(cmd, sizeof cmd, fmt, ap);
-    va_end(ap);
-    int rc = system(cmd);
-    return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
-}
-
 static void assert_same_file(const char *a, const char *b)
 {
     size_t la, lb;
@@ -53,9 +40,9 @@ START_TEST(pipe_equals_in_process)
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
-    ck_assert_int_eq(run("%s expose " SMALL " --out %s/a", bin, d), 0);
-    ck_assert_int_eq(run("%s expose " SMALL " --stream - | %s assemble - --quiet --out %s/b", bin, bin, d), 0);
-    ck_assert_int_eq(run("%s expose " SMALL " --stream %s/s.bin && %s assemble %s/s.bin --quiet --out %s/c",
+    ck_assert_int_eq(wf_test_run("%s expose " SMALL " --out %s/a", bin, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose " SMALL " --stream - | %s assemble - --quiet --out %s/b", bin, bin, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose " SMALL " --stream %s/s.bin && %s assemble %s/s.bin --quiet --out %s/c",
                          bin, d, bin, d, d), 0);
     char a[4200], b[4200], c[4200];
     snprintf(a, sizeof a, "%s/a/" FITS, d);
@@ -73,13 +60,13 @@ START_TEST(tile_height_and_threads_do_not_matter)
     const char *d = wf_test_tmpdir();
     const char *modes[] = {"ramp --sampling per-read", "ramp --sampling direct", "single"};
     for (int m = 0; m < 3; m++) {
-        ck_assert_int_eq(run("%s expose " SMALL " --mode %s --tile-rows 80 --out %s/ref%d", bin, modes[m], d, m), 0);
+        ck_assert_int_eq(wf_test_run("%s expose " SMALL " --mode %s --tile-rows 80 --out %s/ref%d", bin, modes[m], d, m), 0);
         char ref[4200];
         snprintf(ref, sizeof ref, "%s/ref%d/" FITS, d, m);
         const int heights[] = {1, 7, 64};
         for (int i = 0; i < 3; i++)
             for (int t = 1; t <= 2; t++) {
-                ck_assert_int_eq(run("%s expose " SMALL " --mode %s --tile-rows %d --threads %d --out %s/t%d_%d_%d",
+                ck_assert_int_eq(wf_test_run("%s expose " SMALL " --mode %s --tile-rows %d --threads %d --out %s/t%d_%d_%d",
                                      bin, modes[m], heights[i], t, d, m, heights[i], t), 0);
                 char p[4200];
                 snprintf(p, sizeof p, "%s/t%d_%d_%d/" FITS, d, m, heights[i], t);
@@ -100,7 +87,7 @@ START_TEST(bad_config_named_and_no_product)
     FILE *f = fopen(cfg, "w");
     fputs("seed: 3\ndetector:\n  gain: 1.0\n  read_nosie: 5\n", f);
     fclose(f);
-    int rc = run("%s expose --quiet --config %s --out %s/out 2>%s", bin, cfg, d, log);
+    int rc = wf_test_run("%s expose --quiet --config %s --out %s/out 2>%s", bin, cfg, d, log);
     ck_assert_int_ne(rc, 0);
     size_t n;
     char *msg = wf_test_slurp(log, &n);
@@ -111,7 +98,7 @@ START_TEST(bad_config_named_and_no_product)
     snprintf(out, sizeof out, "%s/out/" FITS, d);
     ck_assert(!exists(out));
     /* an unknown filter on the command line */
-    ck_assert_int_ne(run("%s expose --quiet --filter Q999 --out %s/out 2>/dev/null", bin, d), 0);
+    ck_assert_int_ne(wf_test_run("%s expose --quiet --filter Q999 --out %s/out 2>/dev/null", bin, d), 0);
 }
 END_TEST
 
@@ -120,7 +107,7 @@ START_TEST(corrupt_stream_leaves_nothing)
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
-    ck_assert_int_eq(run("%s expose " SMALL " --stream %s/s.bin", bin, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose " SMALL " --stream %s/s.bin", bin, d), 0);
     /* flip one byte in the middle of the stream */
     char path[4200];
     snprintf(path, sizeof path, "%s/s.bin", d);
@@ -131,7 +118,7 @@ START_TEST(corrupt_stream_leaves_nothing)
     fwrite(buf, 1, n, f);
     fclose(f);
     free(buf);
-    ck_assert_int_ne(run("%s assemble %s --quiet --out %s/out 2>/dev/null", bin, path, d), 0);
+    ck_assert_int_ne(wf_test_run("%s assemble %s --quiet --out %s/out 2>/dev/null", bin, path, d), 0);
     char out[4200], tmp[4300];
     snprintf(out, sizeof out, "%s/out/" FITS, d);
     snprintf(tmp, sizeof tmp, "%s.tmp", out);
@@ -144,10 +131,10 @@ START_TEST(fits_opens_in_astropy)
 {
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
-    if (run("/usr/bin/python3 -c 'import astropy' 2>/dev/null") != 0) WF_SKIP("python3 with astropy not installed");
+    if (wf_test_run("/usr/bin/python3 -c 'import astropy' 2>/dev/null") != 0) WF_SKIP("python3 with astropy not installed");
     const char *d = wf_test_tmpdir();
-    ck_assert_int_eq(run("%s expose " SMALL " --out %s", bin, d), 0);
-    ck_assert_int_eq(run("/usr/bin/python3 tests/fits_check.py %s/" FITS, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose " SMALL " --out %s", bin, d), 0);
+    ck_assert_int_eq(wf_test_run("/usr/bin/python3 tests/fits_check.py %s/" FITS, d), 0);
 }
 END_TEST
 
@@ -160,7 +147,7 @@ static void flat_sky_unbiased(const char *mode, double sky)
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
-    ck_assert_int_eq(run("%s expose --quiet --mode %s --set scene.kind=grid --set readout.ncols=128 --set readout.nrows=128 "
+    ck_assert_int_eq(wf_test_run("%s expose --quiet --mode %s --set scene.kind=grid --set readout.ncols=128 --set readout.nrows=128 "
                          "--set detector.effects.cosmic_rays=false --set scene.grid.flux=0 "
                          "--set scene.sky_rate=%g --out %s", bin, mode, sky, d), 0);
     char path[4200];
@@ -206,9 +193,9 @@ START_TEST(object_scene_deterministic)
     const char *d = wf_test_tmpdir();
 #define OBJ "--quiet --set scene.kind=synthetic --set readout.ncols=160 --set readout.nrows=144 " \
             "--set readout.ma_table=4 --set psf.pupil_bin=8"
-    ck_assert_int_eq(run("%s expose " OBJ " --tile-rows 144 --out %s/ref", bin, d), 0);
-    ck_assert_int_eq(run("%s expose " OBJ " --tile-rows 7 --threads 2 --out %s/t7", bin, d), 0);
-    ck_assert_int_eq(run("%s expose " OBJ " --tile-rows 64 --threads 2 --out %s/t64", bin, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose " OBJ " --tile-rows 144 --out %s/ref", bin, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose " OBJ " --tile-rows 7 --threads 2 --out %s/t7", bin, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose " OBJ " --tile-rows 64 --threads 2 --out %s/t64", bin, d), 0);
     const char *names[] = {FITS, "wfisim_e000001_sca01_truth.fits"};
     for (int k = 0; k < 2; k++) {
         char a[4200], b[4200], c[4200];
@@ -254,7 +241,7 @@ START_TEST(catalog_file_on_the_command_line)
         fprintf(f, "%d,%.10f,%.10f,0.7,21.5,0.4,0.2,0.2,0.1,0.1,0.05,10\n", 101 + i, ra, dec);
     }
     fclose(f);
-    ck_assert_int_eq(run("%s expose --quiet --catalog %s --set readout.ncols=128 --set readout.nrows=128 "
+    ck_assert_int_eq(wf_test_run("%s expose --quiet --catalog %s --set readout.ncols=128 --set readout.nrows=128 "
                          "--set readout.ma_table=4 --out %s/out", bin, path, d), 0);
     char truth[4300];
     snprintf(truth, sizeof truth, "%s/out/wfisim_e000001_sca01_truth.fits", d);
@@ -271,7 +258,7 @@ START_TEST(catalog_file_on_the_command_line)
     ck_assert_int_eq(rows, 4);
     for (int i = 0; i < 4; i++) ck_assert(ids[i] >= 101 && ids[i] <= 104);
     /* one object's stamp holds at least scene.flux_fraction of its flux */
-    ck_assert_int_eq(run("%s stamp --quiet --catalog %s --id 103 --out %s/st", bin, path, d), 0);
+    ck_assert_int_eq(wf_test_run("%s stamp --quiet --catalog %s --id 103 --out %s/st", bin, path, d), 0);
     char sp[4300];
     snprintf(sp, sizeof sp, "%s/st/stamp_103.fits", d);
     fitsfile *sf;
@@ -293,7 +280,7 @@ START_TEST(catalog_file_on_the_command_line)
     f = fopen(path, "w");
     fprintf(f, "id,ra,dec,z,mag_Y106\n1,71.0,-53.0,0.5,20\n");
     fclose(f);
-    ck_assert_int_ne(run("%s expose --quiet --catalog %s --set readout.ncols=64 --set readout.nrows=64 "
+    ck_assert_int_ne(wf_test_run("%s expose --quiet --catalog %s --set readout.ncols=64 --set readout.nrows=64 "
                          "--out %s/bad 2>%s/err.txt", bin, path, d, d), 0);
     char err[4300];
     snprintf(err, sizeof err, "%s/err.txt", d);

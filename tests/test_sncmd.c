@@ -17,26 +17,6 @@
 #include "sim/snrate.h"
 #include "tests/testutil.h"
 
-static int run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-static int run(const char *fmt, ...)
-{
-    char cmd[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(cmd, sizeof cmd, fmt, ap);
-    va_end(ap);
-    int rc = system(cmd);
-    return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
-}
-
-static int grep_file(const char *path, const char *needle)
-{
-    char *t = wf_test_slurp(path, NULL);
-    int found = t && strstr(t, needle);
-    free(t);
-    return found;
-}
-
 static double header_double(const char *path, const char *key)
 {
     fitsfile *f;
@@ -57,7 +37,7 @@ START_TEST(generate_circle_hostless)
     const char *d = wf_test_tmpdir();
     const double area = 0.5, days = 100.0;
     for (int k = 0; k < 3; k++)
-        ck_assert_int_eq(run("%s sn generate --data %s --area %g --start 61420 --days %g --hostless --seed %d "
+        ck_assert_int_eq(wf_test_run("%s sn generate --data %s --area %g --start 61420 --days %g --hostless --seed %d "
                              "--out %s/g%d.fits >/dev/null", bin, data, area, days, k == 2 ? 6 : 5, d, k), 0);
     char a[4200], b[4200], c[4200];
     snprintf(a, sizeof a, "%s/g0.fits", d);
@@ -109,8 +89,8 @@ START_TEST(generate_with_hostlib)
     char hostlib[4200], out[4200];
     snprintf(hostlib, sizeof hostlib, "%s/hosts/Akari_Hosts_subset_SNR_v7.HOSTLIB", data);
     snprintf(out, sizeof out, "%s/h.fits", d);
-    ck_assert_int_eq(run("%s survey plan --quiet --data %s --set survey.visits=2 --out %s/plan.fits", bin, data, d), 0);
-    ck_assert_int_eq(run("%s sn generate --data %s --plan %s/plan.fits --catalog %s --seed 9 --out %s >/dev/null", bin,
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --data %s --set survey.visits=2 --out %s/plan.fits", bin, data, d), 0);
+    ck_assert_int_eq(wf_test_run("%s sn generate --data %s --plan %s/plan.fits --catalog %s --seed 9 --out %s >/dev/null", bin,
                          data, d, hostlib, out), 0);
     wf_catalog gal;
     ck_assert_int_eq(wf_hostlib_read(hostlib, &gal, NULL), 0);
@@ -154,10 +134,10 @@ START_TEST(host_catalog_without_mass_is_named)
     ck_assert_ptr_nonnull(f);
     fprintf(f, "id,ra,dec,mag_Y106,hlr_disk,hlr_bulge,bulge_frac,knot_frac,e1,e2,pa,z,logsfr\n1,71.0,-53.0,22,0.3,0.1,0.2,0.1,0,0,0,0.5,0.1\n");
     fclose(f);
-    ck_assert_int_ne(run("%s sn generate --data %s --area 0.1 --start 61420 --days 30 --catalog %s --out %s/x.fits 2>%s",
+    ck_assert_int_ne(wf_test_run("%s sn generate --data %s --area 0.1 --start 61420 --days 30 --catalog %s --out %s/x.fits 2>%s",
                          bin, data, cat, d, log), 0);
-    ck_assert_msg(grep_file(log, "logmass"), "the message does not name the missing column");
-    ck_assert_int_eq(run("%s sn generate --data %s --area 0.1 --start 61420 --days 30 --hostless --out %s/x.fits "
+    ck_assert_msg(wf_test_file_contains(log, "logmass"), "the message does not name the missing column");
+    ck_assert_int_eq(wf_test_run("%s sn generate --data %s --area 0.1 --start 61420 --days 30 --hostless --out %s/x.fits "
                          ">/dev/null", bin, data, d), 0);
 }
 END_TEST
@@ -172,7 +152,7 @@ START_TEST(lightcurves_agree_with_lightcurve)
     snprintf(sne, sizeof sne, "%s/s.fits", d);
     snprintf(lc, sizeof lc, "%s/lc.fits", d);
     snprintf(txt, sizeof txt, "%s/one.txt", d);
-    ck_assert_int_eq(run("%s sn generate --data %s --area 0.05 --start 61420 --days 60 --hostless --seed 2 --out %s "
+    ck_assert_int_eq(wf_test_run("%s sn generate --data %s --area 0.05 --start 61420 --days 60 --hostless --seed 2 --out %s "
                          ">/dev/null", bin, data, sne), 0);
     wf_sn_sample s;
     ck_assert_int_eq(wf_sn_sample_read(sne, &s), 0);
@@ -183,7 +163,7 @@ START_TEST(lightcurves_agree_with_lightcurve)
         if (s.z[i] > 0.45 && (s.z[k] <= 0.45 || s.z[i] < s.z[k])) k = i;
     ck_assert(s.z[k] > 0.45);
     double t0 = s.t0[k];
-    ck_assert_int_eq(run("%s sn lightcurves --data %s --sne %s --grid %.6f:%.6f:5 --filters Y106,J129 --out %s "
+    ck_assert_int_eq(wf_test_run("%s sn lightcurves --data %s --sne %s --grid %.6f:%.6f:5 --filters Y106,J129 --out %s "
                          "--plot %lld --plot-dir %s >/dev/null", bin, data, sne, t0 - 20, t0 + 30, lc,
                          (long long)s.id[k], d), 0);
     snprintf(png, sizeof png, "%s/lc_%lld.png", d, (long long)s.id[k]);
@@ -203,7 +183,7 @@ START_TEST(lightcurves_agree_with_lightcurve)
     fits_get_colnum(f, CASEINSEN, "MJD", &cm, &status);
     fits_get_colnum(f, CASEINSEN, "MAG", &cmag, &status);
     /* the same SN's J129 points through `wfisim sn lightcurve` (the direct 2-D path) */
-    ck_assert_int_eq(run("%s sn lightcurve --data %s --z %.17g --t0 %.17g --x0 %.17g --x1 %.17g --c %.17g --band J129 "
+    ck_assert_int_eq(wf_test_run("%s sn lightcurve --data %s --z %.17g --t0 %.17g --x0 %.17g --x1 %.17g --c %.17g --band J129 "
                          "--mjd %.6f,%.6f,%.6f > %s", bin, data, s.z[k], t0, s.x0[k], s.x1[k], s.c[k], t0 - 10, t0, t0 + 20,
                          txt), 0);
     char *t = wf_test_slurp(txt, NULL);
@@ -245,7 +225,7 @@ START_TEST(lightcurve_command)
     char out[4200];
     snprintf(out, sizeof out, "%s/o.txt", d);
     /* x0 from mu (SPEC 5) at x1 = c = 0; a date 200 days after peak is outside the model */
-    ck_assert_int_eq(run("%s sn lightcurve --data %s --z 0.7 --t0 61500 --mu 43.0 --band H158 --mjd 61500,61700 > %s",
+    ck_assert_int_eq(wf_test_run("%s sn lightcurve --data %s --z 0.7 --t0 61500 --mu 43.0 --band H158 --mjd 61500,61700 > %s",
                          bin, data, out), 0);
     char *t = wf_test_slurp(out, NULL);
     ck_assert_ptr_nonnull(t);
@@ -254,11 +234,11 @@ START_TEST(lightcurve_command)
     ck_assert_double_eq_tol(atof(x0s + 3) / (pow(10.0, -0.4 * 43.0) / 1e-12), 1.0, 1e-7);
     ck_assert_msg(strstr(t, "61700.000000 99.000000 0 1") != NULL, "out-of-model date: %s", t);
     free(t);
-    ck_assert_int_eq(run("%s sn lightcurve --data %s --z 0.7 --t0 61500 --band Q999 --mjd 61500 2>%s", bin, data, out), 2);
-    ck_assert(grep_file(out, "Q999"));
-    ck_assert_int_eq(run("%s sn lightcurve --data %s --z 0.7 --t0 61500 --band H158 --mjd 61500,abc 2>%s >/dev/null", bin,
+    ck_assert_int_eq(wf_test_run("%s sn lightcurve --data %s --z 0.7 --t0 61500 --band Q999 --mjd 61500 2>%s", bin, data, out), 2);
+    ck_assert(wf_test_file_contains(out, "Q999"));
+    ck_assert_int_eq(wf_test_run("%s sn lightcurve --data %s --z 0.7 --t0 61500 --band H158 --mjd 61500,abc 2>%s >/dev/null", bin,
                          data, out), 2);
-    ck_assert(grep_file(out, "abc"));
+    ck_assert(wf_test_file_contains(out, "abc"));
 }
 END_TEST
 
@@ -280,7 +260,7 @@ START_TEST(extreme_parameters)
         double zp1 = 1.0 + cases[k].z, t0 = 61500.0;
         /* just inside the first and last model phases (-20, +50 rest days; the edges themselves
          * are tests/test_salt.c's), then far outside */
-        ck_assert_int_eq(run("%s sn lightcurve --data %s --z %g --t0 %g --x1 %g --c %g --band %s "
+        ck_assert_int_eq(wf_test_run("%s sn lightcurve --data %s --z %g --t0 %g --x1 %g --c %g --band %s "
                              "--mjd %.9f,%.9f,%.9f,%.9f > %s", bin, data, cases[k].z, t0, cases[k].x1, cases[k].c,
                              cases[k].band, t0 - 19.999 * zp1, t0 + 49.999 * zp1, t0 - 1e5, t0 + 1e6, out), 0);
         char *t = wf_test_slurp(out, NULL);
@@ -323,16 +303,16 @@ START_TEST(configuration_keys)
     fprintf(f, "sn:\n  rate: \"POWERLAW2 5.0e-5 1.5 0 1; POWERLAW2 19.4e-5 -0.5 1 3\"\n  x1:\n    max: 1.0\n");
     fclose(f);
     const char *common = "--area 0.2 --start 61420 --days 100 --hostless";
-    ck_assert_int_eq(run("%s sn generate --data %s %s --out %s >/dev/null", bin, data, common, a), 0);
-    ck_assert_int_eq(run("%s sn generate --data %s %s --config %s --set sn.x1.min=-1.5 --out %s >/dev/null", bin, data,
+    ck_assert_int_eq(wf_test_run("%s sn generate --data %s %s --out %s >/dev/null", bin, data, common, a), 0);
+    ck_assert_int_eq(wf_test_run("%s sn generate --data %s %s --config %s --set sn.x1.min=-1.5 --out %s >/dev/null", bin, data,
                          common, yaml, b), 0);
     ck_assert_double_eq_tol(header_double(b, "NEXPECT") / header_double(a, "NEXPECT"), 2.0, 1e-9);
     wf_sn_sample s;
     ck_assert_int_eq(wf_sn_sample_read(b, &s), 0);
     for (size_t i = 0; i < s.n; i++) ck_assert_msg(s.x1[i] >= -1.5 && s.x1[i] <= 1.0, "x1 %g outside [-1.5, 1]", s.x1[i]);
     wf_sn_sample_free(&s);
-    ck_assert_int_eq(run("%s sn generate --data %s %s --set sn.x1.maxx=1 --out %s 2>%s", bin, data, common, b, log), 2);
-    ck_assert(grep_file(log, "sn.x1.maxx"));
+    ck_assert_int_eq(wf_test_run("%s sn generate --data %s %s --set sn.x1.maxx=1 --out %s 2>%s", bin, data, common, b, log), 2);
+    ck_assert(wf_test_file_contains(log, "sn.x1.maxx"));
 }
 END_TEST
 

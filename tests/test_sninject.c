@@ -25,18 +25,6 @@
     "--set scene.sky=false --set scene.flux_fraction=0.9999 "                                         \
     "--mode single"
 
-static int run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-static int run(const char *fmt, ...)
-{
-    char cmd[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(cmd, sizeof cmd, fmt, ap);
-    va_end(ap);
-    int rc = system(cmd);
-    return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
-}
-
 static void plan_row0(const char *plan, double *ra, double *dec, double *pa, double *mjd)
 {
     fitsfile *f;
@@ -107,7 +95,7 @@ START_TEST(injected_flux_and_truth)
     snprintf(model, sizeof model, "%s/salt3/salt3-k21", data);
     snprintf(sne, sizeof sne, "%s/sne.fits", d);
     snprintf(stars, sizeof stars, "%s/stars.csv", d);
-    ck_assert_int_eq(run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
     double ra, dec, pa, mjd;
     plan_row0(plan, &ra, &dec, &pa, &mjd); /* exposure 0: Y106 */
 
@@ -142,7 +130,7 @@ START_TEST(injected_flux_and_truth)
     ck_assert_ptr_nonnull(f);
     fprintf(f, "id,ra,dec,mag_Y106,mag_J129,mag_H158,mag_F184\n1,%.6f,%.6f,20,20,20,20\n", fmod(ra + 20.0, 360.0), dec);
     fclose(f);
-    ck_assert_int_eq(run("%s survey run --quiet --data %s --plan %s --exposures 0 --scas 1,2,3 --sne %s --model %s "
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --data %s --plan %s --exposures 0 --scas 1,2,3 --sne %s --model %s "
                          "--set scene.kind=catalog --stars %s " NOEFFECTS " --set readout.ncols=128 --set readout.nrows=128 --out %s/out",
                          bin, data, plan, sne, model, stars, d), 0);
 
@@ -182,7 +170,7 @@ START_TEST(injected_flux_and_truth)
     /* the observed light curves list the same (SN, image) pairs for exposure 0 */
     char lc[4200];
     snprintf(lc, sizeof lc, "%s/lc.fits", d);
-    ck_assert_int_eq(run("%s sn lightcurves --data %s --sne %s --model %s --plan %s --out %s >/dev/null", bin, data, sne,
+    ck_assert_int_eq(wf_test_run("%s sn lightcurves --data %s --sne %s --model %s --plan %s --out %s >/dev/null", bin, data, sne,
                          model, plan, lc), 0);
     fitsfile *ff;
     int status = 0, ce, cs, ci;
@@ -299,7 +287,7 @@ START_TEST(thousands_on_one_sca)
     ck_assert_ptr_nonnull(f);
     fprintf(f, "id,ra,dec,mag_Y106\n1,%.6f,%.6f,20\n", fmod(ra0 + 20.0, 360.0), dec0);
     fclose(f);
-    ck_assert_int_eq(run("%s expose --quiet --data %s --sne %s --model %s --ra %g --dec %g --pa %g --mjd %g --sca 1 "
+    ck_assert_int_eq(wf_test_run("%s expose --quiet --data %s --sne %s --model %s --ra %g --dec %g --pa %g --mjd %g --sca 1 "
                          "--filter Y106 --set scene.kind=catalog --stars %s " NOEFFECTS " --set readout.ncols=256 "
                          "--set readout.nrows=256 --set scene.flux_fraction=0.995 --out %s/out", bin, data, sne, model,
                          ra0, dec0, pa, mjd, stars, d), 0);

@@ -14,18 +14,6 @@
 
 #define SMALL "--set readout.ncols=128 --set readout.nrows=96 --set detector.cr_rate=0"
 
-static int run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-static int run(const char *fmt, ...)
-{
-    char cmd[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(cmd, sizeof cmd, fmt, ap);
-    va_end(ap);
-    int rc = system(cmd);
-    return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
-}
-
 static void assert_same_file(const char *a, const char *b)
 {
     size_t la, lb;
@@ -73,22 +61,14 @@ static void header(const char *path, const char *key, char *value)
     ck_assert_msg(status == 0, "%s: no %s", path, key);
 }
 
-static int grep_file(const char *path, const char *needle)
-{
-    char *t = wf_test_slurp(path, NULL);
-    int found = t && strstr(t, needle);
-    free(t);
-    return found;
-}
-
 START_TEST(run_resume_and_independence)
 {
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
-    ck_assert_int_eq(run("%s survey plan --quiet --set survey.visits=1 --out %s/plan.fits", bin, d), 0);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s/plan.fits", bin, d), 0);
     /* exposures 15 and 16: the last Y106 pointing of the snake and the first J129 */
-    ck_assert_int_eq(run("%s survey run --quiet --plan %s/plan.fits --exposures 15:16 --scas 3,7 " SMALL
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s/plan.fits --exposures 15:16 --scas 3,7 " SMALL
                          " --out %s/a", bin, d, d), 0);
     const int ids[2] = {15, 16}, scas[2] = {3, 7};
     char plan[4200];
@@ -119,14 +99,14 @@ START_TEST(run_resume_and_independence)
     /* again: everything verifies, nothing is rendered */
     char log[4200];
     snprintf(log, sizeof log, "%s/log2", d);
-    ck_assert_int_eq(run("%s survey run --plan %s --exposures 15:16 --scas 3,7 " SMALL " --out %s/a 2>%s",
+    ck_assert_int_eq(wf_test_run("%s survey run --plan %s --exposures 15:16 --scas 3,7 " SMALL " --out %s/a 2>%s",
                          bin, plan, d, log), 0);
-    ck_assert_msg(grep_file(log, "0 products rendered") && grep_file(log, "4 already done"), "second run redid work");
+    ck_assert_msg(wf_test_file_contains(log, "0 products rendered") && wf_test_file_contains(log, "4 already done"), "second run redid work");
     /* damage one image's data: it is redone, to the same bytes */
     char img[4200], keep[4200];
     snprintf(img, sizeof img, "%s/a/wfisim_e000016_sca07.fits", d);
     snprintf(keep, sizeof keep, "%s/keep.fits", d);
-    ck_assert_int_eq(run("cp %s %s", img, keep), 0);
+    ck_assert_int_eq(wf_test_run("cp %s %s", img, keep), 0);
     FILE *f = fopen(img, "r+b");
     ck_assert_ptr_nonnull(f);
     fseek(f, -3000, SEEK_END);
@@ -136,12 +116,12 @@ START_TEST(run_resume_and_independence)
     fclose(f);
     ck_assert(!wf_survey_product_ok(img));
     snprintf(log, sizeof log, "%s/log3", d);
-    ck_assert_int_eq(run("%s survey run --plan %s --exposures 15:16 --scas 3,7 " SMALL " --out %s/a 2>%s",
+    ck_assert_int_eq(wf_test_run("%s survey run --plan %s --exposures 15:16 --scas 3,7 " SMALL " --out %s/a 2>%s",
                          bin, plan, d, log), 0);
-    ck_assert_msg(grep_file(log, "1 products rendered (1 replacing damaged ones), 3 already done"), "damage not redone");
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones), 3 already done"), "damage not redone");
     assert_same_file(img, keep);
     /* one product alone, in a fresh folder: the same bytes as in the range run */
-    ck_assert_int_eq(run("%s survey run --quiet --plan %s --exposures 16 --scas 7 " SMALL " --out %s/b", bin, plan,
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s --exposures 16 --scas 7 " SMALL " --out %s/b", bin, plan,
                          d), 0);
     char alone[4200];
     snprintf(alone, sizeof alone, "%s/b/wfisim_e000016_sca07.fits", d);
@@ -156,15 +136,15 @@ START_TEST(bad_arguments)
     const char *d = wf_test_tmpdir();
     char log[4200];
     snprintf(log, sizeof log, "%s/log", d);
-    ck_assert_int_ne(run("%s survey run --quiet --plan %s/missing.fits --out %s/x 2>%s", bin, d, d, log), 0);
-    ck_assert(grep_file(log, "missing.fits"));
-    ck_assert_int_eq(run("%s survey plan --quiet --set survey.visits=1 --out %s/plan.fits", bin, d), 0);
-    ck_assert_int_eq(run("%s survey run --quiet --plan %s/plan.fits --scas 1,19 --out %s/x 2>%s", bin, d, d, log), 2);
-    ck_assert(grep_file(log, "--scas"));
-    ck_assert_int_eq(run("%s survey run --quiet --plan %s/plan.fits --exposures 9:3 --out %s/x 2>%s", bin, d, d, log), 2);
-    ck_assert(grep_file(log, "--exposures"));
-    ck_assert_int_ne(run("%s survey run --quiet --plan %s/plan.fits --exposures 100000: --out %s/x 2>%s", bin, d, d, log), 0);
-    ck_assert(grep_file(log, "no exposure in the range"));
+    ck_assert_int_ne(wf_test_run("%s survey run --quiet --plan %s/missing.fits --out %s/x 2>%s", bin, d, d, log), 0);
+    ck_assert(wf_test_file_contains(log, "missing.fits"));
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s/plan.fits", bin, d), 0);
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s/plan.fits --scas 1,19 --out %s/x 2>%s", bin, d, d, log), 2);
+    ck_assert(wf_test_file_contains(log, "--scas"));
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s/plan.fits --exposures 9:3 --out %s/x 2>%s", bin, d, d, log), 2);
+    ck_assert(wf_test_file_contains(log, "--exposures"));
+    ck_assert_int_ne(wf_test_run("%s survey run --quiet --plan %s/plan.fits --exposures 100000: --out %s/x 2>%s", bin, d, d, log), 0);
+    ck_assert(wf_test_file_contains(log, "no exposure in the range"));
 }
 END_TEST
 

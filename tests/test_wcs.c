@@ -20,18 +20,6 @@
 #define PA_A 30.0
 #define GRID 17
 
-static int run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-static int run(const char *fmt, ...)
-{
-    char cmd[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(cmd, sizeof cmd, fmt, ap);
-    va_end(ap);
-    int rc = system(cmd);
-    return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
-}
-
 /* Largest pixel -> world -> pixel error over a GRID x GRID grid spanning the whole SCA. */
 static double round_trip_error(const wf_focal_plane *fp, double ra, double dec, double pa,
                                int sca)
@@ -275,7 +263,7 @@ static const char *astropy_script =
 
 static void header_roundtrip_astropy(const wf_focal_plane *fp)
 {
-    if (run("/usr/bin/python3 -c 'import astropy.wcs, numpy' 2>/dev/null") != 0)
+    if (wf_test_run("/usr/bin/python3 -c 'import astropy.wcs, numpy' 2>/dev/null") != 0)
         WF_SKIP("/usr/bin/python3 with astropy not installed (wcslib-dev is not either)");
     const char *dir = wf_test_tmpdir();
     ck_assert_ptr_nonnull(dir);
@@ -301,7 +289,7 @@ static void header_roundtrip_astropy(const wf_focal_plane *fp)
     ck_assert_ptr_nonnull(p);
     fprintf(p, astropy_script, GRID);
     fclose(p);
-    ck_assert_int_eq(run("/usr/bin/python3 %s %s %s", py, fits_path, out), 0);
+    ck_assert_int_eq(wf_test_run("/usr/bin/python3 %s %s %s", py, fits_path, out), 0);
     FILE *r = fopen(out, "r");
     ck_assert_ptr_nonnull(r);
     int hdu, n = 0;

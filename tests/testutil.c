@@ -1,5 +1,8 @@
 #include "tests/testutil.h"
 
+#include <stdarg.h>
+#include <sys/wait.h>
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -111,4 +114,24 @@ double wf_test_json_number(const char *text, const char *const *keys, int nkeys)
     char *end;
     double v = strtod(lo, &end);
     return end == lo ? NAN : v;
+}
+
+int wf_test_run(const char *fmt, ...)
+{
+    char cmd[8192];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(cmd, sizeof cmd, fmt, ap);
+    va_end(ap);
+    ck_assert_msg(n > 0 && (size_t)n < sizeof cmd, "command longer than %zu characters", sizeof cmd);
+    int rc = system(cmd);
+    return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
+}
+
+int wf_test_file_contains(const char *path, const char *needle)
+{
+    char *t = wf_test_slurp(path, NULL);
+    int found = t && strstr(t, needle);
+    free(t);
+    return found;
 }

@@ -19,6 +19,12 @@ const char *wf_test_tmpdir(void);
 /* The whole file, NUL-terminated (len may be NULL); NULL when unreadable. Caller frees. */
 char *wf_test_slurp(const char *path, size_t *len);
 
+/* Runs a shell command built like printf; its exit status (255 when it did not exit). */
+int wf_test_run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+
+/* 1 when the file exists and contains needle. */
+int wf_test_file_contains(const char *path, const char *needle);
+
 /* The number at a path of JSON keys (each searched inside the previous one's value), as in
  * the reference facts.json; NAN when absent. Enough for the reference files, not general. */
 double wf_test_json_number(const char *text, const char *const *keys, int nkeys);

@@ -276,26 +276,6 @@ static void drawer_free(drawer *d)
     memset(d, 0, sizeof *d);
 }
 
-/* nl equal slices of the band, each at its middle, weighted by the integral of T / lambda
- * over the slice: photons from a source flat in f_nu (as `wfisim psf --sed flat`). */
-static wf_status flat_sed_weights(const wf_bandpass *bp, int nl, double *lam, double *w)
-{
-    double lo = bp->blue_nm, hi = bp->red_nm, width = (hi - lo) / nl, total = 0;
-    for (int k = 0; k < nl; k++) {
-        double a = lo + k * width, s = 0;
-        const int steps = 200;
-        for (int t = 0; t < steps; t++) {
-            double x = a + (t + 0.5) * width / steps;
-            s += wf_bandpass_throughput(bp, x) / x;
-        }
-        lam[k] = a + 0.5 * width;
-        w[k] = s * width / steps;
-        total += w[k];
-    }
-    if (!(total > 0))
-        return wf_error(WF_ERR_INPUT, "%s: the bandpass has no throughput", wf_filter_name(bp->filter));
-    return WF_OK;
-}
 
 static wf_status psf_optics(const acc_run *run, int bin, wf_psf_optics *o)
 {
@@ -314,7 +294,7 @@ static wf_status wavelengths(const acc_run *run, int nlambda, double *lam, doubl
         return WF_OK;
     }
     *nl = nlambda;
-    return flat_sed_weights(run->bp, nlambda, lam, w);
+    return wf_bandpass_flat_slices(run->bp, nlambda, lam, w);
 }
 
 /* What the scene does before its first object: the PSF of this SCA and filter, drawn at

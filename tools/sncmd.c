@@ -10,6 +10,7 @@
 #include "sim/bandpass.h"
 #include "sim/catalog.h"
 #include "sim/cosmology.h"
+#include "sim/fitsout.h"
 #include "sim/hostlib.h"
 #include "sim/salt.h"
 #include "sim/sncat.h"
@@ -609,11 +610,10 @@ static int by_id_mjd(const void *a, const void *b)
 static wf_status write_rows(const lc_rows *r, const char *path, const char *sne, int observed)
 {
     char tmp[WF_PATH_MAX + 16];
-    snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    remove(tmp);
     fitsfile *f;
     int status = 0;
-    if (fits_create_diskfile(&f, tmp, &status)) return wf_error(WF_ERR_IO, "%s: cannot create", tmp);
+    wf_status st = wf_fits_begin(path, tmp, sizeof tmp, &f);
+    if (st) return st;
     fits_create_img(f, BYTE_IMG, 0, NULL, &status);
     char src[68];
     snprintf(src, sizeof src, "%.66s", sne);
@@ -658,19 +658,7 @@ static wf_status write_rows(const lc_rows *r, const char *path, const char *sne,
     free(id);
     free(iv);
     free(names);
-    int cs = 0;
-    fits_close_file(f, &cs);
-    if (status || cs) {
-        remove(tmp);
-        char msg[FLEN_STATUS];
-        fits_get_errstatus(status ? status : cs, msg);
-        return wf_error(WF_ERR_IO, "%s: writing light curves: %s", path, msg);
-    }
-    if (rename(tmp, path) != 0) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
-    }
-    return WF_OK;
+    return wf_fits_finish(f, tmp, path, wf_fits_error(status, tmp, "writing light curves"));
 }
 
 typedef struct epoch {
