@@ -11,9 +11,15 @@
  * reads), and one inverse FFT gives the M x M pixel values. The box is centred on pixel
  * (ic, jc) nearest the object: the shift by M/2 pixels is the factor (-1)^(u+v).
  *
- * Knots are point sources: their transform is a sum of phases, separable in u and v, added
- * in blocks of WF_PROFILE_KNOT_BLOCK from per-knot phase lines. Without a PSF a knot is a
- * delta function whose pixel integral puts all its light in the pixel holding it. */
+ * Knots are point sources: their transform is a sum of phases, separable in u and v. Summed
+ * directly (blocks of WF_PROFILE_KNOT_BLOCK per-knot phase lines) it costs a complex
+ * multiply-add per knot and sample; the knot lattice ("knot lattice" below) sums them on a
+ * coarser grid and interpolates, to ~1e-9 of the peak, which most galaxies take. Without a
+ * PSF a knot is a delta function whose pixel integral puts all its light in the pixel
+ * holding it.
+ *
+ * The per-sample work runs in kernels with scalar and vector versions that give the same
+ * bits ("fold kernels" below). */
 #include <fftw3.h>
 #include <math.h>
 #include <pthread.h>
@@ -22,6 +28,10 @@
 
 #include "sim/profile.h"
 #include "sim/profile_int.h"
+
+/* The knot lattice (see "knot lattice" below): most kernel taps per axis, coarsest step. */
+#define LAT_WMAX 16
+#define LAT_RMAX 64
 
 static pthread_mutex_t fftw_mutex = PTHREAD_MUTEX_INITIALIZER;
 void wf_profile_fftw_lock(void) { pthread_mutex_lock(&fftw_mutex); }
@@ -89,6 +99,23 @@ static void layout(const wf_profile_accuracy *acc, work_layout *l)
     l->cap_line = 2 * ((int)ceil(0.5 * WF_PSF_BAND_NYQ * l->max_m) + 2) + 1;
 }
 
+/* Doubles for the knot lattice: (U / r + w) rows of 2 U / r + w entries, re and im, for
+ * U ~ 1.2 M at Y106 and r >= 2, so an eighth of max_m^2 holds every lattice of boxes up to
+ * M = 512 and the coarser ones beyond; the others fall back to the direct sum. */
+static size_t lattice_cap(const work_layout *l)
+{
+    size_t m = (size_t)l->max_m;
+    return m * m / 8 > 65536 ? m * m / 8 : 65536;
+}
+
+/* Doubles for the lattice's interpolated rows (up to LAT_WMAX of them, re and im, 2 U + 9
+ * entries each) and one mirrored coarse row: room for U up to half cap_line (~2 M, the
+ * band of every filter redder than 0.6 um). */
+static size_t lattice_ring(const work_layout *l)
+{
+    return 2 * (size_t)LAT_WMAX * ((size_t)l->cap_line / 2 + 9) + (size_t)l->cap_line;
+}
+
 wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes)
 {
     wf_status st = wf_profile_check_accuracy(acc);
@@ -102,8 +129,10 @@ wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes)
     *bytes = wf_arena_cost(m * (m + 2) * d) + 2 * wf_arena_cost((size_t)l.cap_line * 2 * d) +
              2 * wf_arena_cost((size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2 * d) +
              2 * wf_arena_cost((size_t)l.cap_line * sizeof(int)) +
-             2 * wf_arena_cost((size_t)l.cap_line * 4 * d) + wf_arena_cost((m / 2 + 8) * 2 * d) +
-             2 * wf_arena_cost((size_t)WF_PROFILE_MAX_KNOTS * 2 * d);
+             2 * wf_arena_cost((size_t)l.cap_line * 4 * d) + wf_arena_cost((m / 2 + 8) * 4 * d) +
+             2 * wf_arena_cost((size_t)WF_PROFILE_MAX_KNOTS * 2 * d) +
+             wf_arena_cost(lattice_cap(&l) * d) + wf_arena_cost(lattice_ring(&l) * d) +
+             wf_arena_cost((size_t)l.cap_line * sizeof(int));
     return WF_OK;
 }
 
@@ -135,12 +164,18 @@ wf_status wf_profile_work_init(wf_profile_work *w, const wf_profile_accuracy *ac
                               (void **)&w->wx)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line * 4, d, "PSF weights",
                               (void **)&w->wy)) ||
-        (st = wf_arena_calloc(arena, (m / 2 + 8) * 2, d, "profile run", (void **)&w->run)) ||
+        (st = wf_arena_calloc(arena, (m / 2 + 8) * 4, d, "profile run", (void **)&w->run)) ||
         (st = wf_arena_calloc(arena, (size_t)WF_PROFILE_MAX_KNOTS * 2, d, "knot positions",
                               (void **)&w->knot_pos)) ||
         (st = wf_arena_calloc(arena, (size_t)WF_PROFILE_MAX_KNOTS * 2, d, "knot positions",
-                              (void **)&w->knot_box)))
+                              (void **)&w->knot_box)) ||
+        (st = wf_arena_calloc(arena, lattice_cap(&l), d, "knot lattice", (void **)&w->lat)) ||
+        (st = wf_arena_calloc(arena, lattice_ring(&l), d, "knot lattice rows",
+                              (void **)&w->ring)) ||
+        (st = wf_arena_calloc(arena, (size_t)l.cap_line, sizeof(int), "profile rows",
+                              (void **)&w->rim)))
         return st;
+    w->cap_lat = lattice_cap(&l);
     w->cap_line = l.cap_line;
     w->sersic = wf_sersic4_table();
     w->nsizes = l.nsizes;
@@ -410,25 +445,36 @@ typedef struct grid {
     int nk;              /* knots drawn in Fourier space: those inside the FFT box */
     const double *kpos;  /* their (x, y), arcsec from the object */
     size_t ks;           /* entries per knot phase line (2 u + 1, and 8 or more of padding) */
+    struct lattice *lat; /* the knots on a coarse lattice, or NULL (direct sums) */
+    const int *rim;      /* rim[|v|] = floor(sqrt(u^2 - v^2)): the row's extent */
 } grid;
 
-/* e^{-i u theta} (-1)^u for u = -n .. n into re[(u + n) st], im[(u + n) st], re-anchored
- * every 32 steps so that the recurrence's rounding stays ~1e-15. */
-static void phase_line_to(double theta, int n, double *re, double *im, size_t st)
+/* e^{-i u theta} (-1)^u (alt) or e^{-i u theta} for u = lo .. hi into re[(u - lo) st],
+ * im[(u - lo) st], re-anchored every 32 steps so that the recurrence's rounding stays
+ * ~1e-15. */
+static void phase_range(double theta, int lo, int hi, double *re, double *im, size_t st,
+                        int alt)
 {
-    for (int u0 = -n; u0 <= n; u0 += 32) {
-        double a = -u0 * theta, sg = (u0 & 1) ? -1.0 : 1.0;
+    for (int u0 = lo; u0 <= hi; u0 += 32) {
+        double a = -u0 * theta, sg = alt && (u0 & 1) ? -1.0 : 1.0;
         double cr = sg * cos(a), ci = sg * sin(a);
-        double sr = -cos(theta), si = sin(theta); /* step e^{-i theta} times -1 */
-        int u1 = u0 + 32 <= n ? u0 + 32 : n + 1;
+        double sr = cos(theta), si = sin(theta); /* step e^{-i theta}, times -1 with alt */
+        if (alt) sr = -sr;
+        else si = -si;
+        int u1 = u0 + 32 <= hi ? u0 + 32 : hi + 1;
         for (int u = u0; u < u1; u++) {
-            re[(size_t)(u + n) * st] = cr;
-            im[(size_t)(u + n) * st] = ci;
+            re[(size_t)(u - lo) * st] = cr;
+            im[(size_t)(u - lo) * st] = ci;
             double nr = cr * sr - ci * si;
             ci = cr * si + ci * sr;
             cr = nr;
         }
     }
+}
+
+static void phase_line_to(double theta, int n, double *re, double *im, size_t st)
+{
+    phase_range(theta, -n, n, re, im, st, 1);
 }
 
 /* The same, complex interleaved into out[2 (u + n)]. */
@@ -504,9 +550,14 @@ knot_sum_v4(int n, int nkb, const double *ckr, const double *cki, const double *
 {
     KNOT_BODY(knot_v4, 4)
 }
-static pthread_once_t knot_once = PTHREAD_ONCE_INIT;
-static int knot_avx;
-static void knot_probe(void) { knot_avx = __builtin_cpu_supports("avx2") ? 1 : 0; }
+typedef double knot_v8 __attribute__((vector_size(64)));
+__attribute__((target("avx512f"))) static int
+knot_sum_v8(int n, int nkb, const double *ckr, const double *cki, const double *kx, size_t ks,
+            double *restrict rr, double *restrict ri)
+{
+    KNOT_BODY(knot_v8, 8)
+}
+static int knot_avx; /* 1: AVX2, 2: AVX-512 (the same sums, lane by lane); wf_profile_simd */
 #endif
 #endif
 
@@ -516,8 +567,8 @@ static void knot_sum(int n, int nkb, const double *ckr, const double *cki, const
     int i0 = 0;
 #if defined(__GNUC__)
 #if defined(KNOT_AVX)
-    pthread_once(&knot_once, knot_probe);
-    if (knot_avx) i0 = knot_sum_v4(n, nkb, ckr, cki, kx, ks, rr, ri);
+    if (knot_avx == 2) i0 = knot_sum_v8(n, nkb, ckr, cki, kx, ks, rr, ri);
+    if (knot_avx) i0 += knot_sum_v4(n - i0, nkb, ckr, cki, kx + i0, ks, rr + i0, ri + i0);
 #endif
     int i1 = knot_sum_v2(n - i0, nkb, ckr, cki, kx + i0, ks, rr + i0, ri + i0);
     i0 += i1;
@@ -534,38 +585,822 @@ static void knot_sum(int n, int nkb, const double *ckr, const double *cki, const
     }
 }
 
+/* ------------------------------------------------------------------------ knot lattice */
+
+/* The knots' transform K(k) = sum_j f_j e^{-i k.x_j} is needed on the fine grid k = (u, v) dk
+ * out to the PSF's band, ~2.2 M^2 samples for an FFT box of M pixels, but the knots lie
+ * within a few hlr of the object, a small part of the box: sampled on a lattice r times
+ * coarser (period L = M p / r, at least X / rho for knots within X of the object) it is
+ * still resolved. With a kernel psi of w taps (spacing Delta = r dk) and Phi its transform,
+ * sum_n g(n Delta) psi(k / Delta - n), g the sum over knots of f_j Delta / Phi(x_j)
+ * e^{-i n Delta x_j}, equals by Poisson's formula K(k) plus the knots' images at x_j + m L
+ * (m != 0) weighted by Phi(x_j + m L) / Phi(x_j): with the Kaiser-Bessel shape
+ * (sim/profile_int.h) and beta = pi w (1 - rho) that ratio is ~exp(-pi w sqrt(1 - 2 rho)),
+ * exp(-LAT_EXP) below, times a prefactor of order 10: the stamps differ from the direct
+ * sum's by <= 2e-9 of their peak in tests/test_profile.c, 1e-8 over the GalSim scene
+ * (bench/bench_profile.c). Separable in x and y: g on ~(2 U / r + w)^2 lattice
+ * points costs one complex multiply-add per knot (half of them, g being Hermitian); each
+ * coarse row is interpolated along u once, each fine sample then takes w real-by-complex
+ * multiply-adds from w such rows. Wider kernels allow a larger rho, hence a coarser
+ * lattice, for more taps per sample: each draw takes the cheapest. */
+#define LAT_EXP 20.0
+
+typedef struct lattice {
+    int r, w, mh, nh, U;
+    int nk;                        /* the knots it holds, (x, y) from the object */
+    const double *pos;
+    const int *rim;                /* the fine grid's |u| <= rim[|v|] */
+    double rho, beta;
+    size_t gw;                     /* stored row width: 2 nh + 1 and padding */
+    const double *gr, *gi;         /* rows m = 0..mh of g(n, m) at [m gw + n + nh]; rows
+                                      m < 0 are conj g(-n, -m) */
+    double wt[LAT_RMAX][LAT_WMAX]; /* psi at s = rho / r + w / 2 - 1 - i, rho = u mod r */
+    double *ar, *ai;               /* ring of w interpolated rows: row m in slot m mod w,
+                                      entries [u + U], padded */
+    size_t al;                     /* ring row stride */
+    double *tmp;                   /* a mirrored row */
+    int next;                      /* next coarse row the ring takes */
+} lattice;
+
+/* rho for a kernel of w taps: pi w sqrt(1 - 2 rho) = LAT_EXP. */
+static double lat_rho(int w)
+{
+    double a = LAT_EXP / (M_PI * w);
+    return 0.5 * (1.0 - a * a);
+}
+
+/* Largest |u| any fine row served by coarse row m needs (-1: none). Fine row v takes coarse
+ * rows floor(v / r) - w/2 + 1 .. floor(v / r) + w/2. */
+static int lat_umax(const lattice *l, int m)
+{
+    long lo = (long)l->r * (m - l->w / 2), hi = (long)l->r * (m + l->w / 2) - 1;
+    long vmin = lo > 0 ? lo : hi < 0 ? -hi : 0;
+    return vmin > l->U ? -1 : l->rim[vmin];
+}
+
+static int lat_nmax(const lattice *l, int m)
+{
+    int um = lat_umax(l, m);
+    return um < 0 ? -1 : um / l->r + l->w / 2;
+}
+
+/* Coarse step for knots within x of the object with a kernel of w taps (0: the lattice
+ * would not be coarser than the fine grid). */
+static int lat_step(const grid *gd, double p, double x, int w)
+{
+    double r = x > 0.0 ? floor(lat_rho(w) * gd->m * p / x) : LAT_RMAX;
+    if (r > LAT_RMAX) r = LAT_RMAX;
+    if (r > gd->u / 2) r = gd->u / 2;
+    return r >= 2 ? (int)r : 0;
+}
+
+/* Relative costs per operation, measured: a complex multiply-add of the coarse sum, a tap
+ * of the fine rows, a tap of the u interpolation. */
+#define COST_COARSE 1.0
+#define COST_FINE 0.8
+#define COST_ROW 1.3
+
+/* Sets the lattice's sizes for step r and w taps; 0 when it does not fit the work's
+ * buffers. *c0 + *c1 nk is its cost for nk knots (the direct sum's: nk per fine sample). */
+static int lat_size(const wf_profile_work *w, const grid *gd, int r, int wd, lattice *l,
+                    double *c0, double *c1)
+{
+    l->r = r;
+    l->w = wd;
+    l->rho = lat_rho(wd);
+    l->U = gd->u;
+    l->rim = gd->rim;
+    l->mh = gd->u / r + wd / 2;
+    l->nh = lat_nmax(l, 0);
+    l->gw = 2 * (size_t)l->nh + 1 + 8;
+    if (2 * ((size_t)l->mh + 1) * l->gw > w->cap_lat) return 0;
+    size_t ks = ((2 * (size_t)l->nh + 1 + 3) & ~(size_t)3) + 8;
+    if ((size_t)l->mh + 1 > ks) return 0; /* the y lines share the x lines' stride */
+    size_t ring = 2 * (size_t)wd * (2 * (size_t)l->U + 9) + 2 * (2 * (size_t)l->nh + 1);
+    if (ring > 2 * (size_t)LAT_WMAX * ((size_t)w->cap_line / 2 + 9) + (size_t)w->cap_line)
+        return 0;
+    double coarse = 0.0, rows = 0.0;
+    for (int m = 0; m <= l->mh; m++) {
+        int up = lat_umax(l, m), un = lat_umax(l, -m);
+        if (up >= 0) rows += up + 1.0; /* the half of the u range in alias runs */
+        if (m && un >= 0) rows += un + 1.0;
+        int um = up > un ? up : un;
+        if (um >= 0) coarse += 2.0 * (um / r + wd / 2) + 1.0;
+    }
+    double fine = 0.5 * M_PI * (double)gd->u * gd->u; /* samples in the alias runs */
+    *c0 = wd * (COST_FINE * fine + COST_ROW * rows);
+    *c1 = COST_COARSE * coarse;
+    return 1;
+}
+
+/* Kernel weights, knot weights and the coarse rows m >= 0 of g (the knots' phase lines in
+ * w->kx and w->ky, free again afterwards). */
+static void lat_build(wf_profile_work *w, const job *jb, grid *gd, lattice *l)
+{
+    const int r = l->r, wd = l->w, nh = l->nh, mh = l->mh;
+    const double delta = r * gd->dk;
+    l->beta = M_PI * wd * (1.0 - l->rho);
+    for (int rho = 0; rho < r; rho++)
+        for (int i = 0; i < wd; i++)
+            l->wt[rho][i] = wf_knot_kernel((double)rho / r + wd / 2 - 1 - i, wd, l->beta);
+    double *gr = w->lat, *gi = w->lat + ((size_t)mh + 1) * l->gw;
+    memset(gr, 0, 2 * ((size_t)mh + 1) * l->gw * sizeof(double));
+    const size_t ks = ((2 * (size_t)nh + 1 + 3) & ~(size_t)3) + 8;
+    size_t room = (size_t)WF_PROFILE_KNOT_BLOCK * (size_t)w->cap_line / ks;
+    int per = room > (size_t)WF_PROFILE_MAX_KNOTS ? WF_PROFILE_MAX_KNOTS : (int)room;
+    double ckr[WF_PROFILE_MAX_KNOTS], cki[WF_PROFILE_MAX_KNOTS], wk[WF_PROFILE_MAX_KNOTS];
+    const double half = 0.5 * wd * delta, norm = jb->fknot / ((double)wd * wd);
+    for (int k0 = 0; k0 < l->nk; k0 += per) {
+        int nkb = l->nk - k0 < per ? l->nk - k0 : per;
+        for (int j = 0; j < nkb; j++) {
+            const double *kp = l->pos + 2 * (size_t)(k0 + j);
+            double x = kp[0] + gd->dx, y = kp[1] + gd->dy;
+            double *lx = w->kx + 2 * (size_t)j * ks, *ly = w->ky + 2 * (size_t)j * ks;
+            phase_range(delta * x, -nh, nh, lx, lx + ks, 1, 0);
+            phase_range(delta * y, 0, mh, ly, ly + ks, 1, 0);
+            wk[j] = norm / (wf_knot_kernel_ft(half * x, l->beta) *
+                            wf_knot_kernel_ft(half * y, l->beta));
+        }
+        for (int m = 0; m <= mh; m++) {
+            int ns = lat_nmax(l, m), nn = lat_nmax(l, -m);
+            if (nn > ns) ns = nn;
+            if (ns < 0) continue;
+            for (int j = 0; j < nkb; j++) {
+                const double *ly = w->ky + 2 * (size_t)j * ks + (size_t)m;
+                ckr[j] = wk[j] * ly[0];
+                cki[j] = wk[j] * ly[ks];
+            }
+            size_t off = (size_t)(nh - ns);
+            knot_sum((2 * ns + 1 + 7) & ~7, nkb, ckr, cki, w->kx + off, ks,
+                     gr + (size_t)m * l->gw + off, gi + (size_t)m * l->gw + off);
+        }
+    }
+    l->gr = gr;
+    l->gi = gi;
+    l->al = 2 * (size_t)l->U + 1 + 8;
+    l->ar = w->ring;
+    l->ai = w->ring + (size_t)wd * l->al;
+    l->tmp = w->ring + 2 * (size_t)wd * l->al;
+    l->next = floor_div(-l->U, r) - wd / 2 + 1;
+}
+
+typedef struct knot_rank {
+    double e; /* max(|x|, |y|) from the object */
+    int j;
+} knot_rank;
+
+static int rank_cmp(const void *pa, const void *pb)
+{
+    const knot_rank *a = pa, *b = pb;
+    if (a->e != b->e) return a->e < b->e ? 1 : -1; /* farthest first */
+    return (a->j > b->j) - (a->j < b->j);
+}
+
+#define LAT_OUTER_MAX 32
+
+/* Chooses the kernel, how many of the farthest knots to sum directly and the lattice for
+ * the rest, by operation count; reorders gd->kpos (the direct ones first, then the
+ * lattice's, each in a fixed order). 0: all knots directly. */
+static int knot_plan(wf_profile_work *w, grid *gd, double p, lattice *l)
+{
+    static const int widths[] = {10, 12, 14, 16};
+    const int nk = gd->nk, forced = w->knot_method == WF_KNOTS_LATTICE;
+    knot_rank rk[WF_PROFILE_MAX_KNOTS];
+    for (int j = 0; j < nk; j++) {
+        double x = fabs(gd->kpos[2 * j] + gd->dx), y = fabs(gd->kpos[2 * j + 1] + gd->dy);
+        rk[j] = (knot_rank){x > y ? x : y, j};
+    }
+    qsort(rk, (size_t)nk, sizeof *rk, rank_cmp);
+    const double fine = 0.5 * M_PI * (double)gd->u * gd->u;
+    /* the direct sum unless the lattice saves a fifth: planning and setup are not counted */
+    double best = forced ? INFINITY : 0.8 * nk * fine;
+    int best_o = -1, best_r = 0, best_w = 0;
+    int omax = forced ? 0 : nk - 1 < LAT_OUTER_MAX ? nk - 1 : LAT_OUTER_MAX;
+    for (size_t iw = 0; iw < sizeof widths / sizeof *widths; iw++) {
+        int last_r = 0;
+        double c0 = 0.0, c1 = 0.0;
+        for (int no = 0; no <= omax; no++) {
+            int r = lat_step(gd, p, rk[no].e, widths[iw]);
+            if (!r) continue;
+            if (r != last_r) {
+                if (!lat_size(w, gd, r, widths[iw], l, &c0, &c1)) continue;
+                last_r = r;
+            }
+            double c = c0 + c1 * (nk - no) + (double)no * fine;
+            if (c < best) {
+                best = c;
+                best_o = no;
+                best_r = r;
+                best_w = widths[iw];
+            }
+        }
+    }
+    double c0, c1;
+    if (best_o < 0 || !lat_size(w, gd, best_r, best_w, l, &c0, &c1)) return 0;
+    l->nk = nk - best_o;
+    /* the direct ones in rank order, then the rest in their own order */
+    double tmp[2 * WF_PROFILE_MAX_KNOTS];
+    unsigned char outer[WF_PROFILE_MAX_KNOTS];
+    memset(outer, 0, (size_t)nk);
+    int k = 0;
+    for (int i = 0; i < best_o; i++, k++) {
+        outer[rk[i].j] = 1;
+        tmp[2 * k] = gd->kpos[2 * rk[i].j];
+        tmp[2 * k + 1] = gd->kpos[2 * rk[i].j + 1];
+    }
+    for (int j = 0; j < nk; j++)
+        if (!outer[j]) {
+            tmp[2 * k] = gd->kpos[2 * j];
+            tmp[2 * k + 1] = gd->kpos[2 * j + 1];
+            k++;
+        }
+    memcpy(w->knot_box, tmp, 2 * (size_t)nk * sizeof(double));
+    gd->kpos = w->knot_box;
+    l->pos = w->knot_box + 2 * (size_t)best_o;
+    return 1;
+}
+
+/* ------------------------------------------------------------------------ fold kernels */
+
+/* The per-sample work of a fold pass on one alias run of a row, in four kernels: the
+ * smooth galaxy (or point source) times the centring and sub-pixel phases; a coarse row of
+ * the knot lattice interpolated along u; the fine row from w of those; the product with
+ * PSF x pixel added into the bins. Each has a scalar version and, on x86-64, vector
+ * versions of 2, 4 (AVX2) and 8 (AVX-512) lanes, chosen once by wf_profile_simd. Lanes
+ * never mix, every operation is the scalar one in the same order (a vector's last lanes
+ * may recompute values already written: the same values), and ISO C mode contracts no
+ * multiply-add into a fused one, so every version gives the same bits: the CPU a stamp is
+ * drawn on does not change it (tests/test_profile.c, test_simd_identical). */
+
+typedef struct smooth_par {
+    double qa, qb, qc;        /* q2 = |A^T k|^2 = (qa u + qb) u + qc along the row */
+    double re2, r02, fb, fd;  /* bulge and disk: F(re2 q2), (1 + r02 q2)^-3/2 */
+    double fpoint;            /* > 0: a point source of this flux instead */
+    int bulge, disk;
+    const wf_sersic_table *t;
+    double eyr, eyi;          /* the row's phase */
+    const double *exr, *exi;  /* the columns' phases, indexed by u */
+} smooth_par;
+
+/* rr[i], ri[i] for u = ua + i, i < n. */
+static void smooth_scalar(const smooth_par *sp, int ua, int n, double *rr, double *ri)
+{
+    const double eyr = sp->eyr, eyi = sp->eyi;
+    for (int i = 0; i < n; i++) {
+        int u = ua + i;
+        double g;
+        if (sp->fpoint > 0.0) {
+            g = sp->fpoint;
+        } else {
+            double q2 = (sp->qa * u + sp->qb) * u + sp->qc;
+            g = 0.0;
+            if (sp->bulge) g += sp->fb * wf_sersic4_eval(sp->t, sp->re2 * q2);
+            if (sp->disk) {
+                double s = 1.0 / (1.0 + sp->r02 * q2);
+                g += sp->fd * s * sqrt(s);
+            }
+        }
+        double pr = sp->exr[u], pi = sp->exi[u];
+        rr[i] = g * (pr * eyr - pi * eyi);
+        ri[i] = g * (pr * eyi + pi * eyr);
+    }
+}
+
+/* run[i] += sum_c wy[c] row_c[i] for the lattice's w rows. */
+static void latadd_scalar(int n, int nw, const double *wy, const double *const *lr,
+                          const double *const *li, int ua, double *runr, double *runi)
+{
+    for (int i = 0; i < n; i++) {
+        double kr = 0.0, ki = 0.0;
+        for (int c = 0; c < nw; c++) {
+            kr += wy[c] * lr[c][ua + i];
+            ki += wy[c] * li[c][ua + i];
+        }
+        runr[i] += kr;
+        runi[i] += ki;
+    }
+}
+
+/* A coarse row g (pointers at n = 0) interpolated along u at u, times (-1)^u (the box's
+ * centring), into ar[u], ai[u]. */
+static inline void latrow_one(const lattice *l, const double *gr, const double *gi, int u,
+                              double *ar, double *ai)
+{
+    int t = floor_div(u, l->r), rho = u - t * l->r, h = l->w / 2 - 1;
+    const double *wt = l->wt[rho];
+    double sr = 0.0, si = 0.0;
+    for (int i = 0; i < l->w; i++) {
+        sr += wt[i] * gr[t - h + i];
+        si += wt[i] * gi[t - h + i];
+    }
+    double sg = (u & 1) ? -1.0 : 1.0;
+    ar[u] = sg * sr;
+    ai[u] = sg * si;
+}
+
+static void latrow_scalar(const lattice *l, const double *gr, const double *gi, int ua, int ub,
+                          double *ar, double *ai)
+{
+    for (int u = ua; u <= ub; u++) latrow_one(l, gr, gi, u, ar, ai);
+}
+
+/* bins (complex interleaved) += run x (fr + i fi), the PSF read at stride st. */
+static void psfmul_scalar(int n, const float *fr, const float *fi, size_t st, const double *runr,
+                          const double *runi, double *bins)
+{
+    for (int i = 0; i < n; i++) {
+        double pr = fr[i * st], pi = fi[i * st];
+        double rr = runr[i], ri = runi[i];
+        bins[2 * i] += rr * pr - ri * pi;
+        bins[2 * i + 1] += rr * pi + ri * pr;
+    }
+}
+
+#if defined(__GNUC__) && defined(__x86_64__) /* SSE2 arithmetic in the scalar code too */
+#include <immintrin.h>
+#define FOLD_SIMD 1
+
+#define VLOAD(x, p) memcpy(&(x), (p), sizeof(x))
+#define VSTORE(p, x) memcpy((p), &(x), sizeof(x))
+
+/* de Vaucouleurs F at w, lane by lane as wf_sersic4_eval. ANY(mask) tells whether a lane
+ * is set, GATHER(ix, c0, c1, c2, c3) loads ck[l] = t->v[ix[l] + k]. */
+#define SERSIC_V(V, VI, VS, NL, ANY, GATHER, w, out)                                       \
+    do {                                                                                   \
+        VI bits_ = (VI)(w);                                                                \
+        VS e_ = __builtin_convertvector((bits_ >> 52) & 0x7ff, VS) - 1023;                 \
+        VS bad_ = (e_ < WF_SERSIC_EMIN) | (e_ >= WF_SERSIC_EMAX);                          \
+        if (ANY(bad_)) {                                                                   \
+            for (int l_ = 0; l_ < (NL); l_++) (out)[l_] = sersic_lane(t, (w)[l_]);         \
+            break;                                                                         \
+        }                                                                                  \
+        /* the mantissa as 1.m, minus 1: exactly (double)(bits & mask) 2^-52 */            \
+        V m_ = ((V)((bits_ & 0xfffffffffffffLL) | 0x3ff0000000000000LL) - 1.0) *          \
+               (double)WF_SERSIC_SUB;                                                      \
+        VS i_ = __builtin_convertvector(m_, VS);                                            \
+        V f_ = m_ - __builtin_convertvector(i_, V);                                         \
+        VS ix_ = (e_ - WF_SERSIC_EMIN) * WF_SERSIC_ROW + i_;                               \
+        V c0_, c1_, c2_, c3_;                                                              \
+        GATHER(ix_, c0_, c1_, c2_, c3_);                                                   \
+        V fm1_ = f_ - 1.0, fm2_ = f_ - 2.0, fp1_ = f_ + 1.0;                               \
+        (out) = (-c0_ * f_ * fm1_ * fm2_ + c3_ * fp1_ * f_ * fm1_) * (1.0 / 6.0) +         \
+                (c1_ * fp1_ * fm1_ * fm2_ - c2_ * fp1_ * f_ * fm2_) * 0.5;                 \
+    } while (0)
+
+#define SMOOTH_BODY(V, VI, VS, NL, SQRT, ZU, ANY, GATHER)                                 \
+    const wf_sersic_table *t = sp->t;                                                      \
+    const double eyr = sp->eyr, eyi = sp->eyi;                                             \
+    V lane;                                                                                \
+    for (int l = 0; l < (NL); l++) lane[l] = l;                                            \
+    for (int i = 0; i < n; i += (NL)) {                                                    \
+        if (i + (NL) > n) { /* the last vector overlaps the one before: same values */     \
+            if (n < (NL)) {                                                                \
+                ZU();                                                                      \
+                smooth_scalar(sp, ua, n, rr, ri);                                          \
+                return;                                                                    \
+            }                                                                              \
+            i = n - (NL);                                                                  \
+        }                                                                                  \
+        int u0 = ua + i;                                                                   \
+        V g = lane * 0.0;                                                                  \
+        if (sp->fpoint > 0.0) {                                                            \
+            g += sp->fpoint;                                                               \
+        } else {                                                                           \
+            V uv = (double)u0 + lane;                                                      \
+            V q2 = (sp->qa * uv + sp->qb) * uv + sp->qc;                                   \
+            if (sp->bulge) {                                                               \
+                V wv = sp->re2 * q2, fv;                                                   \
+                SERSIC_V(V, VI, VS, NL, ANY, GATHER, wv, fv);                              \
+                g += sp->fb * fv;                                                          \
+            }                                                                              \
+            if (sp->disk) {                                                                \
+                V sv = 1.0 / (1.0 + sp->r02 * q2);                                         \
+                g += sp->fd * sv * SQRT(sv);                                               \
+            }                                                                              \
+        }                                                                                  \
+        V pr, pi;                                                                          \
+        VLOAD(pr, sp->exr + u0);                                                           \
+        VLOAD(pi, sp->exi + u0);                                                           \
+        V a = g * (pr * eyr - pi * eyi), b = g * (pr * eyi + pi * eyr);                    \
+        VSTORE(rr + i, a);                                                                 \
+        VSTORE(ri + i, b);                                                                 \
+    }                                                                                      \
+    ZU();
+
+/* run[i] += ... for whole vectors: n rounded up (the run and the ring rows are padded) */
+#define LATADD_BODY(V, NL, ZU)                                                             \
+    for (int i = 0; i < n; i += (NL)) {                                                    \
+        V kr = {0}, ki = {0}, x;                                                           \
+        for (int c = 0; c < nw; c++) {                                                     \
+            VLOAD(x, lr[c] + ua + i);                                                      \
+            kr += wy[c] * x;                                                               \
+            VLOAD(x, li[c] + ua + i);                                                      \
+            ki += wy[c] * x;                                                               \
+        }                                                                                  \
+        V r0, i0;                                                                          \
+        VLOAD(r0, runr + i);                                                               \
+        VLOAD(i0, runi + i);                                                               \
+        r0 += kr;                                                                          \
+        i0 += ki;                                                                          \
+        VSTORE(runr + i, r0);                                                              \
+        VSTORE(runi + i, i0);                                                              \
+    }                                                                                      \
+    ZU();
+
+/* a coarse row interpolated along u, vector over t (u = r t + rho) for each rho; the last
+ * vector of a rho overlaps the one before */
+#define LATROW_BODY(V, NL, ZU)                                                             \
+    const int r = l->r, wd = l->w, h = wd / 2 - 1;                                         \
+    for (int rho = 0; rho < r; rho++) {                                                    \
+        int t0 = floor_div(ua - rho + r - 1, r), t1 = floor_div(ub - rho, r);              \
+        if (t1 - t0 + 1 < (NL)) {                                                          \
+            for (int t = t0; t <= t1; t++) latrow_one(l, gr, gi, r * t + rho, ar, ai);    \
+            continue;                                                                      \
+        }                                                                                  \
+        const double *wt = l->wt[rho];                                                     \
+        for (int t = t0; t <= t1; t += (NL)) {                                             \
+            if (t + (NL) - 1 > t1) t = t1 - (NL) + 1;                                      \
+            V sr = {0}, si = {0}, x;                                                       \
+            for (int i = 0; i < wd; i++) {                                                 \
+                VLOAD(x, gr + t - h + i);                                                  \
+                sr += wt[i] * x;                                                           \
+                VLOAD(x, gi + t - h + i);                                                  \
+                si += wt[i] * x;                                                           \
+            }                                                                              \
+            for (int q = 0; q < (NL); q++) {                                               \
+                int u = r * (t + q) + rho;                                                 \
+                double sg = (u & 1) ? -1.0 : 1.0;                                          \
+                ar[u] = sg * sr[q];                                                        \
+                ai[u] = sg * si[q];                                                        \
+            }                                                                              \
+        }                                                                                  \
+    }                                                                                      \
+    ZU();
+
+/* the products interleaved into the bins: lanes (re 0, im 0, re 1, im 1, ...) */
+#define PSFMUL_BODY(V, VF, VI, NL, LO, HI, ZU, PGATHER)                                                 \
+    int i = 0;                                                                             \
+    for (; i + (NL) <= n; i += (NL)) {                                                     \
+        V pr, pi;                                                                          \
+        if (st == 1) {                                                                     \
+            VF a, b;                                                                       \
+            VLOAD(a, fr + i);                                                              \
+            VLOAD(b, fi + i);                                                              \
+            pr = __builtin_convertvector(a, V);                                            \
+            pi = __builtin_convertvector(b, V);                                            \
+        } else {                                                                           \
+            PGATHER(pr, fr + (size_t)i * st, st);                                          \
+            PGATHER(pi, fi + (size_t)i * st, st);                                          \
+        }                                                                                  \
+        V rr, ri, b0, b1;                                                                  \
+        VLOAD(rr, runr + i);                                                               \
+        VLOAD(ri, runi + i);                                                               \
+        V br = rr * pr - ri * pi, bi = rr * pi + ri * pr;                                  \
+        VLOAD(b0, bins + 2 * i);                                                           \
+        VLOAD(b1, bins + 2 * i + (NL));                                                    \
+        b0 += __builtin_shuffle(br, bi, (VI)LO);                                           \
+        b1 += __builtin_shuffle(br, bi, (VI)HI);                                           \
+        VSTORE(bins + 2 * i, b0);                                                          \
+        VSTORE(bins + 2 * i + (NL), b1);                                                   \
+    }                                                                                      \
+    ZU();                                                                                  \
+    psfmul_scalar(n - i, fr + (size_t)i * st, fi + (size_t)i * st, st, runr + i, runi + i,  \
+                  bins + 2 * i);
+
+/* Out-of-table arguments, one lane at a time. Not inlined: the vector kernels' callers are
+ * built for the baseline ISA, and a call is where the compiler clears the wide registers'
+ * upper halves (SSE code running with them dirty is ~3x slower on some x86 cores). */
+__attribute__((noinline)) static double sersic_lane(const wf_sersic_table *t, double w)
+{
+    return wf_sersic4_eval(t, w);
+}
+
+static inline void no_zeroupper(void) {}
+
+typedef double fv2 __attribute__((vector_size(16)));
+typedef long long fi2 __attribute__((vector_size(16)));
+typedef int fs2 __attribute__((vector_size(8)));
+typedef float ff2 __attribute__((vector_size(8)));
+static inline fv2 sqrt2(fv2 x) { return (fv2)_mm_sqrt_pd((__m128d)x); }
+#define ANY2(b) ((b)[0] | (b)[1])
+#define GATHER2(ix, c0, c1, c2, c3)                                                        \
+    do {                                                                                   \
+        const double *p0_ = t->v + (ix)[0], *p1_ = t->v + (ix)[1];                         \
+        c0 = (fv2){p0_[0], p1_[0]};                                                        \
+        c1 = (fv2){p0_[1], p1_[1]};                                                        \
+        c2 = (fv2){p0_[2], p1_[2]};                                                        \
+        c3 = (fv2){p0_[3], p1_[3]};                                                        \
+    } while (0)
+#define PGATHER2(x, p, st) ((x) = (fv2){(p)[0], (p)[st]})
+static void smooth_v2(const smooth_par *sp, int ua, int n, double *rr, double *ri)
+{
+    SMOOTH_BODY(fv2, fi2, fs2, 2, sqrt2, no_zeroupper, ANY2, GATHER2)
+}
+static void latadd_v2(int n, int nw, const double *wy, const double *const *lr,
+                      const double *const *li, int ua, double *runr, double *runi)
+{
+    LATADD_BODY(fv2, 2, no_zeroupper)
+}
+static void latrow_v2(const lattice *l, const double *gr, const double *gi, int ua, int ub,
+                      double *ar, double *ai)
+{
+    LATROW_BODY(fv2, 2, no_zeroupper)
+}
+static void psfmul_v2(int n, const float *fr, const float *fi, size_t st, const double *runr,
+                      const double *runi, double *bins)
+{
+    PSFMUL_BODY(fv2, ff2, fi2, 2, ((fi2){0, 2}), ((fi2){1, 3}), no_zeroupper, PGATHER2)
+}
+
+typedef double fv4 __attribute__((vector_size(32)));
+typedef long long fi4 __attribute__((vector_size(32)));
+typedef int fs4 __attribute__((vector_size(16)));
+typedef float ff4 __attribute__((vector_size(16)));
+__attribute__((target("avx2"))) static inline fv4 sqrt4(fv4 x)
+{
+    return (fv4)_mm256_sqrt_pd((__m256d)x);
+}
+#define ANY4(b) _mm_movemask_ps((__m128)(b))
+/* each lane's 4 table values are adjacent: 4 loads and a 4 x 4 transpose */
+#define GATHER4(ix, c0, c1, c2, c3)                                                        \
+    do {                                                                                   \
+        fv4 r0_, r1_, r2_, r3_;                                                            \
+        VLOAD(r0_, t->v + (ix)[0]);                                                        \
+        VLOAD(r1_, t->v + (ix)[1]);                                                        \
+        VLOAD(r2_, t->v + (ix)[2]);                                                        \
+        VLOAD(r3_, t->v + (ix)[3]);                                                        \
+        fv4 a_ = __builtin_shufflevector(r0_, r1_, 0, 4, 1, 5);                            \
+        fv4 b_ = __builtin_shufflevector(r2_, r3_, 0, 4, 1, 5);                            \
+        c0 = __builtin_shufflevector(a_, b_, 0, 1, 4, 5);                                  \
+        c1 = __builtin_shufflevector(a_, b_, 2, 3, 6, 7);                                  \
+        a_ = __builtin_shufflevector(r0_, r1_, 2, 6, 3, 7);                                \
+        b_ = __builtin_shufflevector(r2_, r3_, 2, 6, 3, 7);                                \
+        c2 = __builtin_shufflevector(a_, b_, 0, 1, 4, 5);                                  \
+        c3 = __builtin_shufflevector(a_, b_, 2, 3, 6, 7);                                  \
+    } while (0)
+#define PGATHER4(x, p, st)                                                                 \
+    ((x) = __builtin_convertvector(                                                        \
+         (ff4)_mm_i32gather_ps((p), (__m128i)((fs4){0, 1, 2, 3} * (int)(st)), 4), fv4))
+__attribute__((target("avx2"))) static void smooth_v4(const smooth_par *sp, int ua, int n,
+                                                      double *rr, double *ri)
+{
+    SMOOTH_BODY(fv4, fi4, fs4, 4, sqrt4, _mm256_zeroupper, ANY4, GATHER4)
+}
+__attribute__((target("avx2"))) static void
+latadd_v4(int n, int nw, const double *wy, const double *const *lr, const double *const *li,
+          int ua, double *runr, double *runi)
+{
+    LATADD_BODY(fv4, 4, _mm256_zeroupper)
+}
+__attribute__((target("avx2"))) static void latrow_v4(const lattice *l, const double *gr,
+                                                      const double *gi, int ua, int ub,
+                                                      double *ar, double *ai)
+{
+    LATROW_BODY(fv4, 4, _mm256_zeroupper)
+}
+__attribute__((target("avx2"))) static void psfmul_v4(int n, const float *fr, const float *fi,
+                                                      size_t st, const double *runr,
+                                                      const double *runi, double *bins)
+{
+    PSFMUL_BODY(fv4, ff4, fi4, 4, ((fi4){0, 4, 1, 5}), ((fi4){2, 6, 3, 7}), _mm256_zeroupper,
+                PGATHER4)
+}
+
+typedef double fv8 __attribute__((vector_size(64)));
+typedef long long fi8 __attribute__((vector_size(64)));
+typedef int fs8 __attribute__((vector_size(32)));
+typedef float ff8 __attribute__((vector_size(32)));
+__attribute__((target("avx512f"))) static inline fv8 sqrt8(fv8 x)
+{
+    return (fv8)_mm512_sqrt_pd((__m512d)x);
+}
+#define ANY8(b) _mm256_movemask_ps((__m256)(b))
+/* 8 loads of 4 adjacent values and an 8 x 4 transpose */
+#define GATHER8(ix, c0, c1, c2, c3)                                                        \
+    do {                                                                                   \
+        fv4 r_[8];                                                                         \
+        for (int l_ = 0; l_ < 8; l_++) VLOAD(r_[l_], t->v + (ix)[l_]);                     \
+        fv8 z0_ = __builtin_shufflevector(r_[0], r_[1], 0, 1, 2, 3, 4, 5, 6, 7);           \
+        fv8 z1_ = __builtin_shufflevector(r_[2], r_[3], 0, 1, 2, 3, 4, 5, 6, 7);           \
+        fv8 z2_ = __builtin_shufflevector(r_[4], r_[5], 0, 1, 2, 3, 4, 5, 6, 7);           \
+        fv8 z3_ = __builtin_shufflevector(r_[6], r_[7], 0, 1, 2, 3, 4, 5, 6, 7);           \
+        fv8 a_ = __builtin_shufflevector(z0_, z1_, 0, 4, 8, 12, 1, 5, 9, 13);              \
+        fv8 b_ = __builtin_shufflevector(z2_, z3_, 0, 4, 8, 12, 1, 5, 9, 13);              \
+        c0 = __builtin_shufflevector(a_, b_, 0, 1, 2, 3, 8, 9, 10, 11);                    \
+        c1 = __builtin_shufflevector(a_, b_, 4, 5, 6, 7, 12, 13, 14, 15);                  \
+        a_ = __builtin_shufflevector(z0_, z1_, 2, 6, 10, 14, 3, 7, 11, 15);                \
+        b_ = __builtin_shufflevector(z2_, z3_, 2, 6, 10, 14, 3, 7, 11, 15);                \
+        c2 = __builtin_shufflevector(a_, b_, 0, 1, 2, 3, 8, 9, 10, 11);                    \
+        c3 = __builtin_shufflevector(a_, b_, 4, 5, 6, 7, 12, 13, 14, 15);                  \
+    } while (0)
+#define PGATHER8(x, p, st)                                                                 \
+    ((x) = __builtin_convertvector(                                                        \
+         (ff8)_mm256_i32gather_ps((p), (__m256i)((fs8){0, 1, 2, 3, 4, 5, 6, 7} * (int)(st)), \
+                                  4),                                                      \
+         fv8))
+__attribute__((target("avx512f"))) static void smooth_v8(const smooth_par *sp, int ua, int n,
+                                                         double *rr, double *ri)
+{
+    SMOOTH_BODY(fv8, fi8, fs8, 8, sqrt8, _mm256_zeroupper, ANY8, GATHER8)
+}
+__attribute__((target("avx512f"))) static void
+latadd_v8(int n, int nw, const double *wy, const double *const *lr, const double *const *li,
+          int ua, double *runr, double *runi)
+{
+    LATADD_BODY(fv8, 8, _mm256_zeroupper)
+}
+__attribute__((target("avx512f"))) static void latrow_v8(const lattice *l, const double *gr,
+                                                         const double *gi, int ua, int ub,
+                                                         double *ar, double *ai)
+{
+    LATROW_BODY(fv8, 8, _mm256_zeroupper)
+}
+__attribute__((target("avx512f"))) static void
+psfmul_v8(int n, const float *fr, const float *fi, size_t st, const double *runr,
+          const double *runi, double *bins)
+{
+    PSFMUL_BODY(fv8, ff8, fi8, 8, ((fi8){0, 8, 1, 9, 2, 10, 3, 11}),
+                ((fi8){4, 12, 5, 13, 6, 14, 7, 15}), _mm256_zeroupper, PGATHER8)
+}
+#endif
+
+typedef struct fold_kernels {
+    void (*smooth)(const smooth_par *, int, int, double *, double *);
+    void (*latrow)(const lattice *, const double *, const double *, int, int, double *,
+                   double *);
+    void (*latadd)(int, int, const double *, const double *const *, const double *const *,
+                   int, double *, double *);
+    void (*psfmul)(int, const float *, const float *, size_t, const double *, const double *,
+                   double *);
+} fold_kernels;
+
+static fold_kernels fold_k = {smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar};
+static pthread_once_t simd_once = PTHREAD_ONCE_INIT;
+static int simd_lanes;
+
+static int simd_select(int lanes)
+{
+    fold_k = (fold_kernels){smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar};
+    int used = 0;
+#if defined(FOLD_SIMD)
+    __builtin_cpu_init();
+    if (lanes >= 8 && __builtin_cpu_supports("avx512f")) {
+        fold_k = (fold_kernels){smooth_v8, latrow_v8, latadd_v8, psfmul_v8};
+        used = 8;
+    } else if (lanes >= 4 && __builtin_cpu_supports("avx2")) {
+        fold_k = (fold_kernels){smooth_v4, latrow_v4, latadd_v4, psfmul_v4};
+        used = 4;
+    } else if (lanes >= 2) {
+        fold_k = (fold_kernels){smooth_v2, latrow_v2, latadd_v2, psfmul_v2};
+        used = 2;
+    }
+#endif
+#if defined(KNOT_AVX)
+    knot_avx = used == 8 ? 2 : used == 4 ? 1 : 0;
+#endif
+    return used;
+}
+
+static void simd_probe(void) { simd_lanes = simd_select(8); }
+
+int wf_profile_simd(int lanes)
+{
+    pthread_once(&simd_once, simd_probe);
+    if (lanes >= 0) simd_lanes = simd_select(lanes);
+    return simd_lanes;
+}
+
+/* bins += run x PSF read off the table by bicubic interpolation: the table's 4 rows around
+ * this v collapsed first (into pint, room for cap columns re and im), then 4 taps along u;
+ * in pieces when the run spans more table columns than pint holds (same values). */
+static void psf_interp(const wf_profile_psf *psf, const int *tix, const double *twx, int tiy,
+                       const double *twy, int ua, int n, double *pint, int cap,
+                       const double *runr, const double *runi, double *bins)
+{
+    const size_t side = 2 * (size_t)psf->kr + 1;
+    for (int i0 = 0; i0 < n;) {
+        int i1 = n; /* this piece: i0 .. i1 - 1 */
+        while (tix[ua + i1 - 1] + 3 - tix[ua + i0] + 1 > cap) i1 = i0 + (i1 - i0 + 1) / 2;
+        int t0 = tix[ua + i0], t1 = tix[ua + i1 - 1] + 3;
+        double *cr = pint - t0, *ci = pint + cap - t0;
+        for (int tt = t0; tt <= t1; tt++) {
+            double sr = 0.0, si = 0.0;
+            for (int b = 0; b < 4; b++) {
+                size_t at = (size_t)(tiy + b) * side + (size_t)tt;
+                sr += twy[b] * psf->re[at];
+                si += twy[b] * psf->im[at];
+            }
+            cr[tt] = sr;
+            ci[tt] = si;
+        }
+        for (int i = i0; i < i1; i++) {
+            int u = ua + i;
+            const double *wu = twx + 4 * (ptrdiff_t)u;
+            const double *pr = cr + tix[u], *pi = ci + tix[u];
+            double fr = 0.0, fi = 0.0;
+            for (int c = 0; c < 4; c++) {
+                fr += wu[c] * pr[c];
+                fi += wu[c] * pi[c];
+            }
+            double rr = runr[i], ri = runi[i];
+            bins[2 * i] += rr * fr - ri * fi;
+            bins[2 * i + 1] += rr * fi + ri * fr;
+        }
+        i0 = i1;
+    }
+}
+
+/* Coarse row m interpolated along u into its ring slot, at the u of the alias runs
+ * fold_pass visits. */
+static void lat_row(const fold_kernels *fk, lattice *l, int m, int mbox)
+{
+    const int wd = l->w, nh = l->nh;
+    int um = lat_umax(l, m);
+    if (um < 0) return;
+    int slot = ((m % wd) + wd) % wd;
+    double *ar = l->ar + (size_t)slot * l->al + l->U, *ai = l->ai + (size_t)slot * l->al + l->U;
+    const double *gr = l->gr + (size_t)(m < 0 ? -m : m) * l->gw + nh;
+    const double *gi = l->gi + (size_t)(m < 0 ? -m : m) * l->gw + nh;
+    if (m < 0) { /* g(n, m) = conj g(-n, -m) */
+        int ns = lat_nmax(l, m), nn = lat_nmax(l, -m);
+        if (nn > ns) ns = nn;
+        double *tr = l->tmp + ns, *ti = l->tmp + (2 * ns + 1) + ns;
+        for (int n = -ns; n <= ns; n++) {
+            tr[n] = gr[-n];
+            ti[n] = -gi[-n];
+        }
+        gr = tr;
+        gi = ti;
+    }
+    const int half = mbox / 2;
+    for (int a = floor_div(-um, mbox); a <= floor_div(um, mbox); a++) {
+        int ua = a * mbox > -um ? a * mbox : -um;
+        int ub = a * mbox + half < um ? a * mbox + half : um;
+        if (ua <= ub) fk->latrow(l, gr, gi, ua, ub, ar, ai);
+    }
+}
+
 /* One pass over the fine grid: rows v, alias runs of u whose bins lie in the half plane.
  * The run buffer receives the object's transform (times phases) for u in [ua, ub]; it is
  * then multiplied by PSF x pixel and added into the bins. The pass adds knots knot0 ..
  * knot0 + nkb - 1, whose phase lines are in w->kx and w->ky (gd->ks entries per line, real
- * parts then imaginary); the smooth part or point source rides with knot0 = 0 (and is
- * alone when nkb = 0). */
+ * parts then imaginary); the smooth part or point source, and the knot lattice, ride with
+ * knot0 <= 0 (and are alone when nkb = 0). */
 static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *psf,
                       const grid *gd, int us, int knot0, int nkb)
 {
+    const fold_kernels *fk = &fold_k;
     const int m = gd->m, half = gd->half, u_all = gd->u;
     const double dk = gd->dk;
-    const wf_sersic_table *t = w->sersic;
-    const double *ex = w->ex, *ey = w->ey;
+    const double *ey = w->ey;
     double *runr = w->run, *runi = w->run + (half + 8);
+    /* the PSF read by interpolation: the rest of the run buffer */
+    double *pint = w->run + 2 * (size_t)(half + 8);
+    const int pcap = ladder_max(w) / 2 + 8 + (ladder_max(w) / 2 - half);
     const size_t row_len = (size_t)m + 2; /* doubles per row of the in-place buffer */
     const size_t ks = gd->ks;
-    const double re2 = jb->re * jb->re, r02 = jb->r0 * jb->r0;
-    const double qa = jb->shape.qxx * dk * dk;
     const int side = psf ? 2 * psf->kr + 1 : 0;
     const int smooth = knot0 <= 0;
-    const int point = jb->fpoint > 0.0, bulge = jb->fb > 0.0, disk = jb->fd > 0.0;
     double ckr[WF_PROFILE_MAX_KNOTS], cki[WF_PROFILE_MAX_KNOTS];
+    lattice *lat = knot0 <= 0 ? gd->lat : NULL;
+    const int knots = nkb > 0 || lat;
+    double wy[LAT_WMAX];
+    smooth_par sp = {.qa = jb->shape.qxx * dk * dk,
+                     .re2 = jb->re * jb->re,
+                     .r02 = jb->r0 * jb->r0,
+                     .fb = jb->fb,
+                     .fd = jb->fd,
+                     .fpoint = jb->fpoint,
+                     .bulge = jb->fb > 0.0,
+                     .disk = jb->fd > 0.0,
+                     .t = w->sersic,
+                     .exr = w->ex + u_all,
+                     .exi = w->ex + w->cap_line + u_all};
 
     for (int v = -u_all; v <= u_all; v++) {
-        int umax = (int)floor(sqrt((double)u_all * u_all - (double)v * v));
+        int umax = gd->rim[abs(v)];
         int us_max = abs(v) <= us ? (int)floor(sqrt((double)us * us - (double)v * v)) : -1;
-        if (nkb == 0 && us_max < 0) continue;
+        if (!knots && us_max < 0) continue;
+        const double *lr[LAT_WMAX], *li[LAT_WMAX];
+        if (lat) { /* the w coarse rows this row interpolates, and their weights */
+            int tv = floor_div(v, lat->r), m0 = tv - lat->w / 2 + 1;
+            for (; lat->next <= m0 + lat->w - 1; lat->next++) lat_row(fk, lat, lat->next, m);
+            const double *wt = lat->wt[v - tv * lat->r];
+            const double sg = (v & 1) ? -1.0 : 1.0;
+            for (int i = 0; i < lat->w; i++) {
+                int slot = (((m0 + i) % lat->w) + lat->w) % lat->w;
+                lr[i] = lat->ar + (size_t)slot * lat->al + lat->U;
+                li[i] = lat->ai + (size_t)slot * lat->al + lat->U;
+                wy[i] = sg * wt[i];
+            }
+        }
         int by = ((v % m) + m) % m;
         double *crow = w->fft + (size_t)by * row_len;
         double ky = v * dk;
-        double qb = 2.0 * jb->shape.qxy * dk * ky, qc = jb->shape.qyy * ky * ky;
-        double eyr = ey[2 * (v + u_all)], eyi = ey[2 * (v + u_all) + 1];
+        sp.qb = 2.0 * jb->shape.qxy * dk * ky;
+        sp.qc = jb->shape.qyy * ky * ky;
+        sp.eyr = ey[2 * (v + u_all)];
+        sp.eyi = ey[2 * (v + u_all) + 1];
         for (int j = 0; j < nkb; j++) { /* knot's y phase times its flux */
             const double *kyj = w->ky + (size_t)j * 2 * ks + (size_t)(v + u_all);
             ckr[j] = jb->fknot * kyj[0];
@@ -586,7 +1421,7 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
             twy = w->wy + 4 * (size_t)(v + u_all);
         }
         /* the u range this row needs: all of the band with knots, else the smooth disk */
-        int ulim = nkb > 0 ? umax : us_max;
+        int ulim = knots ? umax : us_max;
         int a0 = floor_div(-ulim, m), a1 = floor_div(ulim, m);
         for (int a = a0; a <= a1; a++) {
             int ua = a * m > -ulim ? a * m : -ulim;
@@ -599,68 +1434,22 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
                 sa = ua > -us_max ? ua : -us_max;
                 sb = ub < us_max ? ub : us_max;
             }
-            if (nkb > 0 || sa > ua || sb < ub) {
+            if (sa > ua || sb < ub) {
                 memset(runr, 0, (size_t)n * sizeof(double));
                 memset(runi, 0, (size_t)n * sizeof(double));
             }
-            if (sa <= sb) {
-                double *rr = runr - ua, *ri = runi - ua;
-                const double *exu = ex + 2 * (ptrdiff_t)u_all;
-                if (point) {
-                    const double g = jb->fpoint;
-                    for (int u = sa; u <= sb; u++) {
-                        double pr = exu[2 * u], pi = exu[2 * u + 1];
-                        rr[u] = g * (pr * eyr - pi * eyi);
-                        ri[u] = g * (pr * eyi + pi * eyr);
-                    }
-                } else {
-                    for (int u = sa; u <= sb; u++) {
-                        double q2 = (qa * u + qb) * u + qc;
-                        double g = 0.0;
-                        if (bulge) g += jb->fb * wf_sersic4_eval(t, re2 * q2);
-                        if (disk) {
-                            double s = 1.0 / (1.0 + r02 * q2);
-                            g += jb->fd * s * sqrt(s);
-                        }
-                        double pr = exu[2 * u], pi = exu[2 * u + 1];
-                        rr[u] = g * (pr * eyr - pi * eyi);
-                        ri[u] = g * (pr * eyi + pi * eyr);
-                    }
-                }
-            }
+            if (sa <= sb) fk->smooth(&sp, sa, sb - sa + 1, runr + (sa - ua), runi + (sa - ua));
             if (nkb > 0) /* rounded up to whole vectors: the lines and the run have room */
                 knot_sum((n + 7) & ~7, nkb, ckr, cki, w->kx + (size_t)(ua + u_all), ks, runr,
                          runi);
+            if (lat) fk->latadd(n, lat->w, wy, lr, li, ua, runr, runi);
             /* times PSF x pixel, into the bins */
             double *bins = crow + 2 * (size_t)(ua - a * m);
             if (gd->mode == MODE_EXACT) {
-                const size_t st = (size_t)gd->st;
-                const float *erp = er + (ptrdiff_t)ua * gd->st, *eip = ei + (ptrdiff_t)ua * gd->st;
-                for (int i = 0; i < n; i++) {
-                    double fr = erp[i * st], fi = eip[i * st];
-                    double rr = runr[i], ri = runi[i];
-                    bins[2 * i] += rr * fr - ri * fi;
-                    bins[2 * i + 1] += rr * fi + ri * fr;
-                }
+                fk->psfmul(n, er + (ptrdiff_t)ua * gd->st, ei + (ptrdiff_t)ua * gd->st,
+                           (size_t)gd->st, runr, runi, bins);
             } else {
-                for (int i = 0; i < n; i++) {
-                    int u = ua + i;
-                    const double *wu = twx + 4 * (ptrdiff_t)u;
-                    double fr = 0.0, fi = 0.0;
-                    for (int b = 0; b < 4; b++) {
-                        size_t row = (size_t)(tiy + b) * side + (size_t)tix[u];
-                        double sr = 0.0, si = 0.0;
-                        for (int c = 0; c < 4; c++) {
-                            sr += wu[c] * psf->re[row + c];
-                            si += wu[c] * psf->im[row + c];
-                        }
-                        fr += twy[b] * sr;
-                        fi += twy[b] * si;
-                    }
-                    double rr = runr[i], ri = runi[i];
-                    bins[2 * i] += rr * fr - ri * fi;
-                    bins[2 * i + 1] += rr * fi + ri * fr;
-                }
+                psf_interp(psf, tix, twx, tiy, twy, ua, n, pint, pcap, runr, runi, bins);
             }
         }
     }
@@ -948,6 +1737,7 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
         return wf_error(WF_ERR_INPUT, "profile: PSF prepared for %g arcsec pixels, drawing "
                         "at %g", psf->pixel_scale, w->acc.pixel_scale);
     if (!psf) return draw_nopsf(w, jb, x, y, stamp);
+    (void)wf_profile_simd(-1); /* the kernels, once per process */
     const wf_sersic_table *t = w->sersic;
     const double p = w->acc.pixel_scale;
     grid gd;
@@ -1011,7 +1801,9 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
     if (uk > lim) uk = lim;
     gd.u = us > uk ? us : uk;
 
-    phase_line(gd.dk * gd.dx, gd.u, w->ex);
+    for (int v = 0; v <= gd.u; v++) w->rim[v] = (int)floor(sqrt((double)gd.u * gd.u - (double)v * v));
+    gd.rim = w->rim;
+    phase_line_to(gd.dk * gd.dx, gd.u, w->ex, w->ex + w->cap_line, 1);
     phase_line(gd.dk * gd.dy, gd.u, w->ey);
     if (gd.mode == MODE_INTERP) {
         double ratio = (double)psf->table_fft / gd.m;
@@ -1022,8 +1814,21 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
     }
 
     memset(w->fft, 0, (size_t)gd.m * (gd.m + 2) * sizeof(double));
-    if (!gd.nk) {
-        fold_pass(w, jb, psf, &gd, us, -1, 0);
+    /* knots: the inner ones on a lattice where that costs less, the outer few (whose extent
+     * would make the lattice fine) and all others summed directly */
+    lattice lat;
+    int nd = gd.nk; /* summed directly: the first nd of knot_box */
+    w->knot_last[0] = w->knot_last[1] = 0;
+    if (gd.nk && w->knot_method != WF_KNOTS_DIRECT && knot_plan(w, &gd, p, &lat)) {
+        nd = gd.nk - lat.nk;
+        lat_build(w, jb, &gd, &lat);
+        gd.lat = &lat;
+        w->knot_last[0] = lat.r;
+        w->knot_last[1] = lat.w;
+    }
+    w->knot_last[2] = nd;
+    if (!nd) {
+        fold_pass(w, jb, psf, &gd, us, gd.lat ? 0 : -1, 0);
     } else {
         /* as many knots per pass as the phase-line buffers hold (all of them but for the
          * largest boxes): each pass multiplies by the PSF once */
@@ -1032,15 +1837,16 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
         size_t room = (size_t)WF_PROFILE_KNOT_BLOCK * (size_t)w->cap_line / gd.ks;
         int per = room > (size_t)WF_PROFILE_MAX_KNOTS ? WF_PROFILE_MAX_KNOTS : (int)room;
         if (per < 1) per = 1;
-        for (int k0 = 0; k0 < gd.nk; k0 += per) {
-            int nkb = gd.nk - k0 < per ? gd.nk - k0 : per;
+        for (int k0 = 0; k0 < nd; k0 += per) {
+            int nkb = nd - k0 < per ? nd - k0 : per;
             for (int j = 0; j < nkb; j++) {
                 const double *kp = gd.kpos + 2 * (size_t)(k0 + j);
                 double *lx = w->kx + 2 * (size_t)j * gd.ks, *ly = w->ky + 2 * (size_t)j * gd.ks;
                 phase_line_to(gd.dk * (kp[0] + gd.dx), gd.u, lx, lx + gd.ks, 1);
                 phase_line_to(gd.dk * (kp[1] + gd.dy), gd.u, ly, ly + gd.ks, 1);
             }
-            fold_pass(w, jb, psf, &gd, us, k0, nkb); /* the smooth part rides with pass 0 */
+            /* the smooth part and the lattice ride with pass 0 */
+            fold_pass(w, jb, psf, &gd, us, k0, nkb);
         }
     }
     fftw_execute_dft_c2r((fftw_plan)w->plans[mi], (fftw_complex *)w->fft, w->fft);
@@ -1066,6 +1872,8 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
     stamp->fft = gd.m;
     return WF_OK;
 }
+
+void wf_profile_knot_method(wf_profile_work *work, int method) { work->knot_method = method; }
 
 wf_status wf_profile_work_tune(wf_profile_work *work, double flux_fraction,
                                double folding_threshold, double kvalue_accuracy)

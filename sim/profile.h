@@ -5,13 +5,15 @@
  * Method (measurements in docs/OPTICS.md "Profiles").
  *  - With a PSF, in Fourier space. The product profile(k) x PSF(k) x pixel(k) x shift(k) is
  *    evaluated analytically (exponential: (1 + k^2 r0^2)^-3/2; de Vaucouleurs: its Hankel
- *    transform, tabulated once; knots: sums of phases; PSF x pixel: a table made once per
- *    PSF image) on the fine k grid of the FFT box out to the PSF's band limit, folded into
- *    the box's Nyquist band (which samples the pixel-convolved image exactly although
- *    Roman's PSF is undersampled by 0.11" pixels), and inverse-FFT'd once (FFTW). Flux,
- *    sub-pixel position and shear are exact; the errors are the light from beyond the FFT
- *    box that wraps in (knob folding_threshold) and the Fourier modes dropped below
- *    kvalue_accuracy.
+ *    transform, tabulated once; knots: sums of phases, most of them on a coarse lattice
+ *    and interpolated; PSF x pixel: a table made once per PSF image) on the fine k grid of
+ *    the FFT box out to the PSF's band limit, folded into the box's Nyquist band (which
+ *    samples the pixel-convolved image exactly although Roman's PSF is undersampled by
+ *    0.11" pixels), and inverse-FFT'd once (FFTW). Flux, sub-pixel position and shear are
+ *    exact; the errors are the light from beyond the FFT box that wraps in (knob
+ *    folding_threshold), the Fourier modes dropped below kvalue_accuracy, and the knot
+ *    lattice's interpolation (~1e-9 of the peak). Stamps do not depend on the CPU's vector
+ *    width.
  *  - Without a PSF (psf NULL: tests, the GalSim no-PSF references), in real space: each
  *    pixel is the exact integral of the profile over it (polar fans around the cusp,
  *    Gauss-Legendre elsewhere), ~1e-10 of the flux; a Fourier series of the bare cusp would
@@ -109,7 +111,8 @@ typedef struct wf_profile_work {
     int sizes[48];         /* FFT sides, ascending (see wf_profile_work_init) */
     void *plans[48];       /* fftw_plan: in-place complex-to-real, one per side */
     double *fft;           /* in-place buffer for the largest side */
-    double *ex, *ey;       /* per-draw phase lines, complex interleaved, cap_line entries */
+    double *ex, *ey;       /* per-draw phase lines, cap_line entries: ex real parts then
+                              imaginary ones cap_line further, ey complex interleaved */
     int cap_line;
     double *kx, *ky;       /* knot phase lines: WF_PROFILE_KNOT_BLOCK x cap_line entries */
     int *ix, *iy;          /* bicubic taps for FFT sides that do not divide psf_table_fft */
@@ -117,11 +120,18 @@ typedef struct wf_profile_work {
     double *run;           /* one alias run of a row: complex, max_fft / 2 + 1 entries */
     double *knot_pos;      /* 2 x WF_PROFILE_MAX_KNOTS, arcsec after shear and rotation */
     double *knot_box;      /* the knots of one draw that lie inside its FFT box */
+    double *lat;           /* the knots' coarse lattice (sim/profile.c), cap_lat doubles */
+    size_t cap_lat;
+    double *ring;          /* its rows interpolated along u, and a mirrored row */
+    int *rim;              /* per draw: the extent of each row of the fine grid */
+    int knot_method;       /* WF_KNOTS_* (sim/profile_int.h) */
+    int knot_last[3];      /* the last draw's knots: lattice step (0: none), its taps, and
+                              the knots summed directly */
     const struct wf_sersic_table *sersic;
 } wf_profile_work;
 #define WF_PROFILE_KNOT_BLOCK 16
 
-/* Bytes the work buffers take from an arena for these knobs (12.9 MB at the defaults,
+/* Bytes the work buffers take from an arena for these knobs (15.7 MB at the defaults,
  * most of it the max_fft^2 FFT buffer). FFT sides are 2^a and 3 * 2^a from min_fft to
  * max_fft; with a PSF, sides up to psf_table_fft are used only if they divide it. */
 wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes);

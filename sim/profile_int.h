@@ -83,4 +83,31 @@ double wf_gamma_p_int(int a, double x);
 /* Half-light radius over scale radius: P(2n, b) = 1/2. */
 double wf_sersic_b(int n);
 
+/* Knots in Fourier space (sim/profile.c). The direct sum costs one complex multiply-add per
+ * knot and Fourier sample. The lattice method sums the knots only on a coarse lattice
+ * (every r-th sample per axis, which still resolves their transform because they occupy a
+ * small part of the FFT box) and interpolates the fine samples with a compact kernel
+ * (w taps per axis); each knot's weight is divided by the kernel's transform at its
+ * position, which makes the interpolation exact up to the kernel's aliasing, ~1e-9 of a
+ * stamp's peak (tests/test_profile.c bounds it against the direct sum). AUTO takes the
+ * lattice, with the few farthest knots summed directly, wherever that costs less; DIRECT
+ * is the reference; LATTICE puts every knot on it (when the work's buffers hold it). Each
+ * draw records what it did in work->knot_last. */
+enum { WF_KNOTS_AUTO, WF_KNOTS_DIRECT, WF_KNOTS_LATTICE };
+struct wf_profile_work;
+void wf_profile_knot_method(struct wf_profile_work *work, int method);
+
+/* The Fourier-space draw's per-sample kernels come in scalar, 2-, 4- (AVX2) and 8-lane
+ * (AVX-512) versions which give the same bits (lanes never mix, no fused multiply-adds);
+ * the widest the CPU has is taken. This selects at most `lanes` (< 0: only reports) and
+ * returns the lanes in use. For tests and benchmarks: not to be called while drawing. */
+int wf_profile_simd(int lanes);
+
+/* The lattice kernel psi(s) = I0(beta sqrt(1 - (2 s / w)^2)) - 1 on |s| <= w / 2 (zero at
+ * the ends, so its transform falls as 1/x^2), and that transform over w Delta:
+ * sinh(z) / z - sin(a) / a, z = sqrt(beta^2 - a^2), valid for |a| < beta. */
+double wf_bessel_i0(double x);
+double wf_knot_kernel(double s, int w, double beta);
+double wf_knot_kernel_ft(double a, double beta);
+
 #endif

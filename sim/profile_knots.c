@@ -107,3 +107,27 @@ wf_status wf_profile_enclosed(int sersic_n, double hlr, double r, double *fracti
     }
     return WF_OK;
 }
+
+double wf_bessel_i0(double x)
+{
+    /* the power series: every term positive, so no cancellation at any x */
+    double q = 0.25 * x * x, term = 1.0, sum = 1.0;
+    for (int k = 1; k < 500 && term > 1e-18 * sum; k++) {
+        term *= q / ((double)k * k);
+        sum += term;
+    }
+    return sum;
+}
+
+double wf_knot_kernel(double s, int w, double beta)
+{
+    double t = 2.0 * s / w, t2 = 1.0 - t * t;
+    return t2 > 0.0 ? wf_bessel_i0(beta * sqrt(t2)) - 1.0 : 0.0;
+}
+
+double wf_knot_kernel_ft(double a, double beta)
+{
+    double z = sqrt((beta - a) * (beta + a));
+    double sinc = fabs(a) < 1e-4 ? 1.0 - a * a / 6.0 : sin(a) / a;
+    return sinh(z) / z - sinc;
+}

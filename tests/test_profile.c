@@ -14,7 +14,9 @@
  *  - centring, sheared and rotated ellipticity from unweighted moments;
  *  - stiff cases: half-light radius 0.005" and 20", e = 0.7 at six angles, a magnitude-35
  *    flux, the bulge cusp against exact pixel integrals, bad input;
- *  - a stamp drawn in pieces equals the whole, bit for bit.
+ *  - a stamp drawn in pieces equals the whole, bit for bit;
+ *  - the knot lattice against the direct sum over knots; the drawing kernels' scalar and
+ *    vector versions give the same bits.
  *
  * The PSF input for the GalSim comparison. GalSim's galaxies were convolved with its own PSF
  * object, of which the reference holds two images: OVER4 (0.0275", no pixel, a 3.52" box
@@ -1296,6 +1298,186 @@ START_TEST(test_pieces_identical)
 }
 END_TEST
 
+/* ------------------------------------------------------------------ knots in Fourier space */
+
+/* Draws g at (x, y) with the knots summed by `method` into a new stamp of the given bounds. */
+static wf_stamp draw_knots(ctx *c, const wf_galaxy *g, double x, double y, const wf_stamp *b,
+                           int method)
+{
+    wf_profile_knot_method(&c->work, method);
+    wf_stamp s = stamp_new(b->x0, b->y0, b->nx, b->ny);
+    ck_assert_msg(wf_profile_draw_galaxy(&c->work, g, &c->psf, x, y, &s) == WF_OK, "%s",
+                  wf_error_message());
+    return s;
+}
+
+/* The knot lattice (sim/profile.c "knot lattice") against the direct sum over knots, which
+ * it replaces where it is cheaper: the same stamps to its aliasing error, asserted 1e-7 of
+ * the peak (reached 2e-9) and 1e-8 of the flux (reached 2e-10); with the planner's choice (some far knots
+ * summed directly, the rest on the lattice) and with every knot forced onto the lattice.
+ * Cases: the GalSim scene's 100 knots on small, median, large (an interpolated PSF table)
+ * and sheared galaxies, all the disk's allowed 25% in knots, a hand-placed far knot, and
+ * 1000 knots in a work whose buffers take them in several blocks. */
+START_TEST(test_knot_lattice)
+{
+    wf_psf_image img;
+    double *native = NULL;
+    double *psfpix = reference_psf(&img, &native);
+    const char *which = "GalSim Y106";
+    if (!psfpix) {
+        psfpix = gaussian_psf(128, 0.07, &img);
+        which = "Gaussian 0.07\"";
+    }
+    wf_profile_accuracy acc, small;
+    wf_profile_accuracy_default(&acc);
+    small = acc;
+    small.max_fft = 384;
+    ctx c, cs;
+    ctx_open(&c, &acc, &img);
+    ctx_open(&cs, &small, &img);
+    double far_xy[2 * 100];
+    struct {
+        const char *what;
+        double hlr, bf, e1, e2, kf;
+        int nk, far, blocks;
+        double x, y;
+    } cases[] = {
+        {"median, 100 knots", 0.32, 0.1, 0.1, -0.05, 0.2, 100, 0, 0, 100.3, 200.6},
+        {"small, 100 knots", 0.12, 0.3, 0.0, 0.0, 0.25, 100, 0, 0, 10.5, 10.5},
+        {"large, 100 knots", 1.2, 0.3, 0.2, 0.1, 0.15, 100, 0, 0, 500.71, 400.02},
+        {"sheared e 0.6, 100 knots", 0.4, 0.2, 0.3, -0.52, 0.2, 100, 0, 0, 33.9, 71.45},
+        {"no bulge, 25% in 100 knots", 0.3, 0.0, 0.05, 0.0, 0.25, 100, 0, 0, 7.0, 8.0},
+        {"30 knots", 0.5, 0.2, -0.1, 0.2, 0.2, 30, 0, 0, 1000.2, 3000.9},
+        {"one knot 2.5\" out", 0.3, 0.1, 0.0, 0.1, 0.2, 100, 1, 0, 64.4, 64.6},
+        {"1000 knots, max_fft 384", 0.3, 0.2, 0.1, 0.1, 0.25, 1000, 0, 1, 50.5, 60.25},
+    };
+    int n = (int)(sizeof cases / sizeof *cases), lattice_used = 0, forced_used = 0;
+    double worst_all = 0.0;
+    printf("knot lattice against the direct sum, PSF %s:\n", which);
+    for (int k = 0; k < n; k++) {
+        ctx *cc = cases[k].blocks ? &cs : &c;
+        wf_galaxy g = galaxy(1000.0, cases[k].bf, cases[k].hlr, 0.5 * cases[k].hlr,
+                             cases[k].e1, cases[k].e2);
+        g.id = 100 + (uint32_t)k;
+        g.knot_seed = 5;
+        g.n_knots = cases[k].nk;
+        g.knot_frac = cases[k].kf;
+        if (cases[k].far) {
+            ck_assert(wf_profile_knots(&g, far_xy) == WF_OK);
+            far_xy[0] = 2.5;
+            far_xy[1] = -0.4;
+            g.knot_xy = far_xy;
+        }
+        wf_stamp b;
+        ck_assert(wf_profile_galaxy_bounds(&cc->work, &g, &cc->psf, cases[k].x, cases[k].y, &b,
+                                           NULL) == WF_OK);
+        wf_stamp d = draw_knots(cc, &g, cases[k].x, cases[k].y, &b, WF_KNOTS_DIRECT);
+        ck_assert(cc->work.knot_last[0] == 0 && cc->work.knot_last[2] == cases[k].nk);
+        wf_stamp a = draw_knots(cc, &g, cases[k].x, cases[k].y, &b, WF_KNOTS_AUTO);
+        int r = cc->work.knot_last[0], w = cc->work.knot_last[1], nd = cc->work.knot_last[2];
+        lattice_used += r > 0;
+        wf_stamp f = draw_knots(cc, &g, cases[k].x, cases[k].y, &b, WF_KNOTS_LATTICE);
+        /* every knot on the lattice, unless its buffers cannot hold the lattice so fine */
+        ck_assert_msg(cc->work.knot_last[0] > 0 ? cc->work.knot_last[2] == 0
+                                                : cc->work.knot_last[2] == cases[k].nk,
+                      "%s: %d knots left to the direct sum", cases[k].what,
+                      cc->work.knot_last[2]);
+        forced_used += cc->work.knot_last[0] > 0;
+        double peak = 0.0, da = 0.0, df = 0.0;
+        for (int i = 0; i < b.nx * b.ny; i++) {
+            peak = fmax(peak, d.pix[i]);
+            da = fmax(da, fabs(a.pix[i] - d.pix[i]));
+            df = fmax(df, fabs(f.pix[i] - d.pix[i]));
+        }
+        double fa = fabs(a.sum - d.sum) / d.sum, ff = fabs(f.sum - d.sum) / d.sum;
+        printf("  %-26s fft %4d: planned r %d w %2d, %2d direct: %.1e of the peak, flux %.1e; "
+               "all on the lattice (r %d w %2d, 0: no room): %.1e, %.1e\n",
+               cases[k].what, d.fft, r, w, nd, da / peak, fa, cc->work.knot_last[0],
+               cc->work.knot_last[1], df / peak, ff);
+        ck_assert_msg(a.fft == d.fft && f.fft == d.fft, "%s: FFT sides differ", cases[k].what);
+        ck_assert_msg(da < 1e-7 * peak && df < 1e-7 * peak, "%s: %.3g, %.3g of the peak",
+                      cases[k].what, da / peak, df / peak);
+        ck_assert_msg(fa < 1e-8 && ff < 1e-8, "%s: flux %.3g, %.3g", cases[k].what, fa, ff);
+        worst_all = fmax(worst_all, fmax(da, df) / peak);
+        free(d.pix);
+        free(a.pix);
+        free(f.pix);
+    }
+    printf("  worst %.1e of the peak\n", worst_all);
+    /* the planner must take the lattice for the scene's 100-knot galaxies */
+    ck_assert_msg(lattice_used >= 6 && forced_used >= 6, "the lattice was taken for %d and %d "
+                  "cases only", lattice_used, forced_used);
+    wf_profile_knot_method(&c.work, WF_KNOTS_AUTO);
+    ctx_close(&c);
+    ctx_close(&cs);
+    free(psfpix);
+    free(native);
+}
+END_TEST
+
+/* The per-sample kernels in scalar, 2-, 4- and 8-lane versions (as far as the CPU has them)
+ * give the same bits: a stamp does not depend on the machine's vector width. */
+START_TEST(test_simd_identical)
+{
+    wf_psf_image img;
+    double *native = NULL;
+    double *psfpix = reference_psf(&img, &native);
+    if (!psfpix) psfpix = gaussian_psf(128, 0.07, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    int full = wf_profile_simd(-1);
+    struct {
+        double hlr, bf, kf;
+        int nk, method;
+    } cases[] = {{0.32, 0.1, 0.2, 100, WF_KNOTS_AUTO},   {0.32, 0.1, 0.2, 100, WF_KNOTS_DIRECT},
+                 {1.2, 0.3, 0.15, 100, WF_KNOTS_AUTO},   {0.2, 0.5, 0.0, 0, WF_KNOTS_AUTO},
+                 {0.05, 0.0, 0.25, 10, WF_KNOTS_AUTO},   {0.0, 0.0, 0.0, -1, WF_KNOTS_AUTO}};
+    int n = (int)(sizeof cases / sizeof *cases);
+    wf_stamp ref[6];
+    static const int widths[] = {0, 2, 4, 8};
+    int tried = 0;
+    for (int iw = 0; iw < 4; iw++) {
+        int used = wf_profile_simd(widths[iw]);
+        if (used != widths[iw]) continue; /* not on this CPU */
+        tried++;
+        for (int k = 0; k < n; k++) {
+            wf_stamp s;
+            double x = 200.37 + k, y = 100.71;
+            wf_galaxy g = galaxy(500.0, cases[k].bf, cases[k].hlr, 0.5 * cases[k].hlr, 0.2, -0.1);
+            g.n_knots = cases[k].nk > 0 ? cases[k].nk : 0;
+            g.knot_frac = cases[k].kf;
+            g.knot_seed = 9;
+            if (cases[k].nk < 0)
+                ck_assert(wf_profile_point_bounds(&c.work, &c.psf, x, y, &s, NULL) == WF_OK);
+            else
+                ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, x, y, &s, NULL) == WF_OK);
+            s = stamp_new(s.x0, s.y0, s.nx, s.ny);
+            wf_profile_knot_method(&c.work, cases[k].method);
+            if (cases[k].nk < 0)
+                ck_assert(wf_profile_draw_point(&c.work, &c.psf, 500.0, x, y, &s) == WF_OK);
+            else
+                ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, x, y, &s) == WF_OK);
+            if (tried == 1) {
+                ref[k] = s;
+                continue;
+            }
+            ck_assert_msg(memcmp(s.pix, ref[k].pix, sizeof(double) * s.nx * s.ny) == 0,
+                          "case %d: %d-lane kernels differ from scalar", k, widths[iw]);
+            free(s.pix);
+        }
+    }
+    printf("drawing kernels: scalar and %d vector widths up to %d lanes give the same bits\n",
+           tried - 1, full);
+    for (int k = 0; k < n; k++) free(ref[k].pix);
+    wf_profile_simd(8);
+    ctx_close(&c);
+    free(psfpix);
+    free(native);
+}
+END_TEST
+
 /* FFT sides that do not divide psf_table_fft read the PSF table through bicubic
  * interpolation: its error, against the same draw with an exact table. */
 START_TEST(test_psf_table_interpolation)
@@ -1326,6 +1508,29 @@ START_TEST(test_psf_table_interpolation)
     }
     printf("PSF table interpolation (side 256 from a 192 table): worst pixel %.2e of the "
            "peak, flux %+.1e\n", worst / peak, s1.sum - s2.sum);
+    ck_assert_msg(worst / peak < 1e-3, "interpolated table: %.3g of the peak", worst / peak);
+    free(s1.pix);
+    free(s2.pix);
+    ctx_close(&c1);
+    ctx_close(&c2);
+    /* a largest side (128) below the table's that does not divide it: the table is read
+     * at 1.5 steps per sample, more columns per row than samples; against a 384 table */
+    a1.max_fft = a2.max_fft = 128;
+    a2.psf_table_fft = 384;
+    ctx_open(&c1, &a1, &img);
+    ctx_open(&c2, &a2, &img);
+    s1 = stamp_new(0, 0, 127, 127);
+    s2 = stamp_new(0, 0, 127, 127);
+    ck_assert(wf_profile_draw_galaxy(&c1.work, &g, &c1.psf, 63.0, 63.0, &s1) == WF_OK);
+    ck_assert(wf_profile_draw_galaxy(&c2.work, &g, &c2.psf, 63.0, 63.0, &s2) == WF_OK);
+    ck_assert_msg(s1.fft == 128 && s2.fft == 128, "sides %d %d", s1.fft, s2.fft);
+    worst = peak = 0;
+    for (int i = 0; i < 127 * 127; i++) {
+        worst = fmax(worst, fabs(s1.pix[i] - s2.pix[i]));
+        peak = fmax(peak, s2.pix[i]);
+    }
+    printf("PSF table interpolation (side 128 from a 192 table): worst pixel %.2e of the "
+           "peak\n", worst / peak);
     ck_assert_msg(worst / peak < 1e-3, "interpolated table: %.3g of the peak", worst / peak);
     free(s1.pix);
     free(s2.pix);
@@ -1532,6 +1737,8 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_pieces_identical);
     tcase_add_test(ind, test_psf_table_interpolation);
     tcase_add_test(ind, test_psf_any_sampling);
+    tcase_add_test(ind, test_knot_lattice);
+    tcase_add_test(ind, test_simd_identical);
     suite_add_tcase(s, ind);
     TCase *stiff = tcase_create("stiff");
     tcase_set_timeout(stiff, 120);
