@@ -27,6 +27,7 @@ typedef struct object {
     double x, y;      /* 0-based pixel */
     double ra, dec, mag, flux;
     wf_galaxy g;      /* galaxies: pixel-frame shape */
+    int wide;         /* bright point source: the wide PSF */
 } object;
 
 typedef struct thread_state {
@@ -57,6 +58,14 @@ struct wf_scene {
     wf_arena psf_arena;
     wf_profile_psf ppsf;
     wf_profile_accuracy acc;
+    /* the wide PSF of bright point sources, built only when the scene has one */
+    wf_psf *psf_wide;
+    double *psf_wide_pix;
+    wf_psf_image psf_wide_image;
+    void *psf_wide_memory;
+    wf_arena psf_wide_arena;
+    wf_profile_psf ppsf_wide;
+    wf_profile_accuracy acc_wide;
     object *obj;
     size_t nobj;
     wf_render_object *robj;
@@ -81,6 +90,7 @@ void wf_scene_setup_default(wf_scene_setup *s)
     s->psf_oversample = 4;
     s->psf_nlambda = 1;
     s->stray_light = 0.1;
+    s->bright_mag = 15.0;
     s->psf_size = 256; /* 7" at 4x: drawing cost grows with its area (docs/BENCHMARKS.md) */
     s->flux_fraction = 0.995;
     s->pool_bytes = (size_t)32 << 20; /* float stamps: as many as 64 MiB of doubles held */
@@ -199,7 +209,8 @@ static wf_status draw_object(void *ctx, const wf_render_object *ro, int ya, int 
     wf_stamp st = {ro->x0, ro->y0, ro->nx, ro->ny, buf, 0, 0, 0};
     wf_status s = o->kind == OBJ_GALAXY
                       ? wf_profile_draw_galaxy(&ts->work, &o->g, &ts->scene->ppsf, o->x, o->y, &st)
-                      : wf_profile_draw_point(&ts->work, &ts->scene->ppsf, o->flux, o->x, o->y, &st);
+                      : wf_profile_draw_point(&ts->work, o->wide ? &ts->scene->ppsf_wide : &ts->scene->ppsf,
+                                              o->flux, o->x, o->y, &st);
     if (s) return s;
     if (!full) memcpy(out, buf + (size_t)(ya - ro->y0) * ro->nx, (size_t)(yb - ya) * ro->nx * sizeof *out);
     return WF_OK;
@@ -290,6 +301,47 @@ static wf_status add_objects(wf_scene *s, const wf_catalog *cat, obj_kind kind, 
         }
         s->nobj++;
     }
+    return WF_OK;
+}
+
+/* The wide PSF of bright point sources: four times the image side (28" at the default
+ * sampling), from a pupil binned no coarser than 4 so that its period (46" at Y106) holds the
+ * image, with a PSF table of period three times the image so that its halo does not fold.
+ * Normalised like the narrow one. Built once, and only when a bright source is drawn. */
+static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const double *lams, const double *ws,
+                                int nl, double band_limit)
+{
+    double t0 = now();
+    const wf_scene_setup *setup = &s->setup;
+    wf_psf_optics optics = *narrow;
+    if (optics.pupil_bin > 4) optics.pupil_bin = 4;
+    wf_status st = wf_psf_build_optics(&optics, lams, ws, nl, &s->psf_wide);
+    if (st) return st;
+    int n = 4 * setup->psf_size;
+    if (!(s->psf_wide_pix = malloc((size_t)n * n * sizeof *s->psf_wide_pix)))
+        return wf_error(WF_ERR_NOMEM, "scene: wide PSF image of %d x %d", n, n);
+    wf_psf_draw_opts d;
+    wf_psf_draw_opts_default(&d);
+    d.nx = d.ny = n;
+    d.scale = WF_PSF_PIXEL_SCALE / setup->psf_oversample;
+    d.cx = d.cy = (n - 1) / 2.0;
+    d.pixel = 0;
+    d.jitter = setup->jitter;
+    d.diffusion = setup->diffusion;
+    if ((st = wf_psf_draw(s->psf_wide, &d, s->psf_wide_pix))) return st;
+    double psum = 0.0;
+    for (size_t k = 0; k < (size_t)n * n; k++) psum += s->psf_wide_pix[k];
+    for (size_t k = 0; k < (size_t)n * n; k++) s->psf_wide_pix[k] /= psum;
+    s->psf_wide_image = (wf_psf_image){n, d.scale, s->psf_wide_pix, band_limit};
+    s->acc_wide = s->acc;
+    s->acc_wide.psf_table_fft = 3 * (int)ceil(n / (double)setup->psf_oversample / 2.0) * 2;
+    size_t keep, scratch;
+    if ((st = wf_profile_psf_need(&s->psf_wide_image, &s->acc_wide, &keep, &scratch))) return st;
+    size_t bytes = keep + scratch + 4096;
+    if (!(s->psf_wide_memory = malloc(bytes))) return wf_error(WF_ERR_NOMEM, "scene: wide PSF table");
+    wf_arena_init(&s->psf_wide_arena, s->psf_wide_memory, bytes, "scene wide PSF arena");
+    if ((st = wf_profile_psf_init(&s->ppsf_wide, &s->psf_wide_image, &s->acc_wide, &s->psf_wide_arena))) return st;
+    s->stats.wide_psf_seconds = now() - t0;
     return WF_OK;
 }
 
@@ -398,6 +450,14 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     if ((st = add_objects(s, gal, OBJ_GALAXY, &cap)) || (st = add_objects(s, stars, OBJ_STAR, &cap)) ||
         (st = add_sne(s, &cap)))
         goto bad;
+    for (size_t i = 0; i < s->nobj; i++) {
+        object *o = &s->obj[i];
+        if (o->kind != OBJ_GALAXY && o->flux > 0 && o->mag < setup->bright_mag) {
+            o->wide = 1;
+            s->stats.bright++;
+        }
+    }
+    if (s->stats.bright && (st = build_wide_psf(s, &optics, lams, ws, nl, band_limit))) goto bad;
     if (!(s->robj = malloc((s->nobj ? s->nobj : 1) * sizeof *s->robj)) ||
         !(s->ts = calloc((size_t)setup->threads, sizeof *s->ts))) {
         st = wf_error(WF_ERR_NOMEM, "scene: out of memory");
@@ -420,7 +480,8 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
         if (o->kind == OBJ_SN && !(o->flux > 0)) continue; /* nothing to draw; truth only */
         wf_stamp b;
         st = o->kind == OBJ_GALAXY ? wf_profile_galaxy_bounds(&s->ts[0].work, &o->g, &s->ppsf, o->x, o->y, &b, NULL)
-                                   : wf_profile_point_bounds(&s->ts[0].work, &s->ppsf, o->x, o->y, &b, NULL);
+                                   : wf_profile_point_bounds(&s->ts[0].work, o->wide ? &s->ppsf_wide : &s->ppsf,
+                                                             o->x, o->y, &b, NULL);
         if (st) goto bad;
         uint64_t id = (uint64_t)object_id(s, o);
         double rel = o->kind == OBJ_SN ? setup->sne[o->row].dlnf_dt : 0.0;
@@ -466,6 +527,9 @@ void wf_scene_destroy(wf_scene *s)
     free(s->psf_memory);
     free(s->psf_pix);
     wf_psf_free(s->psf);
+    free(s->psf_wide_memory);
+    free(s->psf_wide_pix);
+    wf_psf_free(s->psf_wide);
     free(s->area);
     free(s->bp);
     free(s);

@@ -47,6 +47,10 @@ typedef struct wf_scene_setup {
     int threads;            /* renderers to prepare [1] */
     int sky_on;             /* add the sky [1] */
     double stray_light;     /* zodiacal light x (1 + this) [0.1, SPEC 2 / GalSim] */
+    double bright_mag;      /* point sources brighter than this AB magnitude are drawn with a
+                             * wide PSF (4x the image side, pupil_bin 4 or finer: the halo and
+                             * diffraction spikes to ~14"), built only when one is present
+                             * [15; below -50: never] */
     const wf_scene_sn *sne; /* supernovae (must outlive the scene) [none] */
     size_t nsne;
 } wf_scene_setup;
@@ -57,6 +61,8 @@ typedef struct wf_scene_stats {
     double zodi;               /* e-/s/arcsec^2 at the SCA centre */
     double psf_lambda_nm;
     double psf_image_sum;      /* the PSF image's share of the light before normalising */
+    long bright;               /* point sources drawn with the wide PSF */
+    double wide_psf_seconds;   /* building it (0: not built) */
     double build_seconds;
 } wf_scene_stats;
 

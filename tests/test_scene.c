@@ -10,6 +10,8 @@
 
 #include "sim/bandpass.h"
 #include "sim/catalog.h"
+#include "sim/psf.h"
+#include "sim/pupil.h"
 #include "sim/scene.h"
 #include "sim/wcs.h"
 #include "tests/testutil.h"
@@ -270,6 +272,84 @@ START_TEST(psf_modes_chromatic_jitter_diffusion)
 }
 END_TEST
 
+/* A magnitude-10 star with the wide PSF: its stamp reaches past the narrow PSF image's 3.5"
+ * and the light in the annulus from 4" to 90% of the stamp's half-width (halo and spikes) is
+ * the PSF module's own (a pupil_bin 4 image with the pixel, drawn directly at 0.11", 28"
+ * wide) to 5%; without it (psf.bright_mag -99) the annulus stays dark. Flux is kept. */
+START_TEST(bright_star_wide_psf)
+{
+    const double x[1] = {128.3}, y[1] = {127.6}, mag[1] = {10};
+    char path[4200];
+    wf_scene_setup ss;
+    setup_small(&ss);
+    snprintf(path, sizeof path, "%s/bright10.csv", wf_test_tmpdir());
+    write_catalog(path, &ss, 0, 1, x, y, mag);
+    wf_catalog stars;
+    ck_assert_int_eq(wf_catalog_read_stars(path, &stars), WF_OK);
+    wf_bandpass bp;
+    wf_bandpass_load(WF_Y106, NULL, &bp);
+    const double flux = wf_bandpass_countrate_ab(&bp, mag[0]);
+    double ann[2], size[2], rout = 0;
+    for (int m = 0; m < 2; m++) {
+        setup_small(&ss);
+        ss.bright_mag = m ? -99.0 : 15.0;
+        wf_scene *scene;
+        ck_assert_msg(wf_scene_create(&ss, NULL, &stars, &scene) == WF_OK, "%s", wf_error_message());
+        wf_scene_stats st;
+        wf_scene_get_stats(scene, &st);
+        ck_assert_int_eq(st.bright, m ? 0 : 1);
+        wf_scene_object info;
+        int x0, y0, nx, ny;
+        double *pix;
+        ck_assert_int_eq(wf_scene_draw_object(scene, 0, &info, &x0, &y0, &nx, &ny, &pix), WF_OK);
+        double sum = 0, a = 0;
+        if (m == 0) rout = 0.9 * 0.5 * (nx < ny ? nx : ny) * 0.11;
+        for (int j = 0; j < ny; j++)
+            for (int i = 0; i < nx; i++) {
+                double r = hypot(x0 + i - x[0], y0 + j - y[0]) * 0.11, v = pix[(size_t)j * nx + i];
+                sum += v;
+                if (r >= 4.0 && r < rout) a += v;
+            }
+        ck_assert_msg(fabs(sum / flux - 1) < 6e-3, "mode %d: stamp holds %.5f of the flux", m, sum / flux);
+        ann[m] = a / flux;
+        size[m] = nx;
+        free(pix);
+        wf_scene_destroy(scene);
+    }
+    /* the same PSF drawn by the PSF module at the detector pixel, 28" wide */
+    wf_psf_optics o;
+    wf_psf_optics_default(&o);
+    o.sca = 1;
+    o.pupil_bin = 4;
+    ck_assert_int_eq(wf_pupil_group_of_filter("Y106", &o.group), WF_OK);
+    double lam = bp.lambda_eff_nm, w = 1.0;
+    wf_psf *psf;
+    ck_assert_int_eq(wf_psf_build_optics(&o, &lam, &w, 1, &psf), WF_OK);
+    wf_psf_draw_opts d;
+    wf_psf_draw_opts_default(&d);
+    d.nx = d.ny = 256;
+    d.cx = d.cy = 127.5;
+    double *img = malloc(sizeof(double) * 256 * 256), tot = 0, a = 0;
+    ck_assert_int_eq(wf_psf_draw(psf, &d, img), WF_OK);
+    for (int j = 0; j < 256; j++)
+        for (int i = 0; i < 256; i++) {
+            double r = hypot(i - 127.5, j - 127.5) * 0.11, v = img[j * 256 + i];
+            tot += v;
+            if (r >= 4.0 && r < rout) a += v;
+        }
+    free(img);
+    wf_psf_free(psf);
+    ck_assert_msg(size[0] > 2 * 3.5 / 0.11 && size[0] > size[1] && rout > 4.5, "wide stamp %g px, narrow %g px",
+                  size[0], size[1]);
+    ck_assert_msg(fabs(ann[0] / (a / tot) - 1) < 0.05, "annulus 4\"-%.1f\": scene %.3e of the flux, PSF module %.3e", rout,
+                  ann[0], a / tot);
+    ck_assert_msg(ann[1] < 0.01 * ann[0], "narrow PSF: %.3e of the flux in the annulus", ann[1]);
+    printf("bright star: wide stamp %.0f px (narrow %.0f), annulus 4\"-%.1f\" holds %.3e of the flux (PSF module "
+           "%.3e)\n", size[0], size[1], rout, ann[0], a / tot);
+    wf_catalog_free(&stars);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("scene");
@@ -279,6 +359,7 @@ static Suite *suite(void)
     tcase_add_test(tc, psf_modes_chromatic_jitter_diffusion);
     tcase_add_test(tc, galaxies_edges_and_extremes);
     tcase_add_test(tc, bright_star_within_budget);
+    tcase_add_test(tc, bright_star_wide_psf);
     tcase_add_test(tc, empty_scene_is_sky);
     suite_add_tcase(s, tc);
     return s;

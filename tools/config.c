@@ -212,6 +212,10 @@ static const key_desc keys[] = {
      .doc = "Pointing jitter, Gaussian sigma per axis (0: off; SPEC 2 gives 0.014)."},
     {.name = "psf.diffusion", .type = KT_DOUBLE, .unit = "pixels", .def = "0", MIN(0), MAX(2), FIELD(psf_diffusion),
      .doc = "Charge diffusion, Gaussian sigma per axis (0: off; SPEC 2 gives 0.1)."},
+    {.name = "psf.bright_mag", .type = KT_DOUBLE, .unit = "mag(AB)", .def = "15", MIN(-100), MAX(40),
+     FIELD(psf_bright_mag),
+     .doc = "Stars and SNe brighter than this are drawn with a wide PSF (28\", pupil_bin 4 or finer: halo and "
+            "spikes), built only when one is present; below -50: never."},
     {.name = "psf.oversample", .type = KT_INT, .unit = "", .def = "4", MIN(2), MAX(8),
      FIELD(psf_oversample), .doc = "PSF image sampling: 0.11 / oversample arcsec."},
     {.name = "scene.sky_rate", .type = KT_DOUBLE, .unit = "e-/pixel/s", MIN(0),

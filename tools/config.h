@@ -39,6 +39,7 @@ typedef struct wf_config {
     int psf_nlambda;               /* psf.nlambda [1: achromatic] */
     double psf_jitter;             /* psf.jitter, arcsec [0] */
     double psf_diffusion;          /* psf.diffusion, pixels [0] */
+    double psf_bright_mag;         /* psf.bright_mag [15] */
     double flux_fraction;          /* scene.flux_fraction [0.995] */
     int sky_on;                    /* scene.sky [true] */
     double stray_light;            /* scene.stray_light [0.1] */

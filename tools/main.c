@@ -241,6 +241,7 @@ static int cmd_stamp(cli *c)
     ss.psf_nlambda = cfg->psf_nlambda;
     ss.jitter = cfg->psf_jitter;
     ss.diffusion = cfg->psf_diffusion;
+    ss.bright_mag = cfg->psf_bright_mag;
     ss.flux_fraction = cfg->flux_fraction;
     ss.sky_on = 0;
     if (!st) st = wf_scene_create(&ss, in.have_gal && in.gal.n ? &in.gal : NULL, in.have_stars && in.stars.n ? &in.stars : NULL, &scene);

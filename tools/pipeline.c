@@ -231,6 +231,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         ss.psf_nlambda = cfg->psf_nlambda;
         ss.jitter = cfg->psf_jitter;
         ss.diffusion = cfg->psf_diffusion;
+        ss.bright_mag = cfg->psf_bright_mag;
         ss.flux_fraction = cfg->flux_fraction;
         ss.sky_on = cfg->sky_on;
         ss.stray_light = cfg->stray_light;
