@@ -120,6 +120,11 @@ START_TEST(run_resume_and_independence)
                          bin, plan, d, log), 0);
     ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones), 3 already done"), "damage not redone");
     assert_same_file(img, keep);
+    /* the survey-level record names the plan, its checksum, the seed and the catalogs */
+    char man[4200];
+    snprintf(man, sizeof man, "%s/a/survey_run.txt", d);
+    ck_assert(wf_test_file_contains(man, plan) && wf_test_file_contains(man, "plan.datasum = ") &&
+              wf_test_file_contains(man, "synthetic field of seed 1") && wf_test_file_contains(man, "exposures = 15:16"));
     /* one product alone, in a fresh folder: the same bytes as in the range run */
     ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s --exposures 16 --scas 7 " SMALL " --out %s/b", bin, plan,
                          d), 0);

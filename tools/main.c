@@ -37,6 +37,7 @@ static const char *usage_text =
     "  expose               one exposure of the configured scene (--stream FILE|- for packets)\n"
     "  assemble FILE|-      packet stream -> FITS (SCI, ERR, DQ, RESULTANTS)\n"
     "  record --rates FILE  write the scene's rate rows to a replay file\n"
+    "  catalog [--seed N]   the synthetic field of that seed -> DIR/synthetic_{galaxies,stars}.fits\n"
     "  stamp --id ID        one catalog object's stamp (PSF, pixel, e-/s) -> DIR/stamp_ID.fits\n"
     "  psf --filter F --sca N --out F   a Roman PSF image (see wfisim psf --help)\n"
     "  accuracy psf|galaxy|scene|all   error against CPU time of every rendering knob\n"
@@ -316,6 +317,7 @@ static int cmd_survey_run(cli *c)
         return 2;
     }
     if ((st = open_injector(c, &opt.sne))) return fail("survey run", st);
+    opt.sne_path = c->sne;
     wf_survey_run_stats stats;
     st = wf_survey_run(&c->cfg, &opt, &stats);
     wf_sn_injector_free(opt.sne);
@@ -324,6 +326,35 @@ static int cmd_survey_run(cli *c)
         fprintf(stderr, "wfisim survey: %ld products rendered (%ld replacing damaged ones), %ld already done; "
                 "%ld supernova images\n", stats.rendered, stats.redone, stats.skipped, stats.sne_drawn);
     return 0;
+}
+
+/* The synthetic field of a seed as catalog files (what the synthetic scene draws from, cell
+ * by cell): DIR/synthetic_galaxies.fits and DIR/synthetic_stars.fits. */
+static int cmd_catalog(cli *c)
+{
+    wf_synth_config sc;
+    wf_synth *syn = NULL;
+    wf_catalog gal, stars;
+    int have = 0;
+    wf_synth_defaults(&sc);
+    sc.seed = c->cfg.seed;
+    char gpath[WF_PATH_MAX + 64], spath[WF_PATH_MAX + 64];
+    snprintf(gpath, sizeof gpath, "%s/synthetic_galaxies.fits", c->cfg.out_dir);
+    snprintf(spath, sizeof spath, "%s/synthetic_stars.fits", c->cfg.out_dir);
+    wf_status st = wf_pipeline_make_dir(c->cfg.out_dir);
+    if (!st) st = wf_synth_create(&sc, &syn);
+    if (!st && !(st = wf_synth_generate_all(syn, &gal, &stars))) have = 1;
+    if (!st) st = wf_catalog_write_fits(gpath, &gal);
+    if (!st) st = wf_catalog_write_fits(spath, &stars);
+    if (!st && !c->cfg.quiet)
+        fprintf(stderr, "wfisim: wrote %s (%zu galaxies) and %s (%zu stars), seed %llu\n", gpath, gal.n, spath,
+                stars.n, (unsigned long long)sc.seed);
+    if (have) {
+        wf_catalog_free(&gal);
+        wf_catalog_free(&stars);
+    }
+    wf_synth_free(syn);
+    return st ? fail("catalog", st) : 0;
 }
 
 static int cmd_record(cli *c)
@@ -378,6 +409,7 @@ int main(int argc, char **argv)
     if (!strcmp(cmd, "expose")) return run_exposure(&c, 0);
     if (!strcmp(cmd, "assemble")) return cmd_assemble(&c);
     if (!strcmp(cmd, "record")) return cmd_record(&c);
+    if (!strcmp(cmd, "catalog")) return cmd_catalog(&c);
     if (!strcmp(cmd, "stamp")) return cmd_stamp(&c);
     fprintf(stderr, "wfisim: unknown command '%s'\n\n%s", cmd, usage_text);
     return 2;

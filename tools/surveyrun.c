@@ -187,6 +187,56 @@ static wf_status configure(const wf_config *base, const wf_survey_run_options *o
     return wf_config_finish(cfg, clock);
 }
 
+/* The survey-level record of a run, DIR/survey_run.txt: the plan (and its checksum), the
+ * catalogs the scenes were drawn from and the SN sample, so the products can be traced to
+ * their inputs. Rewritten (temporary file, rename) at the end of every run. */
+static wf_status write_manifest(const wf_config *cfg, const wf_survey_run_options *opt, const plan_row *rows,
+                                size_t nrows, const wf_survey_run_stats *stats)
+{
+    char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
+    snprintf(path, sizeof path, "%s/survey_run.txt", cfg->out_dir);
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    char datasum[FLEN_VALUE] = "";
+    fitsfile *f;
+    int status = 0;
+    if (!fits_open_diskfile(&f, opt->plan_path, READONLY, &status)) {
+        fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
+        fits_read_key_str(f, "DATASUM", datasum, NULL, &status);
+        int cs = 0;
+        fits_close_file(f, &cs);
+    }
+    static const char *const kinds[] = {"synthetic", "catalog", "grid", "galsim"};
+    FILE *out = fopen(tmp, "w");
+    if (!out) return wf_error(WF_ERR_IO, "%s: cannot create", tmp);
+    fprintf(out, "# wfisim survey run: the inputs of the products in this folder\n");
+    fprintf(out, "wfisim = %s\n", opt->version ? opt->version : "?");
+    fprintf(out, "plan = %s\nplan.datasum = %s\n", opt->plan_path, datasum);
+    fprintf(out, "exposures = %d:%d\n", rows[0].expid, rows[nrows - 1].expid);
+    fprintf(out, "scas =");
+    for (int k = 0; k < (opt->nscas ? opt->nscas : WF_NSCA); k++) fprintf(out, " %d", opt->nscas ? opt->scas[k] : k + 1);
+    fprintf(out, "\nseed = %llu\nmode = %s\nsampling = %s\n", (unsigned long long)cfg->seed,
+            cfg->ro.mode == WF_MODE_SINGLE ? "single" : "ramp", cfg->ro.sampling == WF_SAMPLE_DIRECT ? "direct" : "per-read");
+    fprintf(out, "scene.kind = %s\n", kinds[cfg->scene_kind]);
+    if (cfg->scene_kind == 0)
+        fprintf(out, "catalogs = synthetic field of seed %llu (`wfisim catalog --seed %llu` writes it)\n",
+                (unsigned long long)cfg->seed, (unsigned long long)cfg->seed);
+    else
+        fprintf(out, "scene.catalog = %s\nscene.stars = %s\n", cfg->catalog, cfg->stars);
+    fprintf(out, "sne = %s\n", opt->sne_path ? opt->sne_path : "(none)");
+    fprintf(out, "products.rendered = %ld\nproducts.skipped = %ld\nproducts.redone = %ld\n", stats->rendered,
+            stats->skipped, stats->redone);
+    int bad = ferror(out);
+    if (fclose(out) != 0 || bad) {
+        remove(tmp);
+        return wf_error(WF_ERR_IO, "%s: write failed", tmp);
+    }
+    if (rename(tmp, path) != 0) {
+        remove(tmp);
+        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
+    }
+    return WF_OK;
+}
+
 wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt, wf_survey_run_stats *stats)
 {
     memset(stats, 0, sizeof *stats);
@@ -252,6 +302,7 @@ wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt,
                         existed ? " (damaged product redone)" : "", difftime(time(NULL), t0));
         }
     }
+    if (!st) st = write_manifest(base, opt, rows, nrows, stats);
     free(job);
     free(cfg);
     free(rows);

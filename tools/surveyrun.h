@@ -9,7 +9,10 @@
  *
  * Read pattern: up the ramp, each exposure uses the built-in Rev F table whose duration is
  * nearest its planned time (300 s -> table 6, 900 s -> table 11) unless readout.ma_table was
- * given; single-frame mode uses the planned time exactly. */
+ * given; single-frame mode uses the planned time exactly.
+ *
+ * Survey level: DIR/survey_run.txt records the plan (and its DATASUM), the catalogs (files, or
+ * the synthetic field's seed: `wfisim catalog --seed N` writes that field) and the SN sample. */
 #ifndef WF_SURVEYRUN_H
 #define WF_SURVEYRUN_H
 
@@ -25,6 +28,7 @@ typedef struct wf_survey_run_options {
     int nscas;                 /* 0: all 18 */
     int ma_table_given;        /* 1: readout.ma_table (given on the command line) applies to all */
     wf_sn_injector *sne;       /* supernovae to inject, or NULL */
+    const char *sne_path;      /* their file, for the run's record */
     const char *version;
 } wf_survey_run_options;
 
