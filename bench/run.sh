@@ -5,7 +5,7 @@
 set -eu
 cd "$(dirname "$0")/.."
 B=build/rel/bench
-make -s $B/bench_readout $B/bench_direct_error $B/bench_survey $B/rss bin/wfisim >/dev/null
+make -s $B/bench_readout $B/bench_direct_error $B/bench_survey $B/bench_profile $B/rss bin/wfisim >/dev/null
 out=docs/BENCHMARKS.md
 REF="${WFISIM_REFERENCE:-../shared/reference}/galsim"
 DATA="${WFISIM_DATA:-../shared/data}"
@@ -122,11 +122,35 @@ if [ -f "$REF/scene_catalog_sca1_pointingA.csv.gz" ] && [ $N = 4088 ]; then
     echo "  galsim scene $th: $r" >&2
     rm -rf "$d"
   done
+  # time against the number of objects: the first N rows of the catalog (galaxies)
+  sub=$(mktemp -d)
+  for n in 1000 2000 4000 8000; do
+    { gzip -dc "$REF/scene_catalog_sca1_pointingA.csv.gz" | head -n $((n + 1)); } >"$sub/first$n.csv"
+    d=$(mktemp -d)
+    r=$($B/rss bin/wfisim expose $SC --set scene.kind=galsim --set scene.catalog="$sub/first$n.csv" --threads 1 --out "$d" 2>&1 | grep '^rss:')
+    echo "| first $n galaxies of the scene, 1 thread | \`wfisim expose ... (first $n rows)\` | $(field "$r" wall_s) | $(field "$r" cpu_s) | $(field "$r" peak_rss_MiB) |" >>"$tmp"
+    echo "  scaling $n: $r" >&2
+    rm -rf "$d"
+  done
+  rm -rf "$sub"
   d=$(mktemp -d)
   r=$($B/rss bin/wfisim expose $SC --set scene.kind=grid --set scene.grid.flux=0 --out "$d" 2>&1 | grep '^rss:')
   echo "| empty scene (sky only), 1 thread | \`wfisim expose --mode single --set scene.kind=grid --set scene.grid.flux=0\` | $(field "$r" wall_s) | $(field "$r" cpu_s) | $(field "$r" peak_rss_MiB) |" >>"$tmp"
   rm -rf "$d"
 fi
+if [ -f "$REF/scene_catalog_sca1_pointingA.csv.gz" ]; then
+  prof=$($B/bench_profile 2>&1)
+  {
+    echo
+    echo "Drawing alone, per object (\`bench_profile\`: every object of the GalSim scene drawn once, as"
+    echo "the renderer draws it, no detector chain; by stamp side):"
+    echo
+    echo '```'
+    echo "$prof"
+    echo '```'
+  } >>"$tmp"
+fi
+
 # ---- survey plan, footprint selection, survey run, supernovae ------------------------
 sd=$(mktemp -d)
 rssrow() { # label, shown command, command...
