@@ -2,6 +2,9 @@
 
 #include <fitsio.h>
 #include <math.h>
+#include <stdint.h>
+#include <sys/mman.h>
+#include <unistd.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -304,9 +307,21 @@ static wf_status add_objects(wf_scene *s, const wf_catalog *cat, obj_kind kind, 
     return WF_OK;
 }
 
+/* The PSF tables sit at the bottom of their block; the transforms that computed them used
+ * the rest, which nothing reads again: hand those pages back so they do not stay resident
+ * while the scene renders. */
+static void release_tail(const wf_arena *a)
+{
+    long page = sysconf(_SC_PAGESIZE);
+    if (page <= 0) return;
+    uintptr_t start = ((uintptr_t)a->base + a->used + (uintptr_t)page - 1) & ~((uintptr_t)page - 1);
+    uintptr_t end = ((uintptr_t)a->base + a->capacity) & ~((uintptr_t)page - 1);
+    if (end > start) (void)madvise((void *)start, end - start, MADV_DONTNEED);
+}
+
 /* The wide PSF of bright point sources: four times the image side (28" at the default
  * sampling), from a pupil binned no coarser than 4 so that its period (46" at Y106) holds the
- * image, with a PSF table of period three times the image so that its halo does not fold.
+ * image, with a PSF table whose period is the image's width (the halo does not fold).
  * Normalised like the narrow one. Built once, and only when a bright source is drawn. */
 static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const double *lams, const double *ws,
                                 int nl, double band_limit)
@@ -329,18 +344,23 @@ static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const 
     d.jitter = setup->jitter;
     d.diffusion = setup->diffusion;
     if ((st = wf_psf_draw(s->psf_wide, &d, s->psf_wide_pix))) return st;
+    wf_psf_free(s->psf_wide); /* the image is all the drawer needs: its coefficients go now */
+    s->psf_wide = NULL;
     double psum = 0.0;
     for (size_t k = 0; k < (size_t)n * n; k++) psum += s->psf_wide_pix[k];
     for (size_t k = 0; k < (size_t)n * n; k++) s->psf_wide_pix[k] /= psum;
     s->psf_wide_image = (wf_psf_image){n, d.scale, s->psf_wide_pix, band_limit};
     s->acc_wide = s->acc;
-    s->acc_wide.psf_table_fft = 3 * (int)ceil(n / (double)setup->psf_oversample / 2.0) * 2;
+    /* the table's period is the image's width: the image periodised onto it does not overlap
+     * itself, and a wider period would only cost memory (the transform of os x period) */
+    s->acc_wide.psf_table_fft = 2 * (int)ceil(n / (double)setup->psf_oversample / 2.0);
     size_t keep, scratch;
     if ((st = wf_profile_psf_need(&s->psf_wide_image, &s->acc_wide, &keep, &scratch))) return st;
     size_t bytes = keep + scratch + 4096;
     if (!(s->psf_wide_memory = malloc(bytes))) return wf_error(WF_ERR_NOMEM, "scene: wide PSF table");
     wf_arena_init(&s->psf_wide_arena, s->psf_wide_memory, bytes, "scene wide PSF arena");
     if ((st = wf_profile_psf_init(&s->ppsf_wide, &s->psf_wide_image, &s->acc_wide, &s->psf_wide_arena))) return st;
+    release_tail(&s->psf_wide_arena);
     s->stats.wide_psf_seconds = now() - t0;
     return WF_OK;
 }
@@ -445,6 +465,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     if (!(s->psf_memory = malloc(pbytes))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF table"); goto bad; }
     wf_arena_init(&s->psf_arena, s->psf_memory, pbytes, "scene PSF arena");
     if ((st = wf_profile_psf_init(&s->ppsf, &s->psf_image, &s->acc, &s->psf_arena))) goto bad;
+    release_tail(&s->psf_arena);
     /* objects */
     size_t cap = 0;
     if ((st = add_objects(s, gal, OBJ_GALAXY, &cap)) || (st = add_objects(s, stars, OBJ_STAR, &cap)) ||

@@ -43,6 +43,7 @@ typedef struct wf_config {
     double flux_fraction;          /* scene.flux_fraction [0.995] */
     int sky_on;                    /* scene.sky [true] */
     double stray_light;            /* scene.stray_light [0.1] */
+    double stamp_pool_mib;         /* scene.stamp_pool [32] */
     char data_dir[WF_PATH_MAX];    /* paths.data [$WFISIM_DATA or ""] */
     char reference_dir[WF_PATH_MAX]; /* paths.reference [$WFISIM_REFERENCE or ""] */
     wf_survey_params survey;       /* survey.* (sim/survey.h keeps their table) */

@@ -235,6 +235,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         ss.flux_fraction = cfg->flux_fraction;
         ss.sky_on = cfg->sky_on;
         ss.stray_light = cfg->stray_light;
+        ss.pool_bytes = (size_t)(cfg->stamp_pool_mib * 1048576.0);
         ss.threads = T;
         if ((st = gather_sne(pj, &inputs, &sne, &nsne))) goto done;
         ss.sne = sne;
