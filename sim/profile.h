@@ -188,4 +188,10 @@ wf_status wf_profile_hlr_from_fwhm(int sersic_n, double fwhm, double *hlr);
  * radius r (arcsec) for half-light radius hlr. */
 wf_status wf_profile_enclosed(int sersic_n, double hlr, double r, double *fraction);
 
+/* Sérsic helpers, shared with the SN host placement (sim/snhost.c): the regularised lower
+ * incomplete gamma P(a, x) for integer a >= 1 (the enclosed flux of a Sérsic n profile is
+ * P(2n, b_n (r/r_e)^(1/n))), and b_n, from P(2n, b_n) = 1/2. */
+double wf_gamma_p_int(int a, double x);
+double wf_sersic_b(int n);
+
 #endif

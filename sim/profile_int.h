@@ -77,12 +77,6 @@ typedef struct wf_shape {
 
 wf_status wf_profile_shape(double e1, double e2, double rotation, wf_shape *out);
 
-/* Regularised lower incomplete gamma P(a, x) for integer a >= 1. */
-double wf_gamma_p_int(int a, double x);
-
-/* Half-light radius over scale radius: P(2n, b) = 1/2. */
-double wf_sersic_b(int n);
-
 /* Knots in Fourier space (sim/profile.c). The direct sum costs one complex multiply-add per
  * knot and Fourier sample. The lattice method sums the knots only on a coarse lattice
  * (every r-th sample per axis, which still resolves their transform because they occupy a

@@ -19,6 +19,7 @@
 #include <math.h>
 #include <pthread.h>
 
+#include "sim/profile.h"
 #include "sim/profile_int.h"
 
 #define SERSIC_N 4

@@ -91,10 +91,9 @@ wf_status wf_snhost_place(const wf_catalog *gal, size_t row, wf_rng *rng,
 wf_status wf_snhost_place_at(const wf_catalog *gal, size_t row, int component, double frac,
                              double phi, wf_snhost_position *out);
 
-/* Sérsic helpers, n in [0.05, 20] (tested at n = 1 and 4: P within 1e-15 of closed forms,
- * the inverse within 4e-15 in F and 1e-10 in radius up to F = 1 − 1e-6). */
-/* Regularized lower incomplete gamma P(a, x) = γ(a, x) / Γ(a), a > 0, x >= 0. */
-wf_status wf_snhost_gamma_p(double a, double x, double *p);
+/* Sérsic helpers for whole-number n in [1, 20] (the host model's n = 1 and 4), on the
+ * profile code's P(2n, x) and b_n (sim/profile.h); the radius inverts P by bracketed Newton
+ * (tests/test_snhost.c: 1e-12 against bisection). */
 /* b_n with P(2n, b_n) = 1/2 (b_1 = 1.678347, b_4 = 7.669249). */
 wf_status wf_snhost_sersic_bn(double n, double *bn);
 /* Fraction of a round Sérsic profile's flux within x = r / r_e. */

@@ -13,6 +13,7 @@
 #include "hal/link.h"
 #include "hal/scene.h"
 #include "sim/catalog.h"
+#include "sim/fitsout.h"
 #include "sim/scene.h"
 #include "sim/skyindex.h"
 #include "sim/synth.h"
@@ -253,14 +254,12 @@ static int cmd_stamp(cli *c)
     if (!st) st = wf_scene_draw_object(scene, 0, &info, &x0, &y0, &nx, &ny, &pix);
     char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
     snprintf(path, sizeof path, "%s/stamp_%lld.fits", cfg->out_dir, id);
-    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    fitsfile *f = NULL;
     if (!st) st = wf_pipeline_make_dir(cfg->out_dir);
+    if (!st) st = wf_fits_begin(path, tmp, sizeof tmp, &f);
     if (!st) {
-        fitsfile *f;
         int status = 0;
         long naxes[2] = {nx, ny};
-        remove(tmp);
-        fits_create_diskfile(&f, tmp, &status);
         fits_create_img(f, DOUBLE_IMG, 2, naxes, &status);
         fits_write_key_lng(f, "OBJID", info.id, "catalog id", &status);
         fits_write_key_str(f, "OBJTYPE", info.kind ? "star" : "galaxy", "", &status);
@@ -280,15 +279,7 @@ static int cmd_stamp(cli *c)
         fits_write_key_str(f, "BUNIT", "electron/s", "", &status);
         long first[2] = {1, 1};
         fits_write_pix(f, TDOUBLE, first, (long long)nx * ny, pix, &status);
-        int cs = 0;
-        fits_close_file(f, &cs);
-        if (status || cs) {
-            remove(tmp);
-            st = wf_error(WF_ERR_IO, "%s: cfitsio status %d writing the stamp", path, status ? status : cs);
-        } else if (rename(tmp, path) != 0) {
-            remove(tmp);
-            st = wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
-        }
+        st = wf_fits_finish(f, tmp, path, wf_fits_error(status, tmp, "writing the stamp"));
     }
     if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s (%d x %d, %s %lld, %.4g e-/s)\n", path, nx, ny,
                                     info.kind ? "star" : "galaxy", info.id, info.flux);

@@ -151,13 +151,10 @@ static wf_status write_fits(const psf_args *a, const wf_psf_info *info, const wf
                             const char *lam_source, const double *img, double secs)
 {
     char tmp[4200];
-    int n = snprintf(tmp, sizeof tmp, "%s.tmp", a->out);
-    if (n < 0 || (size_t)n >= sizeof tmp) return wf_error(WF_ERR_INPUT, "--out path too long");
-    remove(tmp); /* only ever a leftover of an interrupted run */
     fitsfile *f = NULL;
     int status = 0;
-    if (fits_create_diskfile(&f, tmp, &status))
-        return wf_fits_error(status, tmp, "creating the FITS file");
+    wf_status st = wf_fits_begin(a->out, tmp, sizeof tmp, &f);
+    if (st) return st;
     long naxes[2] = {d->nx, d->ny};
     fits_create_img(f, DOUBLE_IMG, 2, naxes, &status);
     fits_write_key_str(f, "EXTNAME", "PSF", "point-spread function", &status);
@@ -209,21 +206,14 @@ static wf_status write_fits(const psf_args *a, const wf_psf_info *info, const wf
     key_dbl(f, "STAMPSUM", sum, "sum of this stamp", &status);
     key_dbl(f, "BUILDSEC", round(secs * 1000) / 1000, "build + draw time, s", &status);
     fits_write_key_str(f, "CREATOR", "wfisim psf", "sim/psf.c, docs/OPTICS.md", &status);
-    wf_status st = wf_fits_error(status, tmp, "writing the header");
+    st = wf_fits_error(status, tmp, "writing the header");
     if (!st) st = wf_fits_reserve_checksum(f, tmp);
     if (!st) {
         long fp[2] = {1, 1};
         fits_write_pix(f, TDOUBLE, fp, (LONGLONG)naxes[0] * naxes[1], (void *)img, &status);
         st = wf_fits_error(status, tmp, "writing the image");
     }
-    if (!st) st = wf_fits_checksum_all(f, tmp);
-    status = 0;
-    fits_close_file(f, &status);
-    if (!st) st = wf_fits_error(status, tmp, "closing");
-    if (!st && rename(tmp, a->out))
-        st = wf_error(WF_ERR_IO, "cannot rename %s to %s: %s", tmp, a->out, strerror(errno));
-    if (st) remove(tmp);
-    return st;
+    return wf_fits_finish(f, tmp, a->out, st);
 }
 
 static double now_s(void)
