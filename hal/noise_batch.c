@@ -346,10 +346,10 @@ WF_INLINE double ptrs_quick(double mu, double smu, double u01, double v)
  * and R(k) Stirling's series 1/(12k) - 1/(360k^3) + 1/(1260k^5) (error < 1e-10, as
  * hal/noise.c) from k = 10, exact below, the log(2 pi k) / 2 joins the left side's log (as
  * a factor under a square root); k = 0 has log P = -mu. The arithmetic differs from the
- * scalar test only by roundings (~1e-15), so the accepted distribution is the same. */
+ * scalar test only by roundings (~1e-15), so the accepted distribution is the same. Only
+ * lanes ptrs_quick left undecided come here. */
 WF_INLINE double ptrs_lane(double mu, double smu, double u01, double v)
 {
-    const double quick = ptrs_quick(mu, smu, u01, v);
     const double b = 0.931 + 2.53 * smu;
     const double a = -0.059 + 0.02483 * b;
     const double u = u01 - 0.5;
@@ -367,8 +367,7 @@ WF_INLINE double ptrs_lane(double mu, double smu, double u01, double v)
     const double delta = kk - mu;
     double rhs = delta - kk * vlog1p(delta / mu) - rest;
     rhs = k < 1.0 ? 0.9189385332046727417803297 - mu : rhs; /* k = 0: -mu, + log(2 pi)/2 as lhs */
-    const double r = lhs <= rhs ? k : -1.0;
-    return quick == PTRS_UNDECIDED ? r : quick;
+    return lhs <= rhs ? k : -1.0;
 }
 
 /* (0, 1) at 53 bits from two words, as wf_rng_uniform53: 27 + 26 bits, each part exact in a

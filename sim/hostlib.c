@@ -163,7 +163,7 @@ static int wgt_nvar(const wgt_state *w) { return w->nvar_key >= 0 ? w->nvar_key 
 
 static wf_status wgt_row(reader *r, wgt_state *w, wf_hostlib_wgtmap *m, char **val, int nval)
 {
-    int nvar = wgt_nvar(w);
+    int nvar = w->ncols ? m->nvar : wgt_nvar(w); /* the first row fixes the map's shape */
     if (nvar < 0)
         return wf_error(WF_ERR_INPUT, "%s:%ld: WGT: row before NVAR_WGTMAP or VARNAMES_WGTMAP",
                         r->path, r->line);
@@ -230,6 +230,9 @@ static wf_status wgt_names(reader *r, wgt_state *w, char **val, int nval)
 
 static wf_status wgt_nvar_key(reader *r, wgt_state *w, char **val, int nval)
 {
+    if (w->ncols)
+        return wf_error(WF_ERR_INPUT, "%s:%ld: NVAR_WGTMAP after WGT: rows: the map's shape is already fixed",
+                        r->path, r->line);
     char *end;
     long n = nval >= 1 ? strtol(val[0], &end, 10) : -1;
     if (nval < 1 || *end != '\0' || n < 1 || n > WF_HOSTLIB_MAXWGTVAR)

@@ -471,9 +471,12 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     if ((st = add_objects(s, gal, OBJ_GALAXY, &cap)) || (st = add_objects(s, stars, OBJ_STAR, &cap)) ||
         (st = add_sne(s, &cap)))
         goto bad;
+    /* a wide stamp reaches at most half the wide PSF image (2 psf_size / oversample pixels) */
+    const double reach = 2.0 * setup->psf_size / setup->psf_oversample + 1.0;
     for (size_t i = 0; i < s->nobj; i++) {
         object *o = &s->obj[i];
-        if (o->kind != OBJ_GALAXY && o->flux > 0 && o->mag < setup->bright_mag) {
+        int near = o->x > -reach && o->y > -reach && o->x < setup->ncols + reach && o->y < setup->nrows + reach;
+        if (o->kind != OBJ_GALAXY && o->flux > 0 && o->mag < setup->bright_mag && near) {
             o->wide = 1;
             s->stats.bright++;
         }

@@ -355,6 +355,8 @@ static const struct bad {
     {"weights", HEAD "GAL: 1 70 -53 0.5 1 0.5 0.4 0 0 22\n", WF_ERR_RANGE, ":2:", {"sum to 0", NULL}},
     {"wgtrow", "NVAR_WGTMAP: 2\nWGT: 1 2\n" HEAD, WF_ERR_INPUT, ":2:", {"2 values", NULL}},
     {"empty", "# nothing\n", WF_ERR_INPUT, "", {"no VARNAMES", NULL}},
+    {"wgtshape", "NVAR_WGTMAP: 2\nWGT: 1 2 1 0\nNVAR_WGTMAP: 3\nWGT: 1 2 3 1\n" HEAD, WF_ERR_INPUT, ":3:",
+     {"NVAR_WGTMAP after WGT", NULL}},
     {"comp2", "VARNAMES: GALID RA_GAL DEC_GAL ZTRUE n0_Sersic a0_Sersic b0_Sersic w0_Sersic a_rot "
               "h_obs n2_Sersic\n",
      WF_ERR_INPUT, ":1:", {"'n2_Sersic'", NULL}},

@@ -569,7 +569,8 @@ START_TEST(test_peak_mb)
         printf("  %s: peak M_B(AB) = %.4f (sncosmo %.4f), M_B(Vega-like) = %.4f vs SPEC "
                "-19.365: %+.4f\n",
                which[im], b_ab, sncosmo_ab_x0_1[im] - 30.0, b_vega, b_vega + 19.365);
-        ck_assert_double_eq_tol(b_ab, sncosmo_ab_x0_1[im] - 30.0, 2e-3);
+        /* the same model and interpolation: only the B curve's sampling differs (~1e-4) */
+        ck_assert_double_eq_tol(b_ab, sncosmo_ab_x0_1[im] - 30.0, 5e-4);
         ck_assert_double_eq_tol(b_vega, -19.365, 0.02);
         wf_salt_free(m);
     }
@@ -749,7 +750,9 @@ START_TEST(test_linear_vs_bicubic)
         wf_salt_free(m);
     }
     printf("  max |linear - bicubic| = %.4f mag\n", worst);
-    ck_assert_msg(worst < 0.05, "linear and bicubic differ by %.3f mag", worst);
+    /* half-way between daily nodes the two schemes differ by the template's curvature over a
+     * day, measured 0.002 mag: a larger difference means a broken interpolation */
+    ck_assert_msg(worst < 0.01, "linear and bicubic differ by %.3f mag", worst);
     ck_assert_msg(worst > 1e-5, "linear and bicubic do not differ at all (%.2g)", worst);
 }
 END_TEST
@@ -881,7 +884,9 @@ START_TEST(test_vs_sncosmo)
                 worst = fmax(worst, fabs(d));
                 worst_lc = fmax(worst_lc, fabs(dl));
                 printf("  %.4f/%.4f/%+.1e", mag, smag[k], d);
-                ck_assert_msg(fabs(d) < 0.01 && fabs(dl) < 0.01,
+                /* same files, same interpolation: only the wavelength quadrature differs
+                 * (measured <= 2e-6 mag) */
+                ck_assert_msg(fabs(d) < 1e-4 && fabs(dl) < 1e-4,
                               "%s %s z=%.1f mjd %.2f: ours %.5f (fast %.5f), sncosmo %.5f",
                               which[im], wf_filter_name(sn_bands[jb[k]]), ps[k].z, jmjd[k], mag,
                               magl, smag[k]);
@@ -894,7 +899,7 @@ START_TEST(test_vs_sncosmo)
         worst_all = fmax(worst_all, fmax(worst, worst_lc));
         wf_salt_free(m);
     }
-    ck_assert(worst_all < 0.01);
+    ck_assert(worst_all < 1e-4);
 }
 END_TEST
 

@@ -342,9 +342,12 @@ START_TEST(bright_star_wide_psf)
     wf_psf_free(psf);
     ck_assert_msg(size[0] > 2 * 3.5 / 0.11 && size[0] > size[1] && rout > 4.5, "wide stamp %g px, narrow %g px",
                   size[0], size[1]);
-    ck_assert_msg(fabs(ann[0] / (a / tot) - 1) < 0.05, "annulus 4\"-%.1f\": scene %.3e of the flux, PSF module %.3e", rout,
+    /* same PSF, drawn two ways (the drawer's Fourier table and stamp vs a direct draw with
+     * the pixel): a plumbing check of the wide path, measured 0.3% */
+    ck_assert_msg(fabs(ann[0] / (a / tot) - 1) < 0.01, "annulus 4\"-%.1f\": scene %.3e of the flux, PSF module %.3e", rout,
                   ann[0], a / tot);
-    ck_assert_msg(ann[1] < 0.01 * ann[0], "narrow PSF: %.3e of the flux in the annulus", ann[1]);
+    /* the narrow stamp ends inside 4": the halo is the wide PSF's alone */
+    ck_assert_msg(size[1] * 0.11 / 2 < 4.0, "narrow stamp %g px reaches the annulus", size[1]);
     printf("bright star: wide stamp %.0f px (narrow %.0f), annulus 4\"-%.1f\" holds %.3e of the flux (PSF module "
            "%.3e); wide PSF built in %.2f s\n", size[0], size[1], rout, ann[0], a / tot, build);
     wf_catalog_free(&stars);

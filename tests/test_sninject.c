@@ -157,7 +157,9 @@ START_TEST(injected_flux_and_truth)
         ck_assert_double_eq_tol(tflux / rate, 1.0, 1e-4);
         double sum = image_sum(img);
         /* the stamp holds >= 99.99% of the light; the SN is > 30 px from every edge */
-        ck_assert_msg(fabs(sum / rate - 1.0) < 5e-3, "SN %d: image holds %.6g e-/s, light curve %.6g", 41 + k, sum,
+        /* the stamp holds 99.99%; SN 42 sits 20 px from the image's edge, past which its PSF
+         * wings (1.6e-3 of the light, measured) fall off the image */
+        ck_assert_msg(fabs(sum / rate - 1.0) < (k ? 2.5e-3 : 5e-4), "SN %d: image holds %.6g e-/s, light curve %.6g", 41 + k, sum,
                       rate);
     }
     /* SCA 3 holds neither */
@@ -309,8 +311,10 @@ START_TEST(thousands_on_one_sca)
     fits_close_file(ff, &status);
     ck_assert_int_eq(status, 0);
     ck_assert_int_eq(nrows, NSN);
-    /* the stamps keep >= 99.5% of each SN; those within 8 px of an edge lose a little more */
+    /* each stamp keeps >= 99.5% of its SN; those within a stamp radius of an edge lose some of
+     * that stamp to the edge, so the image holds a little less */
     double sum = image_sum(img);
+    printf("3000 SNe: the image holds %.5f of their flux\n", sum / total);
     ck_assert_msg(sum / total > 0.98 && sum / total <= 1.0 + 1e-4, "image %.6g e-/s, truth %.6g", sum, total);
     wf_sn_sample_free(&s);
 }

@@ -316,13 +316,24 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
     if ((st = wf_pipeline_make_dir(cfg->out_dir))) goto done;
     int fds[2];
     if (pipe(fds) != 0) { st = wf_error(WF_ERR_IO, "cannot create a pipe"); goto done; }
-    FILE *w = fdopen(fds[1], "wb"), *r = fdopen(fds[0], "rb");
+    FILE *w = fdopen(fds[1], "wb"), *r = w ? fdopen(fds[0], "rb") : NULL;
+    if (!w || !r) {
+        if (w) fclose(w); else close(fds[1]);
+        close(fds[0]);
+        st = wf_error(WF_ERR_IO, "cannot open the in-process stream");
+        goto done;
+    }
     assembler_thread at = {0};
     at.in = r;
     at.opt.out_dir = cfg->out_dir;
     at.opt.quiet = cfg->quiet;
     pthread_t th;
-    pthread_create(&th, NULL, assemble_main, &at);
+    if (pthread_create(&th, NULL, assemble_main, &at) != 0) {
+        fclose(w);
+        fclose(r);
+        st = wf_error(WF_ERR_IO, "cannot start the assembler thread");
+        goto done;
+    }
     wf_link_stream_open(&ls, w, "in-process stream", &link);
     job.link = &link;
     st = wf_expose_run(&job);

@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <zlib.h>
 
 #include "sim/bandpass.h"
 #include "sim/catalog.h"
@@ -102,7 +103,7 @@ static int parse(int argc, char **argv, opts *o)
 {
     memset(o, 0, sizeof *o);
     o->area = o->start = o->days = o->x0 = o->mu = o->z = o->t0 = NAN;
-    o->ra = 71.0, o->dec = -53.0, o->seed = 1;
+    o->ra = 71.0, o->dec = -53.0, o->seed = NAN;
     o->h0 = o->om = o->fmax = NAN;
     o->alpha = o->beta = o->sigma_int = o->dz = o->zmin = o->zmax = NAN;
     wf_config_defaults(&sn_cfg);
@@ -172,6 +173,9 @@ static int parse(int argc, char **argv, opts *o)
         i++;
     }
     const wf_config *c = &sn_cfg;
+    /* the configuration's seed by default: the synthetic host field is then the one
+     * `survey run` draws with the same configuration */
+    if (isnan(o->seed)) o->seed = (double)c->seed;
     if (!o->data) o->data = c->data_dir;
     if (!o->model && c->sn.model[0]) o->model = c->sn.model;
     if (isnan(o->h0)) o->h0 = c->sn.h0;
@@ -376,14 +380,15 @@ static void footprint_draw(const footprint *f, wf_rng *rng, double *ra, double *
 static int is_hostlib(const char *path)
 {
     size_t n = strlen(path);
-    if (n > 8 && !strcasecmp(path + n - 8, ".HOSTLIB")) return 1;
-    FILE *f = fopen(path, "r");
+    if ((n > 8 && !strcasecmp(path + n - 8, ".HOSTLIB")) || (n > 11 && !strcasecmp(path + n - 11, ".HOSTLIB.gz")))
+        return 1;
+    gzFile f = gzopen(path, "rb"); /* plain or gzip'd, as the readers take them */
     if (!f) return 0;
     char line[512];
     int found = 0;
-    for (int k = 0; k < 200 && fgets(line, sizeof line, f); k++)
+    for (int k = 0; k < 200 && gzgets(f, line, sizeof line); k++)
         if (!strncmp(line, "VARNAMES:", 9) || !strncmp(line, "GAL:", 4)) { found = 1; break; }
-    fclose(f);
+    gzclose(f);
     return found;
 }
 
@@ -932,7 +937,7 @@ static int cmd_lightcurve(int argc, char **argv)
             if ((st = wf_cosmo_init(&c, o.h0, o.om)) || (st = wf_cosmo_distance_modulus(&c, o.z, &mu))) return fail(st);
         }
         /* SPEC 5 / SNANA SALT2x0calc with no intrinsic scatter */
-        x0 = 1.0 / (1e-12 * pow(10.0, 0.4 * (mu - pop.alpha * o.x1 + pop.beta * o.c)));
+        if ((st = wf_snpop_x0(&pop, mu, o.x1, o.c, 0.0, &x0))) return fail(st);
     }
     if (!(x0 > 0)) return usage_error("%s must be > 0", "--x0");
     wf_bandpass bp;

@@ -12,8 +12,7 @@
 /* One light curve per (SN, filter), built on first use: the per-SN band integrals make every
  * later date cost a phase interpolation. */
 typedef struct lc_slot {
-    wf_salt_lc *lc;
-    int built;
+    wf_salt_lc *lc; /* NULL until first used */
 } lc_slot;
 
 struct wf_sn_injector {
@@ -120,11 +119,9 @@ wf_status wf_sn_injector_select(wf_sn_injector *inj, const char *filter, double 
             continue;
         }
         lc_slot *slot = &inj->slots[f][i];
-        if (!slot->built) {
+        if (!slot->lc) {
             wf_salt_params p = {s->z[i], s->t0[i], s->x0[i], s->x1[i], s->c[i]};
-            st = wf_salt_lc_init(inj->model, &p, inj->bp[f], WF_SALT_INTERP_BICUBIC, &slot->lc);
-            slot->built = 1;
-            if (st) break;
+            if ((st = wf_salt_lc_init(inj->model, &p, inj->bp[f], WF_SALT_INTERP_BICUBIC, &slot->lc))) break;
         }
         double rate;
         unsigned flags;

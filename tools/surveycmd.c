@@ -164,7 +164,10 @@ static int cmd_plan(int argc, char **argv)
             st = wf_survey_write_coverage(&cov, cov_out);
             if (st) unlink(out); /* both products or neither */
         }
-        if (!st) st = coverage_pngs(&cov, cov_out, pngs, sizeof pngs);
+        if (!st && (st = coverage_pngs(&cov, cov_out, pngs, sizeof pngs))) {
+            unlink(out); /* all products or none */
+            unlink(cov_out);
+        }
         if (st) rc = fail(st);
     }
     if (!rc) {
