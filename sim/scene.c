@@ -361,6 +361,9 @@ static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const 
     wf_arena_init(&s->psf_wide_arena, s->psf_wide_memory, bytes, "scene wide PSF arena");
     if ((st = wf_profile_psf_init(&s->ppsf_wide, &s->psf_wide_image, &s->acc_wide, &s->psf_wide_arena))) return st;
     release_tail(&s->psf_wide_arena);
+    free(s->psf_wide_pix); /* the table is all the drawer reads from now on */
+    s->psf_wide_pix = NULL;
+    s->psf_wide_image.pix = NULL;
     s->stats.wide_psf_seconds = now() - t0;
     return WF_OK;
 }

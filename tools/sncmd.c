@@ -22,6 +22,7 @@
 #include "tools/config.h"
 #include "tools/plot.h"
 #include "tools/sninject.h"
+#include "tools/surveyrun.h"
 #include "sim/wcs.h"
 
 static const char *sn_usage =
@@ -275,6 +276,8 @@ static wf_status footprint_from_plan(const char *plan, footprint *f, double *mjd
     size_t len = strlen(plan);
     if (len > 5 && !strcmp(plan + len - 5, ".fits")) snprintf(path, sizeof path, "%.*s_coverage.fits", (int)(len - 5), plan);
     else snprintf(path, sizeof path, "%s_coverage.fits", plan);
+    if (!wf_survey_product_ok(plan))
+        return wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one with `wfisim survey plan`)", plan);
     fitsfile *ff;
     int status = 0;
     if (fits_open_diskfile(&ff, plan, READONLY, &status))
@@ -683,6 +686,8 @@ static wf_status plan_epochs(const char *plan, epoch **out, size_t *n)
     int status = 0, c[6];
     long nrows = 0;
     *out = NULL, *n = 0;
+    if (!wf_survey_product_ok(plan))
+        return wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one with `wfisim survey plan`)", plan);
     if (fits_open_diskfile(&f, plan, READONLY, &status)) return wf_error(WF_ERR_IO, "%s: cannot open the plan", plan);
     fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
     const char *names[6] = {"MJD_MID", "FILTER", "RA", "DEC", "PA", "EXPID"};
