@@ -2,12 +2,15 @@
  * renderer draws it, and reports the CPU time per kind and stamp size: the cost of the
  * profile drawer alone, without the detector chain.
  *
- *   bench_profile [--dump FILE] [--compare FILE] [--limit N] [--simd LANES]
+ *   bench_profile [--dump FILE] [--compare FILE] [--limit N] [--simd LANES] [--core R]
+ *                 [--tol T]
  *
  * --dump writes every stamp (bounds and pixels) so that a later build can be compared with
  * --compare: per object the worst pixel difference over the stamp's peak, and the flux.
  * --simd caps the vector width of the drawing kernels (0: scalar; they all give the same
- * bits, which --dump / --compare across widths shows).
+ * bits, which --dump / --compare across widths shows). --core sets psf.core_radius
+ * (arcsec; 0: the whole PSF in every Fourier box), --tol scene.noise_tolerance (0: the same
+ * knobs for every object); --compare then also gives differences in sky sigma.
  * Data: $WFISIM_DATA (default ../shared/data) and $WFISIM_REFERENCE (../shared/reference). */
 #include <math.h>
 #include <stdio.h>
@@ -42,14 +45,17 @@ int main(int argc, char **argv)
     const char *dump = NULL, *compare = NULL;
     long limit = -1;
     int simd = -1;
+    double core = -1.0, tol = -1.0;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--dump") && i + 1 < argc) dump = argv[++i];
         else if (!strcmp(argv[i], "--compare") && i + 1 < argc) compare = argv[++i];
         else if (!strcmp(argv[i], "--limit") && i + 1 < argc) limit = atol(argv[++i]);
         else if (!strcmp(argv[i], "--simd") && i + 1 < argc) simd = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--core") && i + 1 < argc) core = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--tol") && i + 1 < argc) tol = atof(argv[++i]);
         else {
             fprintf(stderr, "usage: bench_profile [--dump FILE] [--compare FILE] [--limit N] "
-                            "[--simd LANES]\n");
+                            "[--simd LANES] [--core R] [--tol T]\n");
             return 2;
         }
     }
@@ -85,6 +91,9 @@ int main(int argc, char **argv)
     ss.psf_oversample = cfg.psf_oversample;
     ss.psf_nlambda = cfg.psf_nlambda;
     ss.flux_fraction = cfg.flux_fraction;
+    ss.core_radius = core >= 0.0 ? core : cfg.psf_core_radius;
+    ss.noise_tolerance = tol >= 0.0 ? tol : cfg.noise_tolerance;
+    ss.exptime = cfg.ro.exptime;
     ss.threads = 1;
     wf_scene *scene;
     double t0 = cpu_now();
@@ -100,8 +109,13 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_profile: cannot open the dump files or allocate\n");
         return 1;
     }
-    double worst = 0.0, worst_flux = 0.0, total = 0.0;
-    size_t worst_k = 0, mismatched = 0, identical = 0;
+    /* differences also in units of one pixel's sky noise over the exposure (e-), the unit of
+     * scene.noise_tolerance */
+    wf_scene_stats sst;
+    wf_scene_get_stats(scene, &sst);
+    const double sigma_rate = sqrt(sst.sky_min * ss.exptime) / ss.exptime;
+    double worst = 0.0, worst_flux = 0.0, total = 0.0, worst_sigma = 0.0;
+    size_t worst_k = 0, worst_sk = 0, mismatched = 0, identical = 0;
     for (size_t k = 0; k < n; k++) {
         wf_scene_object info;
         int x0, y0, nx, ny;
@@ -140,6 +154,10 @@ int main(int argc, char **argv)
                 }
                 if (!memcmp(o, pix, np * sizeof *o)) identical++;
                 double rel = opeak > 0.0 ? d / opeak : d;
+                if (d / sigma_rate > worst_sigma) {
+                    worst_sigma = d / sigma_rate;
+                    worst_sk = k;
+                }
                 if (rel > worst) {
                     worst = rel;
                     worst_k = k;
@@ -171,8 +189,10 @@ int main(int argc, char **argv)
     }
     if (compare)
         printf("compare: %zu identical of %zu, worst pixel / peak %.3g (object %zu), worst "
-               "|dflux|/flux %.3g%s\n",
-               identical, n, worst, worst_k, worst_flux, mismatched ? ", BOUNDS DIFFER" : "");
+               "pixel / sky sigma %.3g (object %zu, %s), worst |dflux|/flux %.3g%s\n",
+               identical, n, worst, worst_k, worst_sigma, worst_sk,
+               r[worst_sk].kind == 0 ? "galaxy" : r[worst_sk].kind == 1 ? "star" : "sn", worst_flux,
+               mismatched ? ", BOUNDS DIFFER" : "");
     if (fd) fclose(fd);
     if (fc) fclose(fc);
     free(r);

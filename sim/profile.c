@@ -46,6 +46,8 @@ void wf_profile_accuracy_default(wf_profile_accuracy *acc)
     acc->min_fft = 16;
     acc->max_fft = 1024;
     acc->psf_table_fft = 192;
+    acc->core_radius = 0.0;
+    acc->wing_tolerance = 0.0;
 }
 
 wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
@@ -66,6 +68,12 @@ wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
     if (acc->min_fft < 8 || acc->max_fft < acc->min_fft || acc->max_fft > 16384)
         return wf_error(WF_ERR_RANGE, "profile: FFT sides [%d, %d] not within [8, 16384]",
                         acc->min_fft, acc->max_fft);
+    if (!(acc->core_radius >= 0.0 && acc->core_radius <= 60.0))
+        return wf_error(WF_ERR_RANGE, "profile: core_radius %g arcsec outside [0, 60]",
+                        acc->core_radius);
+    if (!(acc->wing_tolerance >= 0.0 && acc->wing_tolerance < INFINITY))
+        return wf_error(WF_ERR_RANGE, "profile: wing_tolerance %g is not a finite value >= 0",
+                        acc->wing_tolerance);
     if (acc->psf_table_fft < 16 || acc->psf_table_fft > 4096 || acc->psf_table_fft % 2)
         return wf_error(WF_ERR_RANGE, "profile: psf_table_fft %d not an even number in "
                         "[16, 4096]", acc->psf_table_fft);
@@ -314,9 +322,13 @@ static double galaxy_radius(const job *jb, const wf_sersic_table *t, double eps)
     return exp(hi);
 }
 
-/* Radius of the PSF image holding all but eps of its light. */
-static double psf_radius(const wf_profile_psf *psf, double eps)
+/* Radius of the PSF image holding all but eps of its light; with core set and a split
+ * PSF, the core's whole extent (its taper's end, plus half a pixel), so that none of the
+ * core's light folds: the box then costs ~2x more samples for a star, and the star has the
+ * unsplit draw's accuracy. */
+static double psf_radius(const wf_profile_psf *psf, double eps, int core)
 {
+    if (core && psf->core_radius > 0.0) return psf->core_radius + 0.5 * psf->pixel_scale;
     for (int i = psf->nee - 1; i >= 0; i--)
         if (1.0 - psf->ee[i] > eps) return (i + 2) * psf->ee_dr;
     return psf->ee_dr;
@@ -328,10 +340,10 @@ static double psf_radius(const wf_profile_psf *psf, double eps)
  * giving the smallest radius is chosen. The sheared galaxy's radius is the round one's
  * times the shear's largest stretch. */
 static double object_radius(const job *jb, const wf_sersic_table *t, const wf_profile_psf *psf,
-                            double eps)
+                            double eps, int core)
 {
     double r;
-    if (jb->fpoint > 0.0 && psf) r = psf_radius(psf, eps);
+    if (jb->fpoint > 0.0 && psf) r = psf_radius(psf, eps, core);
     else if (jb->fpoint > 0.0) r = 0.0;
     else if (!psf) r = jb->shape.smax * galaxy_radius(jb, t, eps);
     else {
@@ -339,12 +351,12 @@ static double object_radius(const job *jb, const wf_sersic_table *t, const wf_pr
         r = INFINITY;
         for (int i = 0; i < 5; i++) {
             double c = jb->shape.smax * galaxy_radius(jb, t, eps * split[i]) +
-                       psf_radius(psf, eps * (1.0 - split[i]));
+                       psf_radius(psf, eps * (1.0 - split[i]), core);
             if (c < r) r = c;
         }
     }
     if (jb->nk > 0) {
-        double rk = jb->knot_rmax + (psf ? psf_radius(psf, 0.5 * eps) : 0.0);
+        double rk = jb->knot_rmax + (psf ? psf_radius(psf, 0.5 * eps, core) : 0.0);
         if (rk > r) r = rk;
     }
     return r;
@@ -360,7 +372,7 @@ static wf_status bounds_for(const wf_profile_work *w, const job *jb, const wf_pr
     const wf_sersic_table *t = w->sersic;
     double p = w->acc.pixel_scale;
     double eps = 1.0 - w->acc.flux_fraction;
-    double r = object_radius(jb, t, psf, eps);
+    double r = object_radius(jb, t, psf, eps, 0);
     int hmax = ladder_max(w) / 2 - 1;
     double h = ceil(r / p - 1e-9);
     double frac = w->acc.flux_fraction;
@@ -370,7 +382,7 @@ static wf_status bounds_for(const wf_profile_work *w, const job *jb, const wf_pr
         double lo = log(eps), hi = 0.0;
         for (int it = 0; it < 30; it++) {
             double mid = 0.5 * (lo + hi);
-            if (object_radius(jb, t, psf, exp(mid)) <= hmax * p) hi = mid;
+            if (object_radius(jb, t, psf, exp(mid), 0) <= hmax * p) hi = mid;
             else lo = mid;
         }
         frac = 1.0 - exp(hi);
@@ -1455,6 +1467,43 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
     }
 }
 
+static long div_floor_l(long a, long b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+/* stamp += flux x wing at (x, y): bilinear between the table's 1 / wing_os pixel samples.
+ * The fractional position is the same for every pixel, so each row reads four contiguous
+ * runs of the phase planes. */
+static void add_wing(const wf_profile_psf *psf, double flux, double x, double y,
+                     wf_stamp *stamp)
+{
+    const int K = psf->wing_os, h = psf->wing_half, np = psf->wing_np;
+    const size_t plane = (size_t)np * np;
+    /* fine index of pixel i: K (i - x) + K h = K i + s */
+    double sx = K * (h - x), sy = K * (h - y);
+    double fx0 = floor(sx), fy0 = floor(sy), fx = sx - fx0, fy = sy - fy0;
+    long ax = (long)fx0, ay = (long)fy0;
+    int a0 = (int)(ax - div_floor_l(ax, K) * K), a1 = (int)(ax + 1 - div_floor_l(ax + 1, K) * K);
+    int b0 = (int)(ay - div_floor_l(ay, K) * K), b1 = (int)(ay + 1 - div_floor_l(ay + 1, K) * K);
+    long ox0 = div_floor_l(ax, K), ox1 = div_floor_l(ax + 1, K);
+    long oy0 = div_floor_l(ay, K), oy1 = div_floor_l(ay + 1, K);
+    const double w00 = flux * (1.0 - fy) * (1.0 - fx), w01 = flux * (1.0 - fy) * fx;
+    const double w10 = flux * fy * (1.0 - fx), w11 = flux * fy * fx;
+    long i0 = (long)stamp->x0 > -ox0 ? (long)stamp->x0 : -ox0;
+    long i1 = (long)stamp->x0 + stamp->nx - 1 < np - 1 - ox1 ? (long)stamp->x0 + stamp->nx - 1
+                                                             : np - 1 - ox1;
+    if (i0 > i1) return;
+    for (int yy = 0; yy < stamp->ny; yy++) {
+        long j = (long)stamp->y0 + yy, ny0 = j + oy0, ny1 = j + oy1;
+        if (ny0 < 0 || ny1 > np - 1) continue;
+        const float *r00 = psf->wing + (size_t)(b0 * K + a0) * plane + (size_t)ny0 * np + ox0;
+        const float *r01 = psf->wing + (size_t)(b0 * K + a1) * plane + (size_t)ny0 * np + ox1;
+        const float *r10 = psf->wing + (size_t)(b1 * K + a0) * plane + (size_t)ny1 * np + ox0;
+        const float *r11 = psf->wing + (size_t)(b1 * K + a1) * plane + (size_t)ny1 * np + ox1;
+        double *dst = stamp->pix + (size_t)yy * stamp->nx - stamp->x0;
+        for (long i = i0; i <= i1; i++)
+            dst[i] += w00 * r00[i] + w01 * r01[i] + w10 * r10[i] + w11 * r11[i];
+    }
+}
+
 /* Smallest FFT side in the ladder holding `need` pixels; with a PSF, sides up to the PSF
  * table's must divide it (exact table reads). The largest side when none is big enough. */
 static int choose_size(const wf_profile_work *w, const wf_profile_psf *psf, double need)
@@ -1760,10 +1809,28 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
         return wf_error(WF_ERR_RANGE, "profile: stamp %dx%d at (%d, %d) is more than max_fft "
                         "%d / 2 pixels from the object at (%.2f, %.2f)", stamp->nx,
                         stamp->ny, stamp->x0, stamp->y0, ladder_max(w), x, y);
-    double rfold = object_radius(jb, t, psf, w->acc.folding_threshold);
-    double rown = object_radius(jb, t, psf, 1.0 - w->acc.flux_fraction);
+    /* With a split PSF the box of an extended object whose wing error bound is tolerated
+     * holds object x core only, whose light ends at the core radius; the stamp's pixels
+     * beyond the box get the wing alone. Other objects take the whole table (a point source
+     * would gain nothing: its box is set by the PSF either way). */
+    wf_profile_psf view;
+    const int split = psf->core_radius > 0.0 &&
+                      jb->fpoint == 0.0 && 2.0 * jb->flux * psf->wing_max <= w->acc.wing_tolerance;
+    if (psf->core_radius > 0.0) {
+        view = *psf;
+        if (split) {
+            view.re = psf->core_re;
+            view.im = psf->core_im;
+            view.env = psf->env_core;
+        } else {
+            view.core_radius = 0.0;
+        }
+        psf = &view;
+    }
+    double rfold = object_radius(jb, t, psf, w->acc.folding_threshold, split);
+    double rown = split ? 0.0 : object_radius(jb, t, psf, 1.0 - w->acc.flux_fraction, 0);
     double need_fold = 2.0 * ceil(fmax(rfold, rown) / p) + 2.0;
-    int mi = choose_size(w, psf, fmax((double)need, need_fold));
+    int mi = choose_size(w, psf, split ? need_fold : fmax((double)need, need_fold));
     gd.m = w->sizes[mi];
     int clamped = gd.m < need_fold;
     gd.half = gd.m / 2;
@@ -1852,12 +1919,23 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
     fftw_execute_dft_c2r((fftw_plan)w->plans[mi], (fftw_complex *)w->fft, w->fft);
 
     const double norm = 1.0 / ((double)gd.m * gd.m);
+    /* the box's pixels within the stamp (all of it unless the PSF is split) */
+    long bx0 = (long)gd.ic - gd.half, by0 = (long)gd.jc - gd.half;
+    long xa = (long)stamp->x0 > bx0 ? (long)stamp->x0 : bx0;
+    long xb = (long)stamp->x0 + stamp->nx < bx0 + gd.m ? (long)stamp->x0 + stamp->nx : bx0 + gd.m;
     for (int yy = 0; yy < stamp->ny; yy++) {
-        const double *src = w->fft + (size_t)(stamp->y0 + yy - gd.jc + gd.half) * (gd.m + 2) +
-                            (size_t)(stamp->x0 - gd.ic + gd.half);
         double *dst = stamp->pix + (size_t)yy * stamp->nx;
-        for (int xx = 0; xx < stamp->nx; xx++) dst[xx] = src[xx] * norm;
+        long yb = (long)stamp->y0 + yy - by0;
+        if (yb < 0 || yb >= gd.m || xa >= xb) {
+            memset(dst, 0, (size_t)stamp->nx * sizeof(double));
+            continue;
+        }
+        const double *src = w->fft + (size_t)yb * (gd.m + 2) + (size_t)(xa - bx0);
+        for (long xx = stamp->x0; xx < xa; xx++) dst[xx - stamp->x0] = 0.0;
+        for (long xx = xa; xx < xb; xx++) dst[xx - stamp->x0] = src[xx - xa] * norm;
+        for (long xx = xb; xx < (long)stamp->x0 + stamp->nx; xx++) dst[xx - stamp->x0] = 0.0;
     }
+    if (split) add_wing(psf, jb->flux, x, y, stamp);
     if (clamped && jb->fpoint == 0.0 && (st = dewrap(w, jb, &gd, x, y, stamp))) return st;
     double clipped = 0.0;
     for (size_t i = 0; i < (size_t)stamp->nx * stamp->ny; i++)
@@ -1876,12 +1954,14 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
 void wf_profile_knot_method(wf_profile_work *work, int method) { work->knot_method = method; }
 
 wf_status wf_profile_work_tune(wf_profile_work *work, double flux_fraction,
-                               double folding_threshold, double kvalue_accuracy)
+                               double folding_threshold, double kvalue_accuracy,
+                               double wing_tolerance)
 {
     wf_profile_accuracy acc = work->acc;
     acc.flux_fraction = flux_fraction;
     acc.folding_threshold = folding_threshold;
     acc.kvalue_accuracy = kvalue_accuracy;
+    acc.wing_tolerance = wing_tolerance;
     wf_status st = wf_profile_check_accuracy(&acc);
     if (st) return st;
     work->acc = acc;

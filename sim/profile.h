@@ -53,6 +53,11 @@ typedef struct wf_profile_accuracy {
     int max_fft;              /* largest FFT side: bounds memory and time per object [1024] */
     int psf_table_fft;        /* FFT sides dividing this read the PSF table exactly, others
                                  interpolate it (bicubic) [192] */
+    double core_radius;       /* arcsec; > 0 splits the PSF into core and wing ("Core and
+                                 wing" below) [0: one PSF, the reference] */
+    double wing_tolerance;    /* with a split PSF, extended objects whose wing error bound
+                                 2 flux wing_max stays below this (flux per pixel) take the
+                                 split [0: none] */
 } wf_profile_accuracy;
 
 void wf_profile_accuracy_default(wf_profile_accuracy *acc);
@@ -100,6 +105,29 @@ typedef struct wf_profile_psf {
     double *ee;                /* ee[i]: fraction of the image's flux within (i + 1) ee_dr */
     double *env;               /* env[i]: max |PSF(k) pixel(k)| over |k| >= i table steps, for
                                   cutting each draw where object x PSF < kvalue_accuracy */
+    /* Core and wing (acc.core_radius > 0; else core_radius 0 and the rest unset). The
+     * core is the image times a taper T(r) (1 within 2/3 core_radius, a raised cosine to 0
+     * at core_radius); the wing is the rest, exactly: the inverse transform of (whole table
+     * - core table), in real space, pixel included. A compact object is drawn as object x
+     * core in a Fourier box sized by the core, plus flux x wing at its position. That is
+     * exact for a point source, but an extended object's wing misses the object's own blur,
+     * which moves no pixel by more than 2 flux wing_max: so an object takes the split only
+     * when that bound is below acc.wing_tolerance (a scene sets it from the sky noise;
+     * errors and costs: docs/ACCURACY.md). Point sources gain nothing and never take it. */
+    double core_radius;        /* arcsec */
+    float *core_re, *core_im;  /* the core's table, laid out as re, im */
+    double *env_core;          /* its envelope, as env */
+    double *ee_core;           /* ee_core[i]: the core's light within (i + 1) ee_dr, a
+                                  fraction of the image's flux */
+    double core_flux;          /* the core's share of the image's flux */
+    double wing_max;           /* largest |wing| pixel value, per unit flux */
+    int wing_os, wing_half;    /* wing samples every 1 / wing_os pixel, offsets up to
+                                  wing_half (+ 1) pixels each way */
+    int wing_np;               /* samples per row of one phase plane */
+    float *wing;               /* wing_os^2 phase planes, plane (b, a) at (b wing_os + a)
+                                  wing_np^2: entry [n_y][n_x] is the wing's pixel value at
+                                  offset (n_x - wing_half + a / wing_os, n_y - wing_half +
+                                  b / wing_os) pixels from the object */
 } wf_profile_psf;
 
 struct wf_sersic_table;
@@ -142,7 +170,8 @@ void wf_profile_work_free(wf_profile_work *work);
 /* Changes the per-object knobs between draws (e.g. looser for faint objects, a larger
  * flux_fraction for bright stars); the others fix the buffers and stay. */
 wf_status wf_profile_work_tune(wf_profile_work *work, double flux_fraction,
-                               double folding_threshold, double kvalue_accuracy);
+                               double folding_threshold, double kvalue_accuracy,
+                               double wing_tolerance);
 
 /* Bytes wf_profile_psf_init keeps (*bytes) and the scratch it needs while running (*scratch). */
 wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy *acc,

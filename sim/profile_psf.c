@@ -20,6 +20,10 @@
 
 #define WF_PSF_KFLOOR 1e-7
 #define WF_PSF_TAPER 0.1
+/* The wing table's samples per pixel: bilinear reads of the pixel-convolved wing, whose
+ * strongest frequencies (~1.2 cycles per pixel at Y106, already damped ~10x by the pixel)
+ * then lose ~10% of their small amplitude. */
+#define WING_OS 8
 
 /* 1 below (1 - WF_PSF_TAPER) band, 0 beyond band, a raised cosine between. A hard cut where
  * an image's transform still holds ~1e-3 (GalSim's OVER4: resampling artifacts) rings at
@@ -88,6 +92,38 @@ static size_t ee_count(const wf_psf_image *img)
     return (size_t)(0.5 * img->n * 1.4142135623730951 * 2.0) + 4; /* bins of scale / 2 */
 }
 
+/* Core and wing (sim/profile.h). The wing lies within the image (plus half a pixel), so
+ * its transform needs samples only every q-th table step: period lw = table_fft / q pixels
+ * at least twice its extent; one c2r FFT of side WING_OS lw gives it every 1/WING_OS pixel. */
+typedef struct split_geom {
+    int h, np, q, lw, nfft;
+} split_geom;
+
+static void split_layout(const wf_psf_image *img, const wf_profile_accuracy *acc, split_geom *g)
+{
+    double p = acc->pixel_scale;
+    g->h = (int)ceil((0.5 * (img->n - 1) * img->scale_arcsec + 0.5 * p) / p) + 1;
+    g->np = 2 * g->h + 2;
+    g->q = 1;
+    for (int q = acc->psf_table_fft / 2; q > 1; q--)
+        if (acc->psf_table_fft % q == 0 && acc->psf_table_fft / q >= 2 * g->h + 8) {
+            g->q = q;
+            break;
+        }
+    g->lw = acc->psf_table_fft / g->q;
+    g->nfft = WING_OS * g->lw;
+}
+
+/* 1 within 2/3 of the core radius, a raised cosine to 0 at it: smooth, so the core's
+ * transform spreads little beyond the PSF's band. */
+static double core_taper(double r, double rc)
+{
+    double r1 = rc * (2.0 / 3.0);
+    if (r <= r1) return 1.0;
+    if (r >= rc) return 0.0;
+    return 0.5 * (1.0 + cos(M_PI * (r - r1) / (rc - r1)));
+}
+
 wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy *acc,
                               size_t *bytes, size_t *scratch)
 {
@@ -101,6 +137,20 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
              wf_arena_cost(ee_count(img) * sizeof(double)) +
              wf_arena_cost(((size_t)kr + 2) * sizeof(double));
     *scratch = wf_arena_cost(side * side * 2 * sizeof(double));
+    if (acc->core_radius > 0.0) {
+        split_geom g;
+        split_layout(img, acc, &g);
+        *bytes += 2 * wf_arena_cost(side * side * sizeof(float)) +
+                  wf_arena_cost(((size_t)kr + 2) * sizeof(double)) +
+                  wf_arena_cost(ee_count(img) * sizeof(double)) +
+                  wf_arena_cost((size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np *
+                                sizeof(float));
+        /* the tapered image while the core is transformed, the wing's FFT while the whole
+         * is */
+        size_t taper = wf_arena_cost((size_t)img->n * (size_t)img->n * sizeof(double));
+        size_t fft = wf_arena_cost((size_t)g.nfft * ((size_t)g.nfft + 2) * sizeof(double));
+        *scratch += taper > fft ? taper : fft;
+    }
     int os = integer_oversampling(acc->pixel_scale, img->scale_arcsec);
     if (os) {
         size_t np = (size_t)os * (size_t)acc->psf_table_fft;
@@ -278,46 +328,147 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
     if (kr > kr_s) kr = kr_s;
     size_t side = 2 * (size_t)kr + 1;
 
-    float *re, *im;
-    double *ee, *env;
+    float *re, *im, *wing = NULL, *cre = NULL, *cim = NULL;
+    double *ee, *env, *ee_core = NULL, *cenv = NULL;
     size_t nee = ee_count(img);
+    const int split = acc->core_radius > 0.0;
+    split_geom g = {0};
+    if (split) split_layout(img, acc, &g);
     if ((st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&re)) ||
         (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&im)) ||
         (st = wf_arena_calloc(arena, nee, sizeof(double), "PSF encircled energy", (void **)&ee)) ||
         (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF envelope",
                               (void **)&env)))
         return st;
-    mark = wf_arena_mark(arena);
-    if ((st = pixel_transform(img, acc, kr_s, arena, &raw))) {
-        wf_arena_release(arena, mark);
+    if (split &&
+        ((st = wf_arena_calloc(arena, nee, sizeof(double), "PSF core encircled energy",
+                               (void **)&ee_core)) ||
+         (st = wf_arena_calloc(arena, (size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np,
+                               sizeof(float), "PSF wing", (void **)&wing)) ||
+         (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table",
+                               (void **)&cre)) ||
+         (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table",
+                               (void **)&cim)) ||
+         (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF core envelope",
+                               (void **)&cenv))))
         return st;
-    }
-    for (int v = -kr; v <= kr; v++)
-        for (int u = -kr; u <= kr; u++) {
-            const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
-            size_t at = (size_t)(v + kr) * side + (size_t)(u + kr);
-            double wt = band_taper(dkt * hypot(u, v), band);
-            re[at] = (float)(wt * o[0]);
-            im[at] = (float)(wt * o[1]);
-            int ring = (int)hypot(u, v);
-            if (ring <= kr) env[ring] = fmax(env[ring], wt * hypot(o[0], o[1]));
-        }
-    for (int i = kr; i > 0; i--) env[i - 1] = fmax(env[i - 1], env[i]);
-    wf_arena_release(arena, mark);
-
     /* encircled energy about the image centre, for stamp sizes */
-    double c = 0.5 * (img->n - 1), dr = 0.5 * img->scale_arcsec;
+    const double c = 0.5 * (img->n - 1), dr = 0.5 * img->scale_arcsec;
     for (int j = 0; j < img->n; j++)
         for (int i = 0; i < img->n; i++) {
-            double r = hypot(i - c, j - c) * img->scale_arcsec;
-            size_t b = (size_t)(r / dr);
-            if (b >= nee) b = nee - 1;
-            ee[b] += img->pix[(size_t)j * img->n + i];
+            size_t bin = (size_t)(hypot(i - c, j - c) * img->scale_arcsec / dr);
+            ee[bin < nee ? bin : nee - 1] += img->pix[(size_t)j * img->n + i];
         }
-    double run = 0.0;
-    for (size_t b = 0; b < nee; b++) {
-        run += ee[b];
-        ee[b] = run / sum;
+    /* the whole image's table; with a split, then the core's (the tapered image) */
+    double core_sum = 0.0;
+    for (int pass = 0; pass <= split; pass++) {
+        mark = wf_arena_mark(arena);
+        wf_psf_image src = *img;
+        if (pass) {
+            double *tapered;
+            if ((st = wf_arena_calloc(arena, (size_t)img->n * (size_t)img->n, sizeof(double),
+                                      "PSF core image", (void **)&tapered))) {
+                wf_arena_release(arena, mark);
+                return st;
+            }
+            for (int j = 0; j < img->n; j++)
+                for (int i = 0; i < img->n; i++) {
+                    double r = hypot(i - c, j - c) * img->scale_arcsec;
+                    size_t at = (size_t)j * img->n + i, bin = (size_t)(r / dr);
+                    tapered[at] = img->pix[at] * core_taper(r, acc->core_radius);
+                    ee_core[bin < nee ? bin : nee - 1] += tapered[at];
+                    core_sum += tapered[at];
+                }
+            src.pix = tapered;
+        }
+        if ((st = pixel_transform(&src, acc, kr_s, arena, &raw))) {
+            wf_arena_release(arena, mark);
+            return st;
+        }
+        float *tr = pass ? cre : re, *ti = pass ? cim : im;
+        double *te = pass ? cenv : env;
+        for (int v = -kr; v <= kr; v++)
+            for (int u = -kr; u <= kr; u++) {
+                const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
+                size_t at = (size_t)(v + kr) * side + (size_t)(u + kr);
+                double wt = band_taper(dkt * hypot(u, v), band);
+                tr[at] = (float)(wt * o[0]);
+                ti[at] = (float)(wt * o[1]);
+                int ring = (int)hypot(u, v);
+                if (ring <= kr) te[ring] = fmax(te[ring], wt * hypot(o[0], o[1]));
+            }
+        for (int i = kr; i > 0; i--) te[i - 1] = fmax(te[i - 1], te[i]);
+        wf_arena_release(arena, mark);
+    }
+    double run = 0.0, run_core = 0.0;
+    for (size_t bin = 0; bin < nee; bin++) {
+        run += ee[bin];
+        ee[bin] = run / sum;
+        if (split) {
+            run_core += ee_core[bin];
+            ee_core[bin] = run_core / sum;
+        }
+    }
+
+    if (split) {
+        /* the wing: (whole - core table) at every q-th step, c2r */
+        mark = wf_arena_mark(arena);
+        const size_t nf = (size_t)g.nfft, half = nf / 2 + 1;
+        double *buf;
+        if ((st = wf_arena_calloc(arena, nf * (nf + 2), sizeof(double), "PSF wing FFT",
+                                  (void **)&buf))) {
+            wf_arena_release(arena, mark);
+            return st;
+        }
+        const int kq = kr / g.q;
+        for (int vq = -kq; vq <= kq; vq++)
+            for (int uq = 0; uq <= kq; uq++) {
+                size_t at = (size_t)(vq * g.q + kr) * side + (size_t)(uq * g.q + kr);
+                double *bb = buf + 2 * ((size_t)((vq % g.nfft + g.nfft) % g.nfft) * half +
+                                        (size_t)uq);
+                bb[0] = (double)re[at] - (double)cre[at];
+                bb[1] = (double)im[at] - (double)cim[at];
+            }
+        wf_profile_fftw_lock();
+        fftw_plan plan = fftw_plan_dft_c2r_2d(g.nfft, g.nfft, (fftw_complex *)buf, buf,
+                                              FFTW_ESTIMATE);
+        wf_profile_fftw_unlock();
+        if (!plan) {
+            wf_arena_release(arena, mark);
+            return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", g.nfft);
+        }
+        fftw_execute(plan);
+        wf_profile_fftw_lock();
+        fftw_destroy_plan(plan);
+        wf_profile_fftw_unlock();
+        /* e(X) = (1 / lw^2) sum_k T(k) e^{i k X} for the draws' convention (sim/profile.c) */
+        const double norm = 1.0 / ((double)g.lw * g.lw);
+        const long nfl = (long)g.nfft;
+        for (int b = 0; b < WING_OS; b++)
+            for (int a = 0; a < WING_OS; a++) {
+                float *plane = wing + ((size_t)b * WING_OS + (size_t)a) * (size_t)g.np * g.np;
+                for (int ny = 0; ny < g.np; ny++) {
+                    long J = (long)b + (long)WING_OS * (ny - g.h);
+                    size_t row = (size_t)(((J % nfl) + nfl) % nfl) * (nf + 2);
+                    for (int nx = 0; nx < g.np; nx++) {
+                        long I = (long)a + (long)WING_OS * (nx - g.h);
+                        float v = (float)(norm * buf[row + (size_t)(((I % nfl) + nfl) % nfl)]);
+                        plane[(size_t)ny * g.np + nx] = v;
+                        if (fabs(v) > psf->wing_max) psf->wing_max = fabs(v);
+                    }
+                }
+            }
+        wf_arena_release(arena, mark);
+        psf->core_radius = acc->core_radius;
+        psf->core_re = cre;
+        psf->core_im = cim;
+        psf->env_core = cenv;
+        psf->ee_core = ee_core;
+        psf->core_flux = core_sum / sum;
+        psf->wing_os = WING_OS;
+        psf->wing_half = g.h;
+        psf->wing_np = g.np;
+        psf->wing = wing;
     }
 
     psf->pixel_scale = acc->pixel_scale;

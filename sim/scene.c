@@ -31,6 +31,7 @@ typedef struct object {
     double ra, dec, mag, flux;
     wf_galaxy g;      /* galaxies: pixel-frame shape */
     int wide;         /* bright point source: the wide PSF */
+    double fold, wing_tol; /* its folding threshold and wing tolerance (noise_tolerance) */
 } object;
 
 typedef struct thread_state {
@@ -96,6 +97,9 @@ void wf_scene_setup_default(wf_scene_setup *s)
     s->bright_mag = 15.0;
     s->psf_size = 256; /* 7" at 4x: drawing cost grows with its area (docs/BENCHMARKS.md) */
     s->flux_fraction = 0.995;
+    s->core_radius = 2.0;
+    s->noise_tolerance = 1.0;
+    s->exptime = 300.0;
     s->pool_bytes = (size_t)32 << 20; /* float stamps: as many as 64 MiB of doubles held */
     s->threads = 1;
     s->sky_on = 1;
@@ -210,7 +214,10 @@ static wf_status draw_object(void *ctx, const wf_render_object *ro, int ya, int 
         buf = ts->stamp;
     }
     wf_stamp st = {ro->x0, ro->y0, ro->nx, ro->ny, buf, 0, 0, 0};
-    wf_status s = o->kind == OBJ_GALAXY
+    const wf_profile_accuracy *acc = &ts->scene->acc;
+    wf_status s = wf_profile_work_tune(&ts->work, acc->flux_fraction, o->fold, acc->kvalue_accuracy, o->wing_tol);
+    if (s) return s;
+    s = o->kind == OBJ_GALAXY
                       ? wf_profile_draw_galaxy(&ts->work, &o->g, &ts->scene->ppsf, o->x, o->y, &st)
                       : wf_profile_draw_point(&ts->work, o->wide ? &ts->scene->ppsf_wide : &ts->scene->ppsf,
                                               o->flux, o->x, o->y, &st);
@@ -351,6 +358,7 @@ static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const 
     for (size_t k = 0; k < (size_t)n * n; k++) s->psf_wide_pix[k] /= psum;
     s->psf_wide_image = (wf_psf_image){n, d.scale, s->psf_wide_pix, band_limit};
     s->acc_wide = s->acc;
+    s->acc_wide.core_radius = 0.0; /* few objects; their halo is what they are drawn for */
     /* the table's period is the image's width: the image periodised onto it does not overlap
      * itself, and a wider period would only cost memory (the transform of os x period) */
     s->acc_wide.psf_table_fft = 2 * (int)ceil(n / (double)setup->psf_oversample / 2.0);
@@ -462,6 +470,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     s->psf_image = (wf_psf_image){n, d.scale, s->psf_pix, band_limit};
     wf_profile_accuracy_default(&s->acc);
     s->acc.flux_fraction = setup->flux_fraction;
+    s->acc.core_radius = setup->core_radius;
     size_t keep, scratch;
     if ((st = wf_profile_psf_need(&s->psf_image, &s->acc, &keep, &scratch))) goto bad;
     size_t pbytes = keep + scratch + 4096;
@@ -476,8 +485,23 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
         goto bad;
     /* a wide stamp reaches at most half the wide PSF image (2 psf_size / oversample pixels) */
     const double reach = 2.0 * setup->psf_size / setup->psf_oversample + 1.0;
+    /* Per-object knobs from the noise (docs/ACCURACY.md): light wrapping into the Fourier
+     * box stays in the stamp, moved across the box, and moves no pixel by more than
+     * fold x flux; the split PSF's wing moves none by more than flux x wing_max. Each may be
+     * as large as noise_tolerance x one pixel's sky noise over the exposure, in e-. With no
+     * sky there is no noise to hide in. */
+    if (!(setup->noise_tolerance >= 0.0) || (setup->noise_tolerance > 0.0 && !(setup->exptime > 0.0))) {
+        st = wf_error(WF_ERR_RANGE, "scene: noise_tolerance %g needs a positive exposure time (%g s)",
+                      setup->noise_tolerance, setup->exptime);
+        goto bad;
+    }
+    const double sky_sigma = setup->sky_on && s->stats.sky_min > 0.0 ? sqrt(s->stats.sky_min * setup->exptime) : 0.0;
+    const double tol_rate = setup->noise_tolerance > 0.0 ? setup->noise_tolerance * sky_sigma / setup->exptime : 0.0;
     for (size_t i = 0; i < s->nobj; i++) {
         object *o = &s->obj[i];
+        o->fold = s->acc.folding_threshold;
+        o->wing_tol = tol_rate; /* e-/s per pixel, the unit of the stamps */
+        if (tol_rate > 0.0 && o->flux > 0.0) o->fold = fmin(WF_SCENE_FOLD_MAX, fmax(o->fold, tol_rate / o->flux));
         int near = o->x > -reach && o->y > -reach && o->x < setup->ncols + reach && o->y < setup->nrows + reach;
         if (o->kind != OBJ_GALAXY && o->flux > 0 && o->mag < setup->bright_mag && near) {
             o->wide = 1;

@@ -43,6 +43,12 @@ typedef struct wf_scene_setup {
     double jitter;          /* pointing jitter, Gaussian sigma per axis, arcsec [0: off] */
     double diffusion;       /* charge diffusion, Gaussian sigma per axis, pixels [0: off] */
     double flux_fraction;   /* stamps hold at least this [0.995] */
+    double core_radius;     /* arcsec, the PSF's core and wing split (sim/profile.h); 0: none [2] */
+    double noise_tolerance; /* per object, looser knobs whose error bound stays below this x
+                             * the sky noise of one pixel over exptime: folding (in [the
+                             * profile default, WF_SCENE_FOLD_MAX]) and the split PSF's wing
+                             * for objects of any size; 0: the same knobs for all [1] */
+    double exptime;         /* s, for noise_tolerance [300] */
     size_t pool_bytes;      /* stamp pool per renderer (float stamps) [32 MiB] */
     int threads;            /* renderers to prepare [1] */
     int sky_on;             /* add the sky [1] */
@@ -54,6 +60,8 @@ typedef struct wf_scene_setup {
     const wf_scene_sn *sne; /* supernovae (must outlive the scene) [none] */
     size_t nsne;
 } wf_scene_setup;
+
+#define WF_SCENE_FOLD_MAX 0.05
 
 typedef struct wf_scene_stats {
     long galaxies, stars, sne; /* drawn (reach the SCA) */

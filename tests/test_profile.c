@@ -895,7 +895,7 @@ START_TEST(test_flux_with_psf)
     ck_assert(s.sum / 500.0 >= acc.flux_fraction - 1e-4 && s.sum / 500.0 <= 1 + 1e-4);
     free(s.pix);
     /* everything: a tight folding threshold and a stamp holding all but 1e-9 */
-    ck_assert(wf_profile_work_tune(&c.work, 1 - 1e-9, 1e-9, 1e-8) == WF_OK);
+    ck_assert(wf_profile_work_tune(&c.work, 1 - 1e-9, 1e-9, 1e-8, 0.0) == WF_OK);
     ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, 300.3, 200.7, &s, NULL) == WF_OK);
     s.pix = calloc((size_t)s.nx * s.ny, sizeof(double));
     ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 300.3, 200.7, &s) == WF_OK);
@@ -953,7 +953,7 @@ START_TEST(test_sheared_ellipticity)
     wf_profile_accuracy_default(&acc);
     ctx c;
     ctx_open(&c, &acc, NULL);
-    ck_assert(wf_profile_work_tune(&c.work, 1 - 1e-9, 1e-9, 1e-7) == WF_OK);
+    ck_assert(wf_profile_work_tune(&c.work, 1 - 1e-9, 1e-9, 1e-7, 0.0) == WF_OK);
     const double emag[] = {0.3, 0.7, 0.7, 0.7, 0.7, 0.7, 0.7};
     const double beta[] = {-0.3, 0.0, 30.0, 45.0, 60.0, 90.0, 135.0}; /* position angle, deg */
     double worst = 0;
@@ -1298,6 +1298,134 @@ START_TEST(test_pieces_identical)
 }
 END_TEST
 
+/* ------------------------------------------------------------------- core and wing */
+
+/* A PSF with a wing: 90% in a Gaussian of sigma s1, 10% in one of s2, n x n samples at
+ * P / 4, normalised. */
+static double *halo_psf(int n, double s1, double s2, wf_psf_image *img)
+{
+    double *pix = malloc(sizeof(double) * n * n), s = 0, c = 0.5 * (n - 1), h = P / 4;
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            double r2 = ((i - c) * (i - c) + (j - c) * (j - c)) * h * h;
+            pix[j * n + i] = 0.9 * exp(-0.5 * r2 / (s1 * s1)) / (s1 * s1) +
+                             0.1 * exp(-0.5 * r2 / (s2 * s2)) / (s2 * s2);
+            s += pix[j * n + i];
+        }
+    for (int i = 0; i < n * n; i++) pix[i] /= s;
+    img->n = n;
+    img->scale_arcsec = h;
+    img->pix = pix;
+    img->band_limit = 0.0;
+    return pix;
+}
+
+/* Core and wing (sim/profile.h): the wing table holds exactly the light the core lacks; an
+ * object whose wing error bound is not tolerated is drawn bit for bit as without the split;
+ * one that takes it keeps its flux, moves no pixel by more than the bound 2 flux wing_max
+ * and, when it is nearly a point, matches the unsplit draw closely; pieces are identical. */
+START_TEST(test_core_wing)
+{
+    wf_psf_image img;
+    double *psfpix = halo_psf(256, 0.07, 0.8, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx whole, split;
+    ctx_open(&whole, &acc, &img);
+    acc.core_radius = 1.0;
+    ctx_open(&split, &acc, &img);
+    const wf_profile_psf *sp = &split.psf;
+    ck_assert(sp->core_radius == 1.0 && sp->wing != NULL);
+
+    /* the wing's pixels at whole-pixel offsets tile the plane: they sum to its flux */
+    double wsum = 0.0;
+    for (int k = 0; k < sp->wing_np * sp->wing_np; k++) wsum += sp->wing[k];
+    printf("core and wing: core %.6f of the flux, wing sums to %.6f, max wing pixel %.3g\n",
+           sp->core_flux, wsum, sp->wing_max);
+    ck_assert_msg(fabs(wsum - (1.0 - sp->core_flux)) < 1e-6, "wing %.8f, core %.8f", wsum,
+                  sp->core_flux);
+    ck_assert(sp->core_flux > 0.9 && sp->core_flux < 0.99);
+
+    const double hlr[] = {0.005, 0.2, 0.5};
+    for (int h = 0; h < 3; h++) {
+        wf_galaxy g = galaxy(1000.0, 0.3, hlr[h], 0.5 * hlr[h], 0.2, -0.1);
+        g.n_knots = h ? 30 : 0;
+        g.knot_frac = h ? 0.2 : 0.0;
+        g.knot_seed = 5;
+        double x = 400.3, y = 300.8;
+        wf_stamp b;
+        ck_assert(wf_profile_galaxy_bounds(&whole.work, &g, &whole.psf, x, y, &b, NULL) == WF_OK);
+        /* not tolerated: the same bits as the whole PSF */
+        wf_stamp a = stamp_new(b.x0, b.y0, b.nx, b.ny), c = stamp_new(b.x0, b.y0, b.nx, b.ny);
+        ck_assert(wf_profile_draw_galaxy(&whole.work, &g, &whole.psf, x, y, &a) == WF_OK);
+        ck_assert(wf_profile_draw_galaxy(&split.work, &g, &split.psf, x, y, &c) == WF_OK);
+        ck_assert_msg(!memcmp(a.pix, c.pix, sizeof(double) * b.nx * b.ny),
+                      "hlr %g: an untolerated split changed the stamp", hlr[h]);
+        /* tolerated at the default folding: a smaller box */
+        int fft_whole = a.fft;
+        ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, acc.folding_threshold,
+                                       acc.kvalue_accuracy, 1e30) == WF_OK);
+        ck_assert(wf_profile_draw_galaxy(&split.work, &g, &split.psf, x, y, &c) == WF_OK);
+        /* (the largest galaxy's box is its own, with or without the wing) */
+        ck_assert_msg(h == 2 ? c.fft <= fft_whole : c.fft < fft_whole,
+                      "hlr %g: the split did not shrink the box (%d, %d)", hlr[h], c.fft,
+                      fft_whole);
+        int fft_split = c.fft;
+        /* tolerated, both with folding 1e-7 so that only the wing differs */
+        ck_assert(wf_profile_work_tune(&whole.work, acc.flux_fraction, 1e-7, 1e-7, 0.0) == WF_OK);
+        ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 1e30) == WF_OK);
+        ck_assert(wf_profile_draw_galaxy(&whole.work, &g, &whole.psf, x, y, &a) == WF_OK);
+        ck_assert(wf_profile_draw_galaxy(&split.work, &g, &split.psf, x, y, &c) == WF_OK);
+        double peak = 0.0, worst = 0.0;
+        for (int k = 0; k < b.nx * b.ny; k++) {
+            peak = fmax(peak, a.pix[k]);
+            worst = fmax(worst, fabs(a.pix[k] - c.pix[k]));
+        }
+        double bound = 2.0 * g.flux * sp->wing_max;
+        printf("core and wing: hlr %.3f: FFT %d -> %d, flux %.6f -> %.6f, worst pixel %.2e of "
+               "the peak, %.3f of the bound\n", hlr[h], fft_whole, fft_split, a.sum / g.flux,
+               c.sum / g.flux, worst / peak, worst / bound);
+        ck_assert_msg(worst <= bound, "hlr %g: %g beyond the bound %g", hlr[h], worst, bound);
+        /* the same light in the stamp but for the wing's blur at the stamp's edge, which
+         * puts a little more of the true wing outside (4e-5 at hlr 0.2) */
+        ck_assert_msg(fabs(c.sum - a.sum) < 1e-4 * g.flux, "hlr %g: flux %.8f vs %.8f", hlr[h],
+                      c.sum / g.flux, a.sum / g.flux);
+        if (h == 0) /* nearly a point: the split is exact for a point */
+            ck_assert_msg(worst < 0.02 * bound, "point-like: %g of the bound", worst / bound);
+        /* pieces of a split stamp are the same pixels as the whole */
+        int cut[] = {0, 5, b.ny / 2, b.ny};
+        for (int k = 0; k + 1 < 4; k++) {
+            wf_stamp part = stamp_new(b.x0, b.y0 + cut[k], b.nx, cut[k + 1] - cut[k]);
+            ck_assert(wf_profile_draw_galaxy(&split.work, &g, &split.psf, x, y, &part) == WF_OK);
+            ck_assert_msg(!memcmp(part.pix, c.pix + (size_t)cut[k] * b.nx,
+                                  sizeof(double) * part.nx * part.ny),
+                          "hlr %g: split rows %d..%d differ", hlr[h], cut[k], cut[k + 1]);
+            free(part.pix);
+        }
+        ck_assert(wf_profile_work_tune(&whole.work, acc.flux_fraction, acc.folding_threshold,
+                                       acc.kvalue_accuracy, 0.0) == WF_OK);
+        ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, acc.folding_threshold,
+                                       acc.kvalue_accuracy, 0.0) == WF_OK);
+        free(a.pix);
+        free(c.pix);
+    }
+    /* point sources never take the split: nothing to gain */
+    wf_stamp b;
+    ck_assert(wf_profile_point_bounds(&whole.work, &whole.psf, 10.2, 20.6, &b, NULL) == WF_OK);
+    wf_stamp a = stamp_new(b.x0, b.y0, b.nx, b.ny), c = stamp_new(b.x0, b.y0, b.nx, b.ny);
+    ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, acc.folding_threshold,
+                                   acc.kvalue_accuracy, 1e30) == WF_OK);
+    ck_assert(wf_profile_draw_point(&whole.work, &whole.psf, 50.0, 10.2, 20.6, &a) == WF_OK);
+    ck_assert(wf_profile_draw_point(&split.work, &split.psf, 50.0, 10.2, 20.6, &c) == WF_OK);
+    ck_assert(!memcmp(a.pix, c.pix, sizeof(double) * b.nx * b.ny));
+    free(a.pix);
+    free(c.pix);
+    ctx_close(&whole);
+    ctx_close(&split);
+    free(psfpix);
+}
+END_TEST
+
 /* ------------------------------------------------------------------ knots in Fourier space */
 
 /* Draws g at (x, y) with the knots summed by `method` into a new stamp of the given bounds. */
@@ -1495,8 +1623,8 @@ START_TEST(test_psf_table_interpolation)
     g.n_knots = 10;
     g.knot_frac = 0.2;
     /* the side from the 201-pixel stamp: 256, which does not divide 192 */
-    ck_assert(wf_profile_work_tune(&c1.work, 0.9, 0.05, 1e-5) == WF_OK);
-    ck_assert(wf_profile_work_tune(&c2.work, 0.9, 0.05, 1e-5) == WF_OK);
+    ck_assert(wf_profile_work_tune(&c1.work, 0.9, 0.05, 1e-5, 0.0) == WF_OK);
+    ck_assert(wf_profile_work_tune(&c2.work, 0.9, 0.05, 1e-5, 0.0) == WF_OK);
     wf_stamp s1 = stamp_new(0, 0, 201, 201), s2 = stamp_new(0, 0, 201, 201);
     ck_assert(wf_profile_draw_galaxy(&c1.work, &g, &c1.psf, 100.0, 100.0, &s1) == WF_OK);
     ck_assert(wf_profile_draw_galaxy(&c2.work, &g, &c2.psf, 100.0, 100.0, &s2) == WF_OK);
@@ -1638,7 +1766,7 @@ START_TEST(test_bad_input)
     a.flux_fraction = 1.0;
     size_t b;
     ck_assert(wf_profile_work_need(&a, &b) == WF_ERR_RANGE);
-    ck_assert(wf_profile_work_tune(&c.work, 0.9, 0.0, 1e-5) == WF_ERR_RANGE);
+    ck_assert(wf_profile_work_tune(&c.work, 0.9, 0.0, 1e-5, 0.0) == WF_ERR_RANGE);
     /* an arena too small fails cleanly */
     unsigned char small[4096];
     wf_arena tiny;
@@ -1735,6 +1863,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_centred_symmetric);
     tcase_add_test(ind, test_sheared_ellipticity);
     tcase_add_test(ind, test_pieces_identical);
+    tcase_add_test(ind, test_core_wing);
     tcase_add_test(ind, test_psf_table_interpolation);
     tcase_add_test(ind, test_psf_any_sampling);
     tcase_add_test(ind, test_knot_lattice);

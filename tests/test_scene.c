@@ -152,6 +152,68 @@ START_TEST(galaxies_edges_and_extremes)
 }
 END_TEST
 
+/* scene.noise_tolerance (sim/scene.h): per object, folding and the split PSF's wing are
+ * loosened only as far as their error bounds stay below tau x one pixel's sky noise over
+ * the exposure. Against the same scene with tau = 0: no pixel of any object moves by more
+ * than the two bounds together (2 tau sigma); faint objects do change (cheaper boxes),
+ * bright ones keep their bits; tau = 0 with a split PSF is the unsplit scene bit for bit. */
+START_TEST(noise_tolerance_bounds)
+{
+    enum { N = 9 };
+    double x[N], y[N], mag[N];
+    for (int i = 0; i < N; i++) {
+        x[i] = 40.3 + 20.0 * i;
+        y[i] = 60.7 + 15.0 * i;
+        mag[i] = 18.0 + i; /* 18 .. 26 */
+    }
+    wf_scene_setup ss;
+    setup_small(&ss);
+    char path[4200];
+    snprintf(path, sizeof path, "%s/tol.csv", wf_test_tmpdir());
+    write_catalog(path, &ss, 1, N, x, y, mag);
+    wf_catalog gal;
+    ck_assert_msg(wf_catalog_read_galaxies(path, &gal) == WF_OK, "%s", wf_error_message());
+    const double tau = 1.0;
+    double *pix[3][N];
+    int nx[3][N], ny[3][N];
+    double sigma = 0.0;
+    for (int m = 0; m < 3; m++) {
+        setup_small(&ss);
+        ss.sky_on = 1;
+        ss.core_radius = m == 2 ? 0.0 : 2.0;
+        ss.noise_tolerance = m == 1 ? tau : 0.0;
+        wf_scene *scene;
+        ck_assert_msg(wf_scene_create(&ss, &gal, NULL, &scene) == WF_OK, "%s", wf_error_message());
+        ck_assert_int_eq(wf_scene_object_count(scene), N);
+        wf_scene_stats st;
+        wf_scene_get_stats(scene, &st);
+        sigma = sqrt(st.sky_min * ss.exptime) / ss.exptime; /* e-/s, the stamps' unit */
+        for (int k = 0; k < N; k++) {
+            wf_scene_object info;
+            int x0, y0;
+            ck_assert_int_eq(wf_scene_draw_object(scene, (size_t)k, &info, &x0, &y0, &nx[m][k], &ny[m][k], &pix[m][k]),
+                             WF_OK);
+        }
+        wf_scene_destroy(scene);
+    }
+    int changed = 0;
+    for (int k = 0; k < N; k++) {
+        ck_assert(nx[0][k] == nx[1][k] && ny[0][k] == ny[1][k] && nx[0][k] == nx[2][k]);
+        size_t np = (size_t)nx[0][k] * ny[0][k];
+        ck_assert_msg(!memcmp(pix[0][k], pix[2][k], np * sizeof(double)), "object %d: tau 0 is not the unsplit scene", k);
+        double worst = 0.0;
+        for (size_t i = 0; i < np; i++) worst = fmax(worst, fabs(pix[1][k][i] - pix[0][k][i]));
+        printf("noise tolerance: object %d: worst pixel moved by %.3g sky sigma\n", k, worst / sigma);
+        ck_assert_msg(worst <= 2.0 * tau * sigma, "object %d: %g sigma", k, worst / sigma);
+        if (worst > 0.0) changed++;
+        if (k == 0) ck_assert_msg(worst == 0.0, "the magnitude-18 galaxy changed");
+        for (int m = 0; m < 3; m++) free(pix[m][k]);
+    }
+    ck_assert_msg(changed >= 3, "only %d faint objects took the looser knobs", changed);
+    wf_catalog_free(&gal);
+}
+END_TEST
+
 START_TEST(bright_star_within_budget)
 {
     wf_scene_setup ss;
@@ -365,6 +427,7 @@ static Suite *suite(void)
     tcase_add_test(tc, bright_star_within_budget);
     tcase_add_test(tc, bright_star_wide_psf);
     tcase_add_test(tc, empty_scene_is_sky);
+    tcase_add_test(tc, noise_tolerance_bounds);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -589,7 +589,7 @@ static wf_status gal_knob(acc_run *run, drawer *d, const gal_case *gc, const cha
         g->n_knots = set[k].knots ? gc->n_knots : 0;
         g->knot_seed = 5;
         g->e1 = 0.2, g->e2 = 0.1;
-        if ((st = wf_profile_work_tune(&d->work, set[k].ff, set[k].fold, set[k].kval))) break;
+        if ((st = wf_profile_work_tune(&d->work, set[k].ff, set[k].fold, set[k].kval, 0.0))) break;
         double fraction = 1;
         st = gc->star ? wf_profile_point_bounds(&d->work, &d->ppsf, gd.x, gd.y, &gd.stamp, &fraction)
                       : wf_profile_galaxy_bounds(&d->work, g, &d->ppsf, gd.x, gd.y, &gd.stamp, &fraction);
@@ -616,7 +616,7 @@ static wf_status gal_knob(acc_run *run, drawer *d, const gal_case *gc, const cha
     wf_profile_accuracy def;
     wf_profile_accuracy_default(&def);
     wf_status st2 = wf_profile_work_tune(&d->work, def.flux_fraction, def.folding_threshold,
-                                         def.kvalue_accuracy);
+                                         def.kvalue_accuracy, 0.0);
     if (!st) st = st2;
 out:
     if (stamps)

@@ -206,6 +206,12 @@ static const key_desc keys[] = {
             "row band by row band: never dropped, but redrawn."},
     {.name = "scene.flux_fraction", .type = KT_DOUBLE, .unit = "", .def = "0.995", ABOVE(0.5), MAX(0.99999),
      FIELD(flux_fraction), .doc = "Each stamp holds at least this fraction of its object's flux."},
+    {.name = "scene.noise_tolerance", .type = KT_DOUBLE, .unit = "sky sigma", .def = "1", MIN(0), MAX(100),
+     FIELD(noise_tolerance),
+     .doc = "Faint objects are drawn with looser knobs where the error bound of each stays below this many times "
+            "the sky noise of one pixel over the exposure: light wrapping into the Fourier box (at most 5% of "
+            "the object, never stricter than the default 0.5%), and the PSF wing placed without the object's "
+            "own blur (psf.core_radius). 0: the same knobs for every object. Errors and costs: docs/ACCURACY.md."},
     {.name = "psf.pupil_bin", .type = KT_ENUM, .unit = "", .def = "8", .choices = pupil_bins,
      FIELD(pupil_bin), .doc = "Pupil-plane binning, as GalSim's pupil_bin (8 fast, 4 or 2 for bright stars)."},
     {.name = "psf.nlambda", .type = KT_INT, .unit = "", .def = "1", MIN(1), MAX(64), FIELD(psf_nlambda),
@@ -219,6 +225,11 @@ static const key_desc keys[] = {
      FIELD(psf_bright_mag),
      .doc = "Stars and SNe brighter than this are drawn with a wide PSF (28\", pupil_bin 4 or finer: halo and "
             "spikes), built only when one is present; below -50: never."},
+    {.name = "psf.core_radius", .type = KT_DOUBLE, .unit = "arcsec", .def = "2", MIN(0), MAX(60),
+     FIELD(psf_core_radius),
+     .doc = "Objects are drawn as object x PSF core (the PSF within this radius, tapered from 2/3 of it) in a "
+            "Fourier box sized by the core, plus flux x the PSF's wing beyond; 0: the whole PSF in every box "
+            "(exact, slower). Errors and costs: docs/ACCURACY.md."},
     {.name = "psf.oversample", .type = KT_INT, .unit = "", .def = "4", MIN(2), MAX(8),
      FIELD(psf_oversample), .doc = "PSF image sampling: 0.11 / oversample arcsec."},
     {.name = "scene.sky_rate", .type = KT_DOUBLE, .unit = "e-/pixel/s", MIN(0),

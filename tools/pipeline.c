@@ -233,6 +233,9 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         ss.diffusion = cfg->psf_diffusion;
         ss.bright_mag = cfg->psf_bright_mag;
         ss.flux_fraction = cfg->flux_fraction;
+        ss.core_radius = cfg->psf_core_radius;
+        ss.noise_tolerance = cfg->noise_tolerance;
+        ss.exptime = cfg->ro.mode == WF_MODE_SINGLE ? cfg->ro.exptime : wf_clock_exposure_time(pj->clock);
         ss.sky_on = cfg->sky_on;
         ss.stray_light = cfg->stray_light;
         ss.pool_bytes = (size_t)(cfg->stamp_pool_mib * 1048576.0);
