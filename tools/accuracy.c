@@ -302,7 +302,7 @@ static wf_status wavelengths(const acc_run *run, int nlambda, double *lam, doubl
  * period, the light beyond the image lost), tabulated for the drawer; plus one drawing work
  * at the default knobs. */
 static wf_status drawer_open(const acc_run *run, int bin, int over, int size, int nlambda,
-                             int normalise, drawer *d)
+                             int normalise, double core_radius, drawer *d)
 {
     memset(d, 0, sizeof *d);
     double lam[WF_PSF_MAX_LAMBDAS], w[WF_PSF_MAX_LAMBDAS];
@@ -335,6 +335,7 @@ static wf_status drawer_open(const acc_run *run, int bin, int over, int size, in
     d->img = (wf_psf_image){size, dopt.scale, d->pix, band};
     wf_profile_accuracy acc;
     wf_profile_accuracy_default(&acc);
+    acc.core_radius = core_radius;
     size_t keep, scratch, wneed;
     if ((st = wf_profile_psf_need(&d->img, &acc, &keep, &scratch)) ||
         (st = wf_profile_work_need(&acc, &wneed)))
@@ -413,7 +414,7 @@ static wf_status psf_star(const acc_run *run, const psf_setting *ps, double *img
         return st;
     }
     drawer d;
-    if ((st = drawer_open(run, ps->bin, ps->over, ps->size, ps->nlambda, !ps->unnorm, &d))) return st;
+    if ((st = drawer_open(run, ps->bin, ps->over, ps->size, ps->nlambda, !ps->unnorm, 0.0, &d))) return st;
     sd.d = &d;
     st = star_via_table(&sd);
     *setup = cpu_now() - t0;
@@ -535,6 +536,8 @@ static const gal_case gal_cases[] = {
 typedef struct gal_setting {
     double ff, fold, kval;
     int knots;
+    drawer *d;   /* NULL: the sweep's drawer; else one with a split PSF */
+    double wtol; /* wing_tolerance (1e30: every galaxy takes the split) */
 } gal_setting;
 
 typedef struct gal_draw {
@@ -575,7 +578,7 @@ static wf_status gal_knob(acc_run *run, drawer *d, const gal_case *gc, const cha
         r->reference = k == ref;
         gal_draw gd;
         memset(&gd, 0, sizeof gd);
-        gd.d = d;
+        gd.d = set[k].d ? set[k].d : d;
         gd.gc = gc;
         gd.x = gc->star ? GAL_STAR : GAL_X;
         gd.y = gc->star ? GAL_STAR : GAL_Y;
@@ -589,10 +592,10 @@ static wf_status gal_knob(acc_run *run, drawer *d, const gal_case *gc, const cha
         g->n_knots = set[k].knots ? gc->n_knots : 0;
         g->knot_seed = 5;
         g->e1 = 0.2, g->e2 = 0.1;
-        if ((st = wf_profile_work_tune(&d->work, set[k].ff, set[k].fold, set[k].kval, 0.0))) break;
+        if ((st = wf_profile_work_tune(&gd.d->work, set[k].ff, set[k].fold, set[k].kval, set[k].wtol))) break;
         double fraction = 1;
-        st = gc->star ? wf_profile_point_bounds(&d->work, &d->ppsf, gd.x, gd.y, &gd.stamp, &fraction)
-                      : wf_profile_galaxy_bounds(&d->work, g, &d->ppsf, gd.x, gd.y, &gd.stamp, &fraction);
+        st = gc->star ? wf_profile_point_bounds(&gd.d->work, &gd.d->ppsf, gd.x, gd.y, &gd.stamp, &fraction)
+                      : wf_profile_galaxy_bounds(&gd.d->work, g, &gd.d->ppsf, gd.x, gd.y, &gd.stamp, &fraction);
         if (st) break;
         if (!(gd.stamp.pix = malloc((size_t)gd.stamp.nx * gd.stamp.ny * sizeof(double)))) {
             st = wf_error(WF_ERR_NOMEM, "accuracy: cannot hold a %dx%d stamp", gd.stamp.nx, gd.stamp.ny);
@@ -615,9 +618,12 @@ static wf_status gal_knob(acc_run *run, drawer *d, const gal_case *gc, const cha
     }
     wf_profile_accuracy def;
     wf_profile_accuracy_default(&def);
-    wf_status st2 = wf_profile_work_tune(&d->work, def.flux_fraction, def.folding_threshold,
-                                         def.kvalue_accuracy, 0.0);
-    if (!st) st = st2;
+    for (int k = 0; k < n; k++) {
+        drawer *dk = set[k].d ? set[k].d : d;
+        wf_status st2 = wf_profile_work_tune(&dk->work, def.flux_fraction, def.folding_threshold,
+                                             def.kvalue_accuracy, 0.0);
+        if (!st) st = st2;
+    }
 out:
     if (stamps)
         for (int k = 0; k < n; k++) free(stamps[k].pix);
@@ -630,8 +636,14 @@ static wf_status sweep_galaxy(acc_run *run)
 {
     const int q = run->quick;
     drawer d;
-    wf_status st = drawer_open(run, 8, 4, 256, 0, 1, &d); /* the scene's default PSF */
+    wf_status st = drawer_open(run, 8, 4, 256, 0, 1, 0.0, &d); /* the scene's default PSF */
     if (st) return st;
+    /* the same PSF split into core and wing (psf.core_radius) */
+    enum { NCORE = 4 };
+    static const double cores[NCORE] = {1.0, 1.5, 2.0, 3.0};
+    drawer dc[NCORE];
+    memset(dc, 0, sizeof dc);
+    for (int i = 0; i < NCORE && !st; i++) st = drawer_open(run, 8, 4, 256, 0, 1, cores[i], &dc[i]);
     wf_profile_accuracy def;
     wf_profile_accuracy_default(&def);
     const double F = def.flux_fraction, T = def.folding_threshold, K = def.kvalue_accuracy;
@@ -639,33 +651,46 @@ static wf_status sweep_galaxy(acc_run *run)
         const gal_case *gc = &gal_cases[c];
         if (q && strcmp(gc->name, "star") && strcmp(gc->name, "medium")) continue;
         {
-            gal_setting s[5] = {{0.9, T, K, 1}, {0.99, T, K, 1}, {0.995, T, K, 1}, {0.999, T, K, 1},
-                                {0.9999, T, K, 1}};
+            gal_setting s[5] = {{0.9, T, K, 1, NULL, 0.0},   {0.99, T, K, 1, NULL, 0.0},
+                                {0.995, T, K, 1, NULL, 0.0}, {0.999, T, K, 1, NULL, 0.0},
+                                {0.9999, T, K, 1, NULL, 0.0}};
             const char *v[5] = {"0.9", "0.99", "0.995", "0.999", "0.9999"};
             if ((st = gal_knob(run, &d, gc, "flux_fraction", s, v, 5, 4))) break;
         }
         {
-            gal_setting s[6] = {{F, 5e-2, K, 1}, {F, 1e-2, K, 1}, {F, 5e-3, K, 1},
-                                {F, 1e-3, K, 1}, {F, 1e-4, K, 1}, {F, 1e-5, K, 1}};
+            gal_setting s[6] = {{F, 5e-2, K, 1, NULL, 0.0}, {F, 1e-2, K, 1, NULL, 0.0}, {F, 5e-3, K, 1, NULL, 0.0},
+                                {F, 1e-3, K, 1, NULL, 0.0}, {F, 1e-4, K, 1, NULL, 0.0}, {F, 1e-5, K, 1, NULL, 0.0}};
             const char *v[6] = {"5e-2", "1e-2", "5e-3", "1e-3", "1e-4", "1e-5"};
             if ((st = q ? gal_knob(run, &d, gc, "folding_threshold", s + 2, v + 2, 3, 2)
                         : gal_knob(run, &d, gc, "folding_threshold", s, v, 6, 5)))
                 break;
         }
         {
-            gal_setting s[5] = {{F, T, 1e-3, 1}, {F, T, 1e-4, 1}, {F, T, 1e-5, 1}, {F, T, 1e-6, 1},
-                                {F, T, 1e-7, 1}};
+            gal_setting s[5] = {{F, T, 1e-3, 1, NULL, 0.0}, {F, T, 1e-4, 1, NULL, 0.0},
+                                {F, T, 1e-5, 1, NULL, 0.0}, {F, T, 1e-6, 1, NULL, 0.0},
+                                {F, T, 1e-7, 1, NULL, 0.0}};
             const char *v[5] = {"1e-3", "1e-4", "1e-5", "1e-6", "1e-7"};
             if ((st = q ? gal_knob(run, &d, gc, "kvalue_accuracy", s + 1, v + 1, 3, 2)
                         : gal_knob(run, &d, gc, "kvalue_accuracy", s, v, 5, 4)))
                 break;
         }
         if (gc->n_knots) {
-            gal_setting s[2] = {{F, T, K, 0}, {F, T, K, 1}};
+            gal_setting s[2] = {{F, T, K, 0, NULL, 0.0}, {F, T, K, 1, NULL, 0.0}};
             const char *v[2] = {"off", "on"};
             if ((st = gal_knob(run, &d, gc, "knots", s, v, 2, 1))) break;
         }
+        if (!gc->star) { /* every galaxy forced onto the split (a scene takes it only where
+                          * the noise hides the bound) */
+            gal_setting s[NCORE + 1];
+            const char *v[NCORE + 1] = {"1.0", "1.5", "2.0", "3.0", "off"};
+            for (int i = 0; i <= NCORE; i++)
+                s[i] = (gal_setting){F, T, K, 1, i < NCORE ? &dc[i] : NULL, i < NCORE ? 1e30 : 0.0};
+            if ((st = q ? gal_knob(run, &d, gc, "core_radius", s + 2, v + 2, 3, 2)
+                        : gal_knob(run, &d, gc, "core_radius", s, v, NCORE + 1, NCORE)))
+                break;
+        }
     }
+    for (int i = 0; i < NCORE; i++) drawer_free(&dc[i]);
     drawer_free(&d);
     return st;
 }
@@ -720,7 +745,8 @@ static wf_status scene_inputs(const acc_run *run, int n, scene_in *in)
 
 /* Noise-free rates (e-/pixel/s) of the region as the renderer hands them to the firmware. */
 static wf_status scene_render(const acc_run *run, const scene_in *in, int bin, int over, int size,
-                              double ff, int sky, float *rate, double *cpu, char *notes, size_t cap)
+                              double ff, int sky, double tol, double core, float *rate, double *cpu,
+                              char *notes, size_t cap)
 {
     wf_scene_setup ss;
     wf_scene_setup_default(&ss);
@@ -734,6 +760,9 @@ static wf_status scene_render(const acc_run *run, const scene_in *in, int bin, i
     ss.psf_size = size;
     ss.flux_fraction = ff;
     ss.sky_on = sky;
+    ss.noise_tolerance = tol;
+    ss.core_radius = core;
+    ss.exptime = in->cfg.ro.exptime;
     ss.threads = 1;
     double t0 = cpu_now();
     wf_scene *sc = NULL;
@@ -759,6 +788,8 @@ static wf_status scene_render(const acc_run *run, const scene_in *in, int bin, i
 typedef struct render_setting {
     int bin, over, size;
     double ff;
+    double tol, core; /* scene.noise_tolerance, psf.core_radius (0, 0: every object exact) */
+    int sky;          /* 1: rendered on the sky (whose noise tol refers to), then taken off */
 } render_setting;
 
 static wf_status render_knob(acc_run *run, const scene_in *in, const char *tcase, const char *knob,
@@ -776,8 +807,21 @@ static wf_status render_knob(acc_run *run, const scene_in *in, const char *tcase
     for (int k = 0; k < n && !st; k++) {
         row_init(&rows[k], "scene", tcase, knob, values[k]);
         rows[k].reference = k == ref;
-        st = scene_render(run, in, set[k].bin, set[k].over, set[k].size, set[k].ff, 0, rate + (size_t)k * np,
-                          &rows[k].cpu_seconds, rows[k].notes, sizeof rows[k].notes);
+        st = scene_render(run, in, set[k].bin, set[k].over, set[k].size, set[k].ff, set[k].sky, set[k].tol,
+                          set[k].core, rate + (size_t)k * np, &rows[k].cpu_seconds, rows[k].notes,
+                          sizeof rows[k].notes);
+        if (!st && set[k].sky) { /* the same sky alone, taken off */
+            scene_in empty = *in;
+            empty.gal.n = empty.stars.n = 0;
+            float *sky = malloc(np * sizeof *sky);
+            double c;
+            char nn[8];
+            if (!sky) st = wf_error(WF_ERR_NOMEM, "accuracy: out of memory");
+            else st = scene_render(run, &empty, set[k].bin, set[k].over, set[k].size, set[k].ff, 1, 0.0, 0.0, sky,
+                                   &c, nn, sizeof nn);
+            for (size_t i = 0; i < np && !st; i++) rate[(size_t)k * np + i] -= sky[i];
+            free(sky);
+        }
     }
     for (size_t i = 0; i < np && !st; i++) b[i] = rate[(size_t)ref * np + i];
     for (int k = 0; k < n && !st; k++) {
@@ -963,25 +1007,37 @@ static wf_status sweep_scene(acc_run *run)
     char tcase[16];
     snprintf(tcase, sizeof tcase, "region%d", n);
     {
-        render_setting s[4] = {{8, 4, 256, 0.995}, {4, 4, 256, 0.995}, {2, 4, 256, 0.995}, {1, 4, 256, 0.995}};
+        render_setting s[4] = {{8, 4, 256, 0.995, 0.0, 0.0, 0}, {4, 4, 256, 0.995, 0.0, 0.0, 0}, {2, 4, 256, 0.995, 0.0, 0.0, 0}, {1, 4, 256, 0.995, 0.0, 0.0, 0}};
         const char *v[4] = {"8", "4", "2", "1"};
         int k = q ? 2 : 4;
         if ((st = render_knob(run, &in, tcase, "pupil_bin", s, v, k, k - 1))) goto out;
     }
     if (!q) { /* at the default 7.04" extent: psf.oversample alone keeps 256 samples */
-        render_setting s[3] = {{8, 2, 128, 0.995}, {8, 4, 256, 0.995}, {8, 8, 512, 0.995}};
+        render_setting s[3] = {{8, 2, 128, 0.995, 0.0, 0.0, 0}, {8, 4, 256, 0.995, 0.0, 0.0, 0}, {8, 8, 512, 0.995, 0.0, 0.0, 0}};
         const char *v[3] = {"2", "4", "8"};
         if ((st = render_knob(run, &in, tcase, "oversample", s, v, 3, 2))) goto out;
     }
     if (!q) {
-        render_setting s[3] = {{8, 4, 128, 0.995}, {8, 4, 256, 0.995}, {8, 4, 512, 0.995}};
+        render_setting s[3] = {{8, 4, 128, 0.995, 0.0, 0.0, 0}, {8, 4, 256, 0.995, 0.0, 0.0, 0}, {8, 4, 512, 0.995, 0.0, 0.0, 0}};
         const char *v[3] = {"128", "256", "512"};
         if ((st = render_knob(run, &in, tcase, "psf_size", s, v, 3, 2))) goto out;
     }
     if (!q) {
-        render_setting s[4] = {{8, 4, 256, 0.99}, {8, 4, 256, 0.995}, {8, 4, 256, 0.999}, {8, 4, 256, 0.9999}};
+        render_setting s[4] = {{8, 4, 256, 0.99, 0.0, 0.0, 0}, {8, 4, 256, 0.995, 0.0, 0.0, 0}, {8, 4, 256, 0.999, 0.0, 0.0, 0}, {8, 4, 256, 0.9999, 0.0, 0.0, 0}};
         const char *v[4] = {"0.99", "0.995", "0.999", "0.9999"};
         if ((st = render_knob(run, &in, tcase, "flux_fraction", s, v, 4, 3))) goto out;
+    }
+    { /* per-object knobs from the sky noise (sim/scene.h), with the default split PSF */
+        render_setting s[4] = {{8, 4, 256, 0.995, 3.0, 2.0, 1}, {8, 4, 256, 0.995, 1.0, 2.0, 1},
+                               {8, 4, 256, 0.995, 0.3, 2.0, 1}, {8, 4, 256, 0.995, 0.0, 2.0, 1}};
+        const char *v[4] = {"3", "1", "0.3", "0"};
+        if ((st = render_knob(run, &in, tcase, "noise_tolerance", s, v, 4, 3))) goto out;
+    }
+    if (!q) { /* the core radius at the default tolerance */
+        render_setting s[4] = {{8, 4, 256, 0.995, 1.0, 1.5, 1}, {8, 4, 256, 0.995, 1.0, 2.0, 1},
+                               {8, 4, 256, 0.995, 1.0, 3.0, 1}, {8, 4, 256, 0.995, 0.0, 2.0, 1}};
+        const char *v[4] = {"1.5", "2", "3", "exact"};
+        if ((st = render_knob(run, &in, tcase, "core_radius", s, v, 4, 3))) goto out;
     }
     { /* the readout modes on the default rendering, sky included */
         float *truth = malloc(sizeof *truth * (size_t)n * n);
@@ -991,7 +1047,7 @@ static wf_status sweep_scene(acc_run *run)
             st = wf_error(WF_ERR_NOMEM, "accuracy: cannot hold a %dx%d rendering", n, n);
             goto out;
         }
-        st = scene_render(run, &in, 8, 4, 256, 0.995, 1, truth, &cpu, notes, sizeof notes);
+        st = scene_render(run, &in, 8, 4, 256, 0.995, 1, 1.0, 2.0, truth, &cpu, notes, sizeof notes);
         if (!st) st = sampling_knob(run, &in, truth, 1);
         if (!st && !q) st = sampling_knob(run, &in, truth, 0);
         free(truth);
