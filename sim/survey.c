@@ -550,7 +550,7 @@ wf_status wf_survey_coverage_make(const wf_survey_plan *plan, const wf_focal_pla
         return wf_error(WF_ERR_NOMEM, "survey coverage: no memory for %d x %d cells", cov.nx,
                         cov.ny);
     }
-    const double ra0 = p->ra * DEG, dec0 = p->dec * DEG, s0 = sin(dec0), c0 = cos(dec0);
+    const double ra0 = p->ra * DEG, dec0 = p->dec * DEG;
     wf_status st = WF_OK;
     for (size_t key = 0; key < nkey && !st; key++) {
         const int *n = nper + key * p->nfilters;
@@ -579,10 +579,10 @@ wf_status wf_survey_coverage_make(const wf_survey_plan *plan, const wf_focal_pla
             if (j1 >= cov.ny) j1 = cov.ny - 1;
             for (int j = j0; j <= j1 && !st; j++)
                 for (int i = i0; i <= i1; i++) {
-                    double xi = (h - i) * cov.pixel * DEG, eta = (j - h) * cov.pixel * DEG;
-                    double den = c0 - eta * s0;
-                    double ra = (ra0 + atan2(xi, den)) / DEG;
-                    double dec = atan2(s0 + eta * c0, hypot(xi, den)) / DEG;
+                    double xi = (h - i) * cov.pixel * DEG, eta = (j - h) * cov.pixel * DEG, ra, dec;
+                    wf_wcs_tangent_deproject(ra0, dec0, xi, eta, &ra, &dec);
+                    ra /= DEG;
+                    dec /= DEG;
                     double px, py;
                     if (wf_wcs_world2pix(&w, ra, dec, &px, &py)) continue; /* far off: outside */
                     if (px < -0.5 || px >= WF_WCS_NPIX - 0.5 || py < -0.5 || py >= WF_WCS_NPIX - 0.5)
