@@ -234,33 +234,14 @@ static void footprint_free(footprint *f)
     free(f->cells);
 }
 
-static void tan_to_world(double ra0, double dec0, double xi_deg, double eta_deg, double *ra, double *dec)
-{
-    const double d2r = M_PI / 180.0;
-    double xi = xi_deg * d2r, eta = eta_deg * d2r, d0 = dec0 * d2r;
-    double den = cos(d0) - eta * sin(d0);
-    double a = atan2(xi, den);
-    *ra = fmod(ra0 + a / d2r + 720.0, 360.0);
-    *dec = atan2((sin(d0) + eta * cos(d0)) * cos(a), den) / d2r;
-}
-
-static int world_to_tan(double ra0, double dec0, double ra, double dec, double *xi, double *eta)
-{
-    const double d2r = M_PI / 180.0;
-    double d0 = dec0 * d2r, d = dec * d2r, da = (ra - ra0) * d2r;
-    double cosc = sin(d0) * sin(d) + cos(d0) * cos(d) * cos(da);
-    if (cosc <= 0) return 0;
-    *xi = cos(d) * sin(da) / cosc / d2r;
-    *eta = (cos(d0) * sin(d) - sin(d0) * cos(d) * cos(da)) / cosc / d2r;
-    return 1;
-}
-
 static int footprint_contains(const footprint *f, double ra, double dec)
 {
+    const double d2r = M_PI / 180.0;
     double xi, eta;
-    if (!world_to_tan(f->ra0, f->dec0, ra, dec, &xi, &eta)) return 0;
+    if (wf_wcs_tangent_project(f->ra0 * d2r, f->dec0 * d2r, ra * d2r, dec * d2r, &xi, &eta)) return 0;
+    xi /= d2r;
+    eta /= d2r;
     if (f->circle) {
-        const double d2r = M_PI / 180.0;
         double cosd = sin(f->dec0 * d2r) * sin(dec * d2r) + cos(f->dec0 * d2r) * cos(dec * d2r) * cos((ra - f->ra0) * d2r);
         return cosd >= cos(f->radius * d2r);
     }
@@ -365,7 +346,12 @@ static void footprint_draw(const footprint *f, wf_rng *rng, double *ra, double *
     }
     size_t k = f->cells[(size_t)(u3 * (double)f->ncovered) < f->ncovered ? (size_t)(u3 * (double)f->ncovered) : f->ncovered - 1];
     double i = (double)(k % (size_t)f->nx) + u1 - 0.5, j = (double)(k / (size_t)f->nx) + u2 - 0.5;
-    tan_to_world(f->ra0, f->dec0, (i + 1.0 - f->crpix1) * f->cd11, (j + 1.0 - f->crpix2) * f->cd22, ra, dec);
+    const double d2r = M_PI / 180.0;
+    double r, d;
+    wf_wcs_tangent_deproject(f->ra0 * d2r, f->dec0 * d2r, (i + 1.0 - f->crpix1) * f->cd11 * d2r,
+                             (j + 1.0 - f->crpix2) * f->cd22 * d2r, &r, &d);
+    *ra = fmod(r / d2r + 720.0, 360.0);
+    *dec = d / d2r;
 }
 
 /* ---- generate ------------------------------------------------------------------------ */
