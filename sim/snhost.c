@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "sim/profile.h"
+#include "sim/wcs.h"
 
 /* ------------------------------------------------------------------ configuration */
 
@@ -328,17 +329,13 @@ wf_status wf_snhost_place_at(const wf_catalog *gal, size_t row, int component, d
     double th = gal->pa[row] * (M_PI / 180.0), cs = cos(th), sn = sin(th);
     double du = cs * sx - sn * sy, dv = sn * sx + cs * sy;
     double xi = -du / 206264.80624709636, eta = dv / 206264.80624709636; /* east, north, rad */
-    double a0 = gal->ra[row] * (M_PI / 180.0), d0 = gal->dec[row] * (M_PI / 180.0);
-    double ca = cos(a0), sa = sin(a0), cd = cos(d0), sd = sin(d0);
-    /* host direction + xi * east + eta * north, then normalised: the gnomonic inverse */
-    double vx = cd * ca - xi * sa - eta * sd * ca;
-    double vy = cd * sa + xi * ca - eta * sd * sa;
-    double vz = sd + eta * cd;
-    double ra = atan2(vy, vx) * (180.0 / M_PI);
+    double ra, dec;
+    wf_wcs_tangent_deproject(gal->ra[row] * (M_PI / 180.0), gal->dec[row] * (M_PI / 180.0), xi, eta, &ra, &dec);
+    ra *= 180.0 / M_PI;
     if (ra < 0.0) ra += 360.0;
     if (ra >= 360.0) ra -= 360.0;
     out->ra = ra;
-    out->dec = atan2(vz, hypot(vx, vy)) * (180.0 / M_PI);
+    out->dec = dec * (180.0 / M_PI);
     out->d_east = -du;
     out->d_north = dv;
     out->offset = hypot(du, dv);

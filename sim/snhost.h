@@ -27,7 +27,7 @@
  *   and scales the half-light ellipse's radius in that direction, which is the same map).
  *   Knots follow the exponential disk, so the disk profile stands for them too.
  *   The offset (east = −u, north = v) lies on the tangent plane at the host, turned into RA,
- *   Dec by the exact gnomonic inverse (the TAN projection of the WCS; projecting RA, Dec back
+ *   Dec by the WCS's gnomonic inverse, wf_wcs_tangent_deproject (projecting RA, Dec back
  *   returns the offset to ~1e-10″). The angular separation is atan(ρ) ≈ ρ − ρ³/3 for a
  *   planar offset ρ: 8e-9″ short at 10″, 6e-11″ at 2″ (a double RA near 71° resolves
  *   5e-11″); the renderer's shear through the local WCS Jacobian agrees to the same order.

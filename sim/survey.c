@@ -550,7 +550,7 @@ wf_status wf_survey_coverage_make(const wf_survey_plan *plan, const wf_focal_pla
         return wf_error(WF_ERR_NOMEM, "survey coverage: no memory for %d x %d cells", cov.nx,
                         cov.ny);
     }
-    const double ra0 = p->ra * DEG, dec0 = p->dec * DEG, s0 = sin(dec0), c0 = cos(dec0);
+    const double ra0 = p->ra * DEG, dec0 = p->dec * DEG;
     wf_status st = WF_OK;
     for (size_t key = 0; key < nkey && !st; key++) {
         const int *n = nper + key * p->nfilters;
@@ -579,10 +579,10 @@ wf_status wf_survey_coverage_make(const wf_survey_plan *plan, const wf_focal_pla
             if (j1 >= cov.ny) j1 = cov.ny - 1;
             for (int j = j0; j <= j1 && !st; j++)
                 for (int i = i0; i <= i1; i++) {
-                    double xi = (h - i) * cov.pixel * DEG, eta = (j - h) * cov.pixel * DEG;
-                    double den = c0 - eta * s0;
-                    double ra = (ra0 + atan2(xi, den)) / DEG;
-                    double dec = atan2(s0 + eta * c0, hypot(xi, den)) / DEG;
+                    double xi = (h - i) * cov.pixel * DEG, eta = (j - h) * cov.pixel * DEG, ra, dec;
+                    wf_wcs_tangent_deproject(ra0, dec0, xi, eta, &ra, &dec);
+                    ra /= DEG;
+                    dec /= DEG;
                     double px, py;
                     if (wf_wcs_world2pix(&w, ra, dec, &px, &py)) continue; /* far off: outside */
                     if (px < -0.5 || px >= WF_WCS_NPIX - 0.5 || py < -0.5 || py >= WF_WCS_NPIX - 0.5)
@@ -960,4 +960,106 @@ wf_status wf_survey_write_coverage(const wf_survey_coverage *cov, const char *pa
         if (!st) st = wf_fits_error(status, tmp, "writing a coverage image");
     }
     return wf_fits_finish(f, tmp, path, st);
+}
+
+/* ---- reading a plan back ------------------------------------------------------------------- */
+
+static const struct {
+    const char *name;
+    int type;                     /* TINT, TSTRING or TDOUBLE */
+    size_t off;
+} plan_columns[] = {
+    {"EXPID", TINT, offsetof(wf_survey_row, expid)},
+    {"VISIT", TINT, offsetof(wf_survey_row, visit)},
+    {"ORIENT", TINT, offsetof(wf_survey_row, orient)},
+    {"POINTING", TINT, offsetof(wf_survey_row, pointing)},
+    {"PASS", TINT, offsetof(wf_survey_row, pass)},
+    {"FILTER", TSTRING, offsetof(wf_survey_row, filter)},
+    {"RA", TDOUBLE, offsetof(wf_survey_row, ra)},
+    {"DEC", TDOUBLE, offsetof(wf_survey_row, dec)},
+    {"PA", TDOUBLE, offsetof(wf_survey_row, pa)},
+    {"MJD_START", TDOUBLE, offsetof(wf_survey_row, mjd_start)},
+    {"MJD_MID", TDOUBLE, offsetof(wf_survey_row, mjd_mid)},
+    {"EXPTIME", TDOUBLE, offsetof(wf_survey_row, exptime)},
+};
+#define PLAN_NCOLS (sizeof plan_columns / sizeof *plan_columns)
+#define FILTER_READ_MAX 31        /* widest FILTER column read (the text is then cut to 15) */
+
+/* 1 when every HDU of f has a CHECKSUM and DATASUM that verify: the test of
+ * wf_survey_product_ok (tools/surveyrun.c), on the handle the plan is then read from. */
+static int checksums_verify(fitsfile *f)
+{
+    int status = 0, nhdu = 0, ok = 1;
+    fits_get_num_hdus(f, &nhdu, &status);
+    for (int h = 1; h <= nhdu && ok && !status; h++) {
+        int type, dataok = 0, hduok = 0;
+        fits_movabs_hdu(f, h, &type, &status);
+        fits_verify_chksum(f, &dataok, &hduok, &status);
+        ok = !status && dataok == 1 && hduok == 1;
+    }
+    fits_clear_errmsg();
+    return ok && !status && nhdu > 0;
+}
+
+static wf_status read_plan_close(fitsfile *f, wf_survey_row *rows, wf_status st)
+{
+    int cs = 0;
+    fits_close_file(f, &cs);
+    fits_clear_errmsg();
+    if (st) free(rows);
+    return st;
+}
+
+wf_status wf_survey_read_plan(const char *path, wf_survey_row **rows, size_t *n)
+{
+    *rows = NULL;
+    *n = 0;
+    fitsfile *f;
+    int status = 0;
+    if (fits_open_diskfile(&f, path, READONLY, &status)) {
+        fits_clear_errmsg();
+        return wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one with `wfisim survey plan`)", path);
+    }
+    if (!checksums_verify(f))
+        return read_plan_close(f, NULL, wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one "
+                                                 "with `wfisim survey plan`)", path));
+    if (fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status))
+        return read_plan_close(f, NULL, wf_error(WF_ERR_INPUT, "%s: no PLAN table", path));
+    int col[PLAN_NCOLS];
+    for (size_t c = 0; c < PLAN_NCOLS; c++) {
+        if (fits_get_colnum(f, CASEINSEN, (char *)plan_columns[c].name, &col[c], &status))
+            return read_plan_close(f, NULL, wf_error(WF_ERR_INPUT, "%s: PLAN table has no column %s", path,
+                                                     plan_columns[c].name));
+        int type = 0;
+        long repeat = 0;
+        if (plan_columns[c].type == TSTRING &&
+            (fits_get_coltype(f, col[c], &type, &repeat, NULL, &status) || type != TSTRING || repeat > FILTER_READ_MAX))
+            return read_plan_close(f, NULL, wf_error(WF_ERR_INPUT, "%s: PLAN column %s is not text of at most %d "
+                                                     "characters", path, plan_columns[c].name, FILTER_READ_MAX));
+    }
+    long nrows = 0;
+    fits_get_num_rows(f, &nrows, &status);
+    wf_survey_row *out = calloc((size_t)(nrows > 0 ? nrows : 1), sizeof *out);
+    if (!out) return read_plan_close(f, NULL, wf_error(WF_ERR_NOMEM, "%s: %ld plan rows", path, nrows));
+    for (long r = 1; r <= nrows && !status; r++) {
+        wf_survey_row *x = &out[r - 1];
+        for (size_t c = 0; c < PLAN_NCOLS && !status; c++) {
+            void *dst = (char *)x + plan_columns[c].off;
+            if (plan_columns[c].type == TSTRING) {
+                char text[FILTER_READ_MAX + 1] = "", *tp = text;
+                fits_read_col(f, TSTRING, col[c], r, 1, 1, NULL, &tp, NULL, &status);
+                snprintf(x->filter, sizeof x->filter, "%s", text);
+                continue;
+            }
+            fits_read_col(f, plan_columns[c].type, col[c], r, 1, 1, NULL, dst, NULL, &status);
+            if (!status && plan_columns[c].type == TDOUBLE && !isfinite(*(double *)dst))
+                return read_plan_close(f, out, wf_error(WF_ERR_INPUT, "%s: PLAN row %ld column %s is not finite",
+                                                        path, r, plan_columns[c].name));
+        }
+    }
+    if (status) return read_plan_close(f, out, wf_fits_error(status, path, "reading the PLAN table"));
+    read_plan_close(f, out, WF_OK);
+    *rows = out;
+    *n = (size_t)nrows;
+    return WF_OK;
 }

@@ -151,4 +151,20 @@ wf_status wf_survey_write_plan(const wf_survey_plan *plan, const wf_survey_overl
                                const char *path);
 wf_status wf_survey_write_coverage(const wf_survey_coverage *cov, const char *path);
 
+/* One exposure of a plan file: the PLAN columns its readers use (ORIENTPA is not read). */
+typedef struct wf_survey_row {
+    int expid, visit, orient, pointing, pass;
+    char filter[16];                /* the FILTER text, cut to 15 characters */
+    double ra, dec, pa;             /* boresight and GalSim PA, deg */
+    double mjd_start, mjd_mid;      /* days */
+    double exptime;                 /* s */
+} wf_survey_row;
+
+/* The PLAN table of a plan file written by wf_survey_write_plan, in file order. Every HDU's
+ * CHECKSUM and DATASUM must verify (a damaged plan would place every image wrongly). A file
+ * that cannot be opened or does not verify, no PLAN table, a missing column or a non-finite
+ * number is WF_ERR_INPUT naming the file (and the column and row); a failed read WF_ERR_IO.
+ * *rows is allocated, also for an empty table: free() it. */
+wf_status wf_survey_read_plan(const char *path, wf_survey_row **rows, size_t *n);
+
 #endif

@@ -263,8 +263,7 @@ wf_status wf_wcs_focal_plane(const char *data_dir, wf_focal_plane *fp)
 
 /* ---- spherical helpers ------------------------------------------------------------------ */
 
-/* Gnomonic deprojection about (ra0, dec0): xi towards east, eta towards north, radians. */
-static void deproject(double ra0, double dec0, double xi, double eta, double *ra, double *dec)
+void wf_wcs_tangent_deproject(double ra0, double dec0, double xi, double eta, double *ra, double *dec)
 {
     double sd = sin(dec0), cd = cos(dec0);
     double den = cd - eta * sd;
@@ -272,16 +271,17 @@ static void deproject(double ra0, double dec0, double xi, double eta, double *ra
     *dec = atan2(sd + eta * cd, hypot(xi, den));
 }
 
-/* Gnomonic projection about (ra0, dec0); returns 0 when the point is 90 deg or more away. */
-static int project(double ra0, double dec0, double ra, double dec, double *xi, double *eta)
+wf_status wf_wcs_tangent_project(double ra0, double dec0, double ra, double dec, double *xi, double *eta)
 {
     double sd0 = sin(dec0), cd0 = cos(dec0), sd = sin(dec), cd = cos(dec);
     double dra = ra - ra0, cdra = cos(dra);
     double cosc = sd0 * sd + cd0 * cd * cdra;
-    if (!(cosc > 1e-12)) return 0;
+    if (!(cosc > 1e-12))
+        return wf_error(WF_ERR_RANGE, "wcs: (%.6f, %.6f) is 90 deg or more from the tangent point (%.6f, %.6f)",
+                        ra / DEG, dec / DEG, ra0 / DEG, dec0 / DEG);
     *xi = cd * sin(dra) / cosc;
     *eta = (cd0 * sd - sd0 * cd * cdra) / cosc;
-    return 1;
+    return WF_OK;
 }
 
 /* Position angle (east of north) at point 1 of the great circle towards point 2, radians. */
@@ -333,11 +333,11 @@ wf_status wf_wcs_for_sca(const wf_focal_plane *fp, double ra, double dec, double
     double u = (fp->u0[s] * c - fp->v0[s] * sn) * DEG;
     double v = (fp->u0[s] * sn + fp->v0[s] * c) * DEG;
     double ra0 = ra * DEG, dec0 = dec * DEG, cra, cdec, pra, pdec;
-    deproject(ra0, dec0, -u, v, &cra, &cdec);
+    wf_wcs_tangent_deproject(ra0, dec0, -u, v, &cra, &cdec);
 
     /* North of the boresight's tangent plane is not north at the SCA: the meridians converge.
      * GalSim measures that turn with a point one degree up the tangent plane's v axis. */
-    deproject(ra0, dec0, -u, v + 1.0 * DEG, &pra, &pdec);
+    wf_wcs_tangent_deproject(ra0, dec0, -u, v + 1.0 * DEG, &pra, &pdec);
     double pa_sca = pa_fpa + position_angle(cra, cdec, pra, pdec);
     double cs = cos(pa_sca), ss = sin(pa_sca);
     double a10 = fp->a[s][1][0], a01 = fp->a[s][0][1], b10 = fp->b[s][1][0], b01 = fp->b[s][0][1];
@@ -397,7 +397,7 @@ wf_status wf_wcs_pix2world(const wf_wcs *w, double x, double y, double *ra, doub
     double xi = (w->cd[0][0] * U + w->cd[0][1] * V) * DEG;
     double eta = (w->cd[1][0] * U + w->cd[1][1] * V) * DEG;
     double r, d;
-    deproject(w->crval[0] * DEG, w->crval[1] * DEG, xi, eta, &r, &d);
+    wf_wcs_tangent_deproject(w->crval[0] * DEG, w->crval[1] * DEG, xi, eta, &r, &d);
     *ra = wrap360(r / DEG);
     *dec = d / DEG;
     return WF_OK;
@@ -408,7 +408,7 @@ wf_status wf_wcs_world2pix(const wf_wcs *w, double ra, double dec, double *x, do
     if (!isfinite(ra) || !isfinite(dec))
         return wf_error(WF_ERR_INPUT, "wcs: position (%g, %g) is not finite", ra, dec);
     double xi, eta;
-    if (!project(w->crval[0] * DEG, w->crval[1] * DEG, ra * DEG, dec * DEG, &xi, &eta))
+    if (wf_wcs_tangent_project(w->crval[0] * DEG, w->crval[1] * DEG, ra * DEG, dec * DEG, &xi, &eta))
         return wf_error(WF_ERR_RANGE, "wcs: (%.6f, %.6f) is 90 deg or more from SCA %d's centre",
                         ra, dec, w->sca);
     xi /= DEG;

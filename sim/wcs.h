@@ -88,6 +88,17 @@ wf_status wf_wcs_fit_inverse(const wf_wcs *w, int ap_order, double ap[WF_WCS_SIP
  * names the file in messages. */
 wf_status wf_wcs_write_header(const wf_wcs *w, fitsfile *f, const char *path);
 
+/* The gnomonic (TAN) projection about the tangent point (ra0, dec0), every argument in radians
+ * (the units the WCS computes in: converting on the way would move its results by an ulp):
+ * xi points east and eta north on the plane touching the unit sphere there, so hypot(xi, eta)
+ * is the tangent of the distance from (ra0, dec0). The projection of every WCS here and of the
+ * survey's coverage grid. project: WF_ERR_RANGE for a point 90 deg or more from the tangent
+ * point (xi, eta untouched). deproject: RA is ra0 plus the offset, not wrapped into [0, 2 pi). */
+wf_status wf_wcs_tangent_project(double ra0, double dec0, double ra, double dec, double *xi,
+                                 double *eta);
+void wf_wcs_tangent_deproject(double ra0, double dec0, double xi, double eta, double *ra,
+                              double *dec);
+
 /* Angular distance between two positions, degrees. */
 double wf_wcs_separation(double ra1, double dec1, double ra2, double dec2);
 

@@ -359,6 +359,104 @@ START_TEST(fits_products)
 }
 END_TEST
 
+/* A copy of the plan at src with one change in its PLAN table, re-checksummed so that only
+ * the change is wrong: RA of row 3 NaN (what = 0) or no MJD_START column (what = 1). */
+static void altered_plan(const char *src, const char *dst, int what)
+{
+    size_t len;
+    char *bytes = wf_test_slurp(src, &len);
+    ck_assert_ptr_nonnull(bytes);
+    FILE *out = fopen(dst, "wb");
+    ck_assert(out && fwrite(bytes, 1, len, out) == len && fclose(out) == 0);
+    free(bytes);
+    fitsfile *f;
+    int status = 0, col;
+    fits_open_file(&f, dst, READWRITE, &status);
+    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
+    if (what == 0) {
+        double nan = NAN;
+        fits_get_colnum(f, CASEINSEN, "RA", &col, &status);
+        fits_write_col(f, TDOUBLE, col, 3, 1, 1, &nan, &status);
+    } else {
+        fits_get_colnum(f, CASEINSEN, "MJD_START", &col, &status);
+        fits_delete_col(f, col, &status);
+    }
+    fits_write_chksum(f, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+}
+
+/* wf_survey_read_plan gives back every exposure as written, and refuses a plan that is
+ * missing, damaged, short of a column or holding a non-finite number, naming what. */
+START_TEST(plan_read_back)
+{
+    wf_focal_plane fp;
+    wf_wcs_focal_plane_builtin(&fp);
+    wf_survey_plan plan;
+    const char *sets[] = {"survey.visits=2", NULL};
+    make_plan(&fp, sets, &plan);
+    const char *dir = wf_test_tmpdir();
+    char path[4200], bad[4200];
+    snprintf(path, sizeof path, "%s/plan.fits", dir);
+    snprintf(bad, sizeof bad, "%s/bad.fits", dir);
+    ck_assert_msg(wf_survey_write_plan(&plan, NULL, path) == WF_OK, "%s", wf_error_message());
+    wf_survey_row *rows;
+    size_t n;
+    ck_assert_msg(wf_survey_read_plan(path, &rows, &n) == WF_OK, "%s", wf_error_message());
+    ck_assert_uint_eq(n, plan.nexp);
+    for (size_t i = 0; i < n; i++) {
+        const wf_exposure *x = &plan.exp[i];
+        const wf_survey_row *r = &rows[i];
+        ck_assert(r->expid == x->id && r->visit == x->visit && r->orient == x->orient &&
+                  r->pointing == x->pointing && r->pass == x->pass);
+        ck_assert_str_eq(r->filter, plan.par.filters[x->filter]);
+        /* doubles go through the file unchanged: compared exactly */
+        ck_assert(r->ra == x->ra && r->dec == x->dec && r->pa == x->pa);
+        ck_assert(r->mjd_start == x->mjd_start && r->mjd_mid == x->mjd_mid && r->exptime == x->exptime);
+    }
+    free(rows);
+
+    snprintf(bad, sizeof bad, "%s/missing.fits", dir);
+    ck_assert_int_eq(wf_survey_read_plan(bad, &rows, &n), WF_ERR_INPUT);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "missing.fits"));
+    ck_assert_ptr_null(rows);
+
+    /* one bit of the PLAN data flipped: its DATASUM no longer verifies */
+    fitsfile *f;
+    int status = 0;
+    LONGLONG head, data, end;
+    fits_open_file(&f, path, READONLY, &status);
+    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
+    fits_get_hduaddrll(f, &head, &data, &end, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    snprintf(bad, sizeof bad, "%s/damaged.fits", dir);
+    size_t len;
+    char *bytes = wf_test_slurp(path, &len);
+    ck_assert(bytes && (size_t)data + 10 < len);
+    bytes[data + 10] ^= 1;
+    FILE *out = fopen(bad, "wb");
+    ck_assert(out && fwrite(bytes, 1, len, out) == len && fclose(out) == 0);
+    free(bytes);
+    ck_assert_int_eq(wf_survey_read_plan(bad, &rows, &n), WF_ERR_INPUT);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "damaged.fits: not a plan whose checksums verify"));
+
+    snprintf(bad, sizeof bad, "%s/nan.fits", dir);
+    altered_plan(path, bad, 0);
+    ck_assert_int_eq(wf_survey_read_plan(bad, &rows, &n), WF_ERR_INPUT);
+    ck_assert_msg(strstr(wf_error_message(), "nan.fits: PLAN row 3 column RA is not finite"), "%s",
+                  wf_error_message());
+    ck_assert_ptr_null(rows);
+
+    snprintf(bad, sizeof bad, "%s/short.fits", dir);
+    altered_plan(path, bad, 1);
+    ck_assert_int_eq(wf_survey_read_plan(bad, &rows, &n), WF_ERR_INPUT);
+    ck_assert_msg(strstr(wf_error_message(), "short.fits: PLAN table has no column MJD_START"), "%s",
+                  wf_error_message());
+    wf_survey_plan_free(&plan);
+}
+END_TEST
+
 START_TEST(survey_command)
 {
     const char *dir = wf_test_tmpdir();
@@ -480,6 +578,7 @@ static Suite *survey_suite(void)
     tcase_add_test(tc, no_overlap_within_a_snake);
     tcase_add_test(tc, coverage_areas);
     tcase_add_test(tc, fits_products);
+    tcase_add_test(tc, plan_read_back);
     tcase_add_test(tc, survey_command);
     tcase_add_test(tc, bad_parameters);
     tcase_add_test(tc, key_documentation);

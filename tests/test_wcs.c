@@ -376,6 +376,75 @@ static void expect_load_error(const char *dir, wf_status code, const char *needl
     ck_assert_msg(!memcmp(&fp, &before, sizeof fp), "focal plane changed on error");
 }
 
+/* The gnomonic pair: closed-form values, a vector construction of the same projection, round
+ * trips both ways to 1e-12 deg (across RA 0, near a pole, out to 60 deg), and the refusal at
+ * 90 deg. */
+START_TEST(tangent_projection)
+{
+    const double deg = M_PI / 180.0, tol = 1e-12 * deg;
+    double xi, eta, ra, dec;
+    /* along the equator and along a meridian the offsets are tangents of the angle */
+    ck_assert_int_eq(wf_wcs_tangent_project(30 * deg, 0, 50 * deg, 0, &xi, &eta), WF_OK);
+    ck_assert_double_eq_tol(xi, tan(20 * deg), 1e-15);
+    ck_assert_double_eq_tol(eta, 0.0, 1e-15);
+    ck_assert_int_eq(wf_wcs_tangent_project(RA_A * deg, DEC_A * deg, RA_A * deg, (DEC_A + 7) * deg, &xi, &eta), WF_OK);
+    ck_assert_double_eq_tol(xi, 0.0, 1e-15);
+    ck_assert_double_eq_tol(eta, tan(7 * deg), 1e-15);
+    /* about (0, 0): xi = tan(ra), eta = tan(dec) / cos(ra); back: ra = atan(xi),
+     * dec = atan(eta / sqrt(1 + xi^2)) */
+    ck_assert_int_eq(wf_wcs_tangent_project(0, 0, 25 * deg, -15 * deg, &xi, &eta), WF_OK);
+    ck_assert_double_eq_tol(xi, tan(25 * deg), 1e-15);
+    ck_assert_double_eq_tol(eta, tan(-15 * deg) / cos(25 * deg), 1e-15);
+    wf_wcs_tangent_deproject(0, 0, 0.3, -0.2, &ra, &dec);
+    ck_assert_double_eq_tol(ra, atan(0.3), 1e-15);
+    ck_assert_double_eq_tol(dec, atan(-0.2 / sqrt(1 + 0.09)), 1e-15);
+
+    const double centres[][2] = {{RA_A, DEC_A}, {0.2, 10.0}, {359.9, -0.5}, {10.0, 85.0}, {200.0, -89.5}};
+    const double reach[] = {0.5, 5.0, 60.0}; /* deg from the tangent point */
+    double worst_sky = 0, worst_plane = 0;
+    for (size_t c = 0; c < sizeof centres / sizeof *centres; c++) {
+        double a0 = centres[c][0] * deg, d0 = centres[c][1] * deg;
+        /* east, north and the centre as vectors: xi = p.e / p.c, eta = p.n / p.c */
+        double cv[3] = {cos(d0) * cos(a0), cos(d0) * sin(a0), sin(d0)};
+        double ev[3] = {-sin(a0), cos(a0), 0};
+        double nv[3] = {-sin(d0) * cos(a0), -sin(d0) * sin(a0), cos(d0)};
+        for (size_t r = 0; r < sizeof reach / sizeof *reach; r++)
+            for (int k = 0; k < 24; k++) {
+                double rho = tan(reach[r] * deg) * (0.25 + 0.75 * (k % 4) / 3.0), phi = 2 * M_PI * k / 24.0;
+                double x0 = rho * cos(phi), y0 = rho * sin(phi);
+                wf_wcs_tangent_deproject(a0, d0, x0, y0, &ra, &dec);
+                double pv[3] = {cos(dec) * cos(ra), cos(dec) * sin(ra), sin(dec)};
+                double pc = pv[0] * cv[0] + pv[1] * cv[1] + pv[2] * cv[2];
+                double pe = pv[0] * ev[0] + pv[1] * ev[1], pn = pv[0] * nv[0] + pv[1] * nv[1] + pv[2] * nv[2];
+                ck_assert_msg(fabs(pe / pc - x0) <= 1e-14 * (1 + rho) && fabs(pn / pc - y0) <= 1e-14 * (1 + rho),
+                              "centre %zu: (%g, %g) deprojects off the vector construction", c, x0, y0);
+                ck_assert_int_eq(wf_wcs_tangent_project(a0, d0, ra, dec, &xi, &eta), WF_OK);
+                /* an error dx in the plane is dx / (1 + rho^2) radians on the sky */
+                double e_plane = hypot(xi - x0, eta - y0) / (1 + rho * rho);
+                ck_assert_msg(e_plane <= tol, "centre %zu: plane round trip %.3g deg", c, e_plane / deg);
+                /* sky -> plane -> sky from a point off the grid (RA in [0, 360) where it crosses 0) */
+                double ra1 = fmod(ra + 0.37 * rho + 4 * M_PI, 2 * M_PI), dec1 = dec - 0.21 * rho * cos(dec), ra2, dec2;
+                if (!(wf_wcs_separation(ra1 / deg, dec1 / deg, centres[c][0], centres[c][1]) < 89.0)) continue;
+                ck_assert_int_eq(wf_wcs_tangent_project(a0, d0, ra1, dec1, &xi, &eta), WF_OK);
+                wf_wcs_tangent_deproject(a0, d0, xi, eta, &ra2, &dec2);
+                double e_sky = wf_wcs_separation(ra1 / deg, dec1 / deg, ra2 / deg, dec2 / deg);
+                ck_assert_msg(e_sky <= 1e-12, "centre %zu: sky round trip %.3g deg", c, e_sky);
+                if (e_sky > worst_sky) worst_sky = e_sky;
+                if (e_plane / deg > worst_plane) worst_plane = e_plane / deg;
+            }
+    }
+    printf("tangent projection round trips: sky %.2g deg, plane %.2g deg at most\n", worst_sky, worst_plane);
+
+    /* 90 deg away there is no tangent-plane point */
+    xi = eta = 7.0;
+    ck_assert_int_eq(wf_wcs_tangent_project(RA_A * deg, DEC_A * deg, (RA_A + 180) * deg, -DEC_A * deg, &xi, &eta),
+                     WF_ERR_RANGE);
+    ck_assert_int_eq(wf_wcs_tangent_project(0, 0, 90 * deg, 0, &xi, &eta), WF_ERR_RANGE);
+    ck_assert_msg(strstr(wf_error_message(), "90 deg or more"), "%s", wf_error_message());
+    ck_assert(xi == 7.0 && eta == 7.0);
+}
+END_TEST
+
 START_TEST(bad_input)
 {
     wf_focal_plane fp;
@@ -431,6 +500,7 @@ static Suite *wcs_suite(void)
     tcase_add_test(tc, inverse_sip_fit);
     tcase_add_test(tc, header_astropy_data);
     tcase_add_test(tc, header_astropy_builtin);
+    tcase_add_test(tc, tangent_projection);
     tcase_add_test(tc, bad_input);
     suite_add_tcase(s, tc);
     return s;

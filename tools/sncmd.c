@@ -18,11 +18,11 @@
 #include "sim/snhost.h"
 #include "sim/snpop.h"
 #include "sim/snrate.h"
+#include "sim/survey.h"
 #include "sim/synth.h"
 #include "tools/config.h"
 #include "tools/plot.h"
 #include "tools/sninject.h"
-#include "tools/surveyrun.h"
 #include "sim/wcs.h"
 
 static const char *sn_usage =
@@ -234,33 +234,14 @@ static void footprint_free(footprint *f)
     free(f->cells);
 }
 
-static void tan_to_world(double ra0, double dec0, double xi_deg, double eta_deg, double *ra, double *dec)
-{
-    const double d2r = M_PI / 180.0;
-    double xi = xi_deg * d2r, eta = eta_deg * d2r, d0 = dec0 * d2r;
-    double den = cos(d0) - eta * sin(d0);
-    double a = atan2(xi, den);
-    *ra = fmod(ra0 + a / d2r + 720.0, 360.0);
-    *dec = atan2((sin(d0) + eta * cos(d0)) * cos(a), den) / d2r;
-}
-
-static int world_to_tan(double ra0, double dec0, double ra, double dec, double *xi, double *eta)
-{
-    const double d2r = M_PI / 180.0;
-    double d0 = dec0 * d2r, d = dec * d2r, da = (ra - ra0) * d2r;
-    double cosc = sin(d0) * sin(d) + cos(d0) * cos(d) * cos(da);
-    if (cosc <= 0) return 0;
-    *xi = cos(d) * sin(da) / cosc / d2r;
-    *eta = (cos(d0) * sin(d) - sin(d0) * cos(d) * cos(da)) / cosc / d2r;
-    return 1;
-}
-
 static int footprint_contains(const footprint *f, double ra, double dec)
 {
+    const double d2r = M_PI / 180.0;
     double xi, eta;
-    if (!world_to_tan(f->ra0, f->dec0, ra, dec, &xi, &eta)) return 0;
+    if (wf_wcs_tangent_project(f->ra0 * d2r, f->dec0 * d2r, ra * d2r, dec * d2r, &xi, &eta)) return 0;
+    xi /= d2r;
+    eta /= d2r;
     if (f->circle) {
-        const double d2r = M_PI / 180.0;
         double cosd = sin(f->dec0 * d2r) * sin(dec * d2r) + cos(f->dec0 * d2r) * cos(dec * d2r) * cos((ra - f->ra0) * d2r);
         return cosd >= cos(f->radius * d2r);
     }
@@ -276,34 +257,24 @@ static wf_status footprint_from_plan(const char *plan, footprint *f, double *mjd
     size_t len = strlen(plan);
     if (len > 5 && !strcmp(plan + len - 5, ".fits")) snprintf(path, sizeof path, "%.*s_coverage.fits", (int)(len - 5), plan);
     else snprintf(path, sizeof path, "%s_coverage.fits", plan);
-    if (!wf_survey_product_ok(plan))
-        return wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one with `wfisim survey plan`)", plan);
-    fitsfile *ff;
-    int status = 0;
-    if (fits_open_diskfile(&ff, plan, READONLY, &status))
-        return wf_error(WF_ERR_IO, "%s: cannot open the plan", plan);
-    int c1, c2;
-    long nrows = 0;
-    fits_movnam_hdu(ff, BINARY_TBL, "PLAN", 0, &status);
-    fits_get_colnum(ff, CASEINSEN, "MJD_START", &c1, &status);
-    fits_get_colnum(ff, CASEINSEN, "EXPTIME", &c2, &status);
-    fits_get_num_rows(ff, &nrows, &status);
+    wf_survey_row *rows;
+    size_t nrows;
+    wf_status st = wf_survey_read_plan(plan, &rows, &nrows);
+    if (st) return st;
     *mjd0 = INFINITY, *mjd1 = -INFINITY;
-    for (long r = 1; r <= nrows && !status; r++) {
-        double m, t;
-        fits_read_col(ff, TDOUBLE, c1, r, 1, 1, NULL, &m, NULL, &status);
-        fits_read_col(ff, TDOUBLE, c2, r, 1, 1, NULL, &t, NULL, &status);
+    for (size_t r = 0; r < nrows; r++) {
+        double m = rows[r].mjd_start, t = rows[r].exptime;
         if (m < *mjd0) *mjd0 = m;
         if (m + t / 86400.0 > *mjd1) *mjd1 = m + t / 86400.0;
     }
-    int cs = 0;
-    fits_close_file(ff, &cs);
-    if (status || !nrows) return wf_error(WF_ERR_INPUT, "%s: not a plan with a PLAN table (MJD_START, EXPTIME)", plan);
+    free(rows);
+    if (!nrows) return wf_error(WF_ERR_INPUT, "%s: the PLAN table has no exposures", plan);
+    fitsfile *ff;
+    int status = 0, cs = 0;
     if (fits_open_diskfile(&ff, path, READONLY, &status))
         return wf_error(WF_ERR_IO, "%s: cannot open the plan's coverage map (written by `wfisim survey plan`)", path);
     int nhdu = 0;
     fits_get_num_hdus(ff, &nhdu, &status);
-    wf_status st = WF_OK;
     int32_t *buf = NULL;
     for (int h = 2; h <= nhdu && !status && !st; h++) {
         int type;
@@ -375,7 +346,12 @@ static void footprint_draw(const footprint *f, wf_rng *rng, double *ra, double *
     }
     size_t k = f->cells[(size_t)(u3 * (double)f->ncovered) < f->ncovered ? (size_t)(u3 * (double)f->ncovered) : f->ncovered - 1];
     double i = (double)(k % (size_t)f->nx) + u1 - 0.5, j = (double)(k / (size_t)f->nx) + u2 - 0.5;
-    tan_to_world(f->ra0, f->dec0, (i + 1.0 - f->crpix1) * f->cd11, (j + 1.0 - f->crpix2) * f->cd22, ra, dec);
+    const double d2r = M_PI / 180.0;
+    double r, d;
+    wf_wcs_tangent_deproject(f->ra0 * d2r, f->dec0 * d2r, (i + 1.0 - f->crpix1) * f->cd11 * d2r,
+                             (j + 1.0 - f->crpix2) * f->cd22 * d2r, &r, &d);
+    *ra = fmod(r / d2r + 720.0, 360.0);
+    *dec = d / d2r;
 }
 
 /* ---- generate ------------------------------------------------------------------------ */
@@ -682,40 +658,29 @@ static int by_mjd(const void *a, const void *b)
 
 static wf_status plan_epochs(const char *plan, epoch **out, size_t *n)
 {
-    fitsfile *f;
-    int status = 0, c[6];
-    long nrows = 0;
     *out = NULL, *n = 0;
-    if (!wf_survey_product_ok(plan))
-        return wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one with `wfisim survey plan`)", plan);
-    if (fits_open_diskfile(&f, plan, READONLY, &status)) return wf_error(WF_ERR_IO, "%s: cannot open the plan", plan);
-    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
-    const char *names[6] = {"MJD_MID", "FILTER", "RA", "DEC", "PA", "EXPID"};
-    for (int k = 0; k < 6; k++) fits_get_colnum(f, CASEINSEN, (char *)names[k], &c[k], &status);
-    fits_get_num_rows(f, &nrows, &status);
-    epoch *e = status ? NULL : malloc((size_t)(nrows > 0 ? nrows : 1) * sizeof *e);
-    wf_status st = WF_OK;
-    for (long r = 1; e && r <= nrows && !status && !st; r++) {
-        char name[32], *np = name;
-        epoch *x = &e[r - 1];
-        fits_read_col(f, TDOUBLE, c[0], r, 1, 1, NULL, &x->mjd, NULL, &status);
-        fits_read_col(f, TSTRING, c[1], r, 1, 1, NULL, &np, NULL, &status);
-        fits_read_col(f, TDOUBLE, c[2], r, 1, 1, NULL, &x->ra, NULL, &status);
-        fits_read_col(f, TDOUBLE, c[3], r, 1, 1, NULL, &x->dec, NULL, &status);
-        fits_read_col(f, TDOUBLE, c[4], r, 1, 1, NULL, &x->pa, NULL, &status);
-        fits_read_col(f, TINT, c[5], r, 1, 1, NULL, &x->expid, NULL, &status);
+    wf_survey_row *rows;
+    size_t nrows;
+    wf_status st = wf_survey_read_plan(plan, &rows, &nrows);
+    if (st) return st;
+    epoch *e = malloc((nrows ? nrows : 1) * sizeof *e);
+    if (!e) st = wf_error(WF_ERR_NOMEM, "%s: %zu plan rows", plan, nrows);
+    for (size_t r = 0; r < nrows && !st; r++) {
+        const wf_survey_row *x = &rows[r];
         wf_filter fl;
-        if (!status && (st = wf_filter_parse(name, &fl))) break;
-        x->filter = (int)fl;
+        if ((st = wf_filter_parse(x->filter, &fl))) {
+            char msg[512];
+            snprintf(msg, sizeof msg, "%s", wf_error_message());
+            st = wf_error(st, "%s: PLAN row %zu column FILTER: %s", plan, r + 1, msg);
+            break;
+        }
+        e[r] = (epoch){.mjd = x->mjd_mid, .ra = x->ra, .dec = x->dec, .pa = x->pa, .filter = (int)fl, .expid = x->expid};
     }
-    int cs = 0;
-    fits_close_file(f, &cs);
-    if (!st && (status || !e))
-        st = wf_error(WF_ERR_INPUT, "%s: not a plan with a PLAN table (EXPID, MJD_MID, FILTER, RA, DEC, PA)", plan);
+    free(rows);
     if (st) { free(e); return st; }
-    qsort(e, (size_t)nrows, sizeof *e, by_mjd);
+    qsort(e, nrows, sizeof *e, by_mjd);
     *out = e;
-    *n = (size_t)nrows;
+    *n = nrows;
     return WF_OK;
 }
 

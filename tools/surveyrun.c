@@ -8,13 +8,8 @@
 #include <time.h>
 
 #include "hal/clock.h"
+#include "sim/survey.h"
 #include "tools/pipeline.h"
-
-typedef struct plan_row {
-    int expid, visit, orient, pointing, pass;
-    char filter[16];
-    double ra, dec, pa, mjd_mid, exptime;
-} plan_row;
 
 wf_status wf_survey_parse_range(const char *text, long *first, long *last)
 {
@@ -77,70 +72,15 @@ int wf_survey_product_ok(const char *path)
     return ok && !status && nhdu > 0;
 }
 
-/* The PLAN table of a plan written by `wfisim survey plan`, rows [first, last] by EXPID. The
- * file's checksums must verify: a damaged plan would place every image wrongly. */
-static wf_status read_plan(const char *path, long first, long last, plan_row **out, size_t *n)
+/* The rows of the plan with EXPID in [first, last] (last < 0: to the end), in file order. */
+static wf_status read_plan(const char *path, long first, long last, wf_survey_row **out, size_t *n)
 {
-    *out = NULL;
-    *n = 0;
-    if (!wf_survey_product_ok(path))
-        return wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one with `wfisim survey plan`)", path);
-    fitsfile *f;
-    int status = 0;
-    fits_open_diskfile(&f, path, READONLY, &status);
-    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
-    if (status) {
-        int cs = 0;
-        fits_close_file(f, &cs);
-        return wf_error(WF_ERR_INPUT, "%s: no PLAN table", path);
-    }
-    static const char *names[] = {"EXPID", "VISIT", "ORIENT", "POINTING", "PASS", "FILTER",
-                                  "RA", "DEC", "PA", "MJD_MID", "EXPTIME"};
-    int col[11];
-    for (int k = 0; k < 11 && !status; k++)
-        if (fits_get_colnum(f, CASEINSEN, (char *)names[k], &col[k], &status)) {
-            int cs = 0;
-            fits_close_file(f, &cs);
-            return wf_error(WF_ERR_INPUT, "%s: PLAN table has no column %s", path, names[k]);
-        }
-    long nrows = 0;
-    fits_get_num_rows(f, &nrows, &status);
-    plan_row *rows = calloc((size_t)(nrows > 0 ? nrows : 1), sizeof *rows);
-    if (!rows) {
-        int cs = 0;
-        fits_close_file(f, &cs);
-        return wf_error(WF_ERR_NOMEM, "%s: %ld plan rows", path, nrows);
-    }
+    wf_status st = wf_survey_read_plan(path, out, n);
+    if (st) return st;
+    wf_survey_row *rows = *out;
     size_t k = 0;
-    for (long r = 1; r <= nrows && !status; r++) {
-        plan_row x;
-        int iv[5];
-        double dv[5];
-        char fbuf[32], *fp = fbuf;
-        for (int c = 0; c < 5; c++) fits_read_col(f, TINT, col[c], r, 1, 1, NULL, &iv[c], NULL, &status);
-        fits_read_col(f, TSTRING, col[5], r, 1, 1, NULL, &fp, NULL, &status);
-        for (int c = 0; c < 5; c++) fits_read_col(f, TDOUBLE, col[6 + c], r, 1, 1, NULL, &dv[c], NULL, &status);
-        if (status) break;
-        if (iv[0] < first || (last >= 0 && iv[0] > last)) continue;
-        x.expid = iv[0], x.visit = iv[1], x.orient = iv[2], x.pointing = iv[3], x.pass = iv[4];
-        snprintf(x.filter, sizeof x.filter, "%.15s", fbuf);
-        x.ra = dv[0], x.dec = dv[1], x.pa = dv[2], x.mjd_mid = dv[3], x.exptime = dv[4];
-        for (int c = 0; c < 5; c++)
-            if (!isfinite(dv[c])) {
-                free(rows);
-                int cs = 0;
-                fits_close_file(f, &cs);
-                return wf_error(WF_ERR_INPUT, "%s: PLAN row %ld column %s is not finite", path, r, names[6 + c]);
-            }
-        rows[k++] = x;
-    }
-    int cs = 0;
-    fits_close_file(f, &cs);
-    if (status) {
-        free(rows);
-        return wf_error(WF_ERR_IO, "%s: reading the PLAN table: cfitsio status %d", path, status);
-    }
-    *out = rows;
+    for (size_t i = 0; i < *n; i++)
+        if (rows[i].expid >= first && (last < 0 || rows[i].expid <= last)) rows[k++] = rows[i];
     *n = k;
     return WF_OK;
 }
@@ -164,7 +104,7 @@ static wf_status nearest_table(double frame_time, double t, char *name, size_t c
     return WF_OK;
 }
 
-static wf_status configure(const wf_config *base, const wf_survey_run_options *opt, const plan_row *x,
+static wf_status configure(const wf_config *base, const wf_survey_run_options *opt, const wf_survey_row *x,
                            int sca, wf_config *cfg, wf_clock *clock)
 {
     *cfg = *base;
@@ -190,7 +130,7 @@ static wf_status configure(const wf_config *base, const wf_survey_run_options *o
 /* The survey-level record of a run, DIR/survey_run.txt: the plan (and its checksum), the
  * catalogs the scenes were drawn from and the SN sample, so the products can be traced to
  * their inputs. Rewritten (temporary file, rename) at the end of every run. */
-static wf_status write_manifest(const wf_config *cfg, const wf_survey_run_options *opt, const plan_row *rows,
+static wf_status write_manifest(const wf_config *cfg, const wf_survey_run_options *opt, const wf_survey_row *rows,
                                 size_t nrows, const wf_survey_run_stats *stats)
 {
     char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
@@ -240,7 +180,7 @@ static wf_status write_manifest(const wf_config *cfg, const wf_survey_run_option
 wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt, wf_survey_run_stats *stats)
 {
     memset(stats, 0, sizeof *stats);
-    plan_row *rows;
+    wf_survey_row *rows;
     size_t nrows;
     wf_status st = read_plan(opt->plan_path, opt->first, opt->last, &rows, &nrows);
     if (st) return st;
