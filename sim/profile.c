@@ -1777,14 +1777,20 @@ static wf_status draw_nopsf(wf_profile_work *w, const job *jb, double x, double 
     return WF_OK;
 }
 
+/* wing 0 leaves a split draw's wing to the caller (wf_profile_add_wing); plan non-NULL
+ * only decides: plan[0] the split (0, 1), plan[1] the FFT side; nothing is drawn. */
 static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_psf *psf,
-                          double x, double y, wf_stamp *stamp)
+                          double x, double y, wf_stamp *stamp, int wing, int *plan)
 {
     wf_status st = check_position(x, y);
     if (st) return st;
     if (psf && fabs(psf->pixel_scale - w->acc.pixel_scale) > 1e-12 * w->acc.pixel_scale)
         return wf_error(WF_ERR_INPUT, "profile: PSF prepared for %g arcsec pixels, drawing "
                         "at %g", psf->pixel_scale, w->acc.pixel_scale);
+    if (!psf && plan) {
+        plan[0] = 0, plan[1] = 0;
+        return WF_OK;
+    }
     if (!psf) return draw_nopsf(w, jb, x, y, stamp);
     (void)wf_profile_simd(-1); /* the kernels, once per process */
     const wf_sersic_table *t = w->sersic;
@@ -1832,6 +1838,10 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
     double need_fold = 2.0 * ceil(fmax(rfold, rown) / p) + 2.0;
     int mi = choose_size(w, psf, split ? need_fold : fmax((double)need, need_fold));
     gd.m = w->sizes[mi];
+    if (plan) {
+        plan[0] = split, plan[1] = gd.m;
+        return WF_OK;
+    }
     int clamped = gd.m < need_fold;
     gd.half = gd.m / 2;
     gd.dk = 2.0 * M_PI / (gd.m * p);
@@ -1935,7 +1945,7 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
         for (long xx = xa; xx < xb; xx++) dst[xx - stamp->x0] = src[xx - xa] * norm;
         for (long xx = xb; xx < (long)stamp->x0 + stamp->nx; xx++) dst[xx - stamp->x0] = 0.0;
     }
-    if (split) add_wing(psf, jb->flux, x, y, stamp);
+    if (split && wing) add_wing(psf, jb->flux, x, y, stamp);
     if (clamped && jb->fpoint == 0.0 && (st = dewrap(w, jb, &gd, x, y, stamp))) return st;
     double clipped = 0.0;
     for (size_t i = 0; i < (size_t)stamp->nx * stamp->ny; i++)
@@ -1996,7 +2006,59 @@ wf_status wf_profile_draw_galaxy(wf_profile_work *work, const wf_galaxy *g,
         clear_stamp(stamp);
         return WF_OK;
     }
-    return draw_job(work, &jb, psf, x, y, stamp);
+    return draw_job(work, &jb, psf, x, y, stamp, 1, NULL);
+}
+
+wf_status wf_profile_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
+                                 const wf_profile_psf *psf, double x, double y,
+                                 const wf_stamp *bounds, wf_stamp *box, int *split)
+{
+    job jb;
+    wf_galaxy lit = *g;
+    if (lit.flux == 0.0) lit.flux = 1.0;
+    wf_status st = galaxy_job(work, &lit, &jb);
+    if (st || (st = check_position(x, y))) return st;
+    int plan[2];
+    wf_stamp b = *bounds;
+    if ((st = draw_job(work, &jb, psf, x, y, &b, 1, plan))) return st;
+    *box = *bounds;
+    *split = plan[0] && g->flux > 0.0;
+    if (*split) { /* the FFT box [ic - M/2, ic + M/2) within the bounds */
+        long ic = lround(x), jc = lround(y), h = plan[1] / 2;
+        long x0 = ic - h > bounds->x0 ? ic - h : bounds->x0;
+        long y0 = jc - h > bounds->y0 ? jc - h : bounds->y0;
+        long x1 = ic + h < (long)bounds->x0 + bounds->nx ? ic + h : (long)bounds->x0 + bounds->nx;
+        long y1 = jc + h < (long)bounds->y0 + bounds->ny ? jc + h : (long)bounds->y0 + bounds->ny;
+        box->x0 = (int)x0, box->y0 = (int)y0;
+        box->nx = (int)(x1 - x0), box->ny = (int)(y1 - y0);
+    }
+    return WF_OK;
+}
+
+wf_status wf_profile_draw_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
+                                      const wf_profile_psf *psf, double x, double y,
+                                      wf_stamp *stamp)
+{
+    wf_status st = check_stamp(stamp);
+    if (st) return st;
+    job jb;
+    if ((st = galaxy_job(work, g, &jb)) || (st = check_position(x, y))) return st;
+    if (jb.flux == 0.0) {
+        clear_stamp(stamp);
+        return WF_OK;
+    }
+    return draw_job(work, &jb, psf, x, y, stamp, 0, NULL);
+}
+
+wf_status wf_profile_add_wing(const wf_profile_psf *psf, double flux, double x, double y,
+                              wf_stamp *stamp)
+{
+    wf_status st = check_stamp(stamp);
+    if (st || (st = check_position(x, y))) return st;
+    if (!psf || !(psf->core_radius > 0.0))
+        return wf_error(WF_ERR_INPUT, "profile: a wing needs a PSF split into core and wing");
+    add_wing(psf, flux, x, y, stamp);
+    return WF_OK;
 }
 
 wf_status wf_profile_draw_point(wf_profile_work *work, const wf_profile_psf *psf, double flux,
@@ -2020,5 +2082,5 @@ wf_status wf_profile_draw_point(wf_profile_work *work, const wf_profile_psf *psf
     memset(&jb, 0, sizeof jb);
     jb.flux = jb.fpoint = flux;
     wf_profile_shape(0.0, 0.0, 0.0, &jb.shape);
-    return draw_job(work, &jb, psf, x, y, stamp);
+    return draw_job(work, &jb, psf, x, y, stamp, 1, NULL);
 }

@@ -21,8 +21,8 @@ struct wf_renderer {
     size_t pool_used;
     size_t live_bytes;      /* bytes of the stamps still kept: pool_used - live_bytes is garbage */
     size_t *order;          /* compaction scratch: active objects by offset */
-    double *acc, *piece, *skyrow;
-    size_t acc_cap, piece_cap;
+    double *acc, *piece, *skyrow, *hbuf;
+    size_t acc_cap, piece_cap, hbuf_cap;
     wf_renderer_stats stats;
 };
 
@@ -38,12 +38,12 @@ static int by_row(const void *a, const void *b)
  * drawn in double at an aligned address. */
 static size_t stamp_bytes(const wf_render_object *o)
 {
-    return ((size_t)o->nx * (size_t)o->ny * sizeof(float) + 7u) & ~(size_t)7u;
+    return ((size_t)o->bnx * (size_t)o->bny * sizeof(float) + 7u) & ~(size_t)7u;
 }
 
 static size_t draw_bytes(const wf_render_object *o)
 {
-    return (size_t)o->nx * (size_t)o->ny * sizeof(double);
+    return (size_t)o->bnx * (size_t)o->bny * sizeof(double);
 }
 
 /* Doubles to floats in place: float k lands at bytes [4k, 4k+4), below double k+1's, so
@@ -93,7 +93,16 @@ wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_obje
         int off = o->x0 >= cfg->ncols || (long)o->x0 + o->nx <= 0 || o->y0 >= cfg->nrows ||
                   (long)o->y0 + o->ny <= 0;
         if (off) { r->stats.objects_skipped++; continue; }
-        r->objs[r->n++] = *o;
+        wf_render_object c = *o;
+        if (!c.bnx) c.bx0 = c.x0, c.by0 = c.y0, c.bnx = c.nx, c.bny = c.ny;
+        if (c.bnx < 1 || c.bny < 1 || c.bx0 < c.x0 || c.by0 < c.y0 || (long)c.bx0 + c.bnx > (long)c.x0 + c.nx ||
+            (long)c.by0 + c.bny > (long)c.y0 + c.ny || (c.halo && !cfg->halo)) {
+            wf_renderer_destroy(r);
+            return wf_error(WF_ERR_INPUT, "renderer: object %llu: box %d x %d at (%d, %d) not within its %d x %d "
+                            "footprint at (%d, %d), or a halo without a halo function", (unsigned long long)o->id,
+                            c.bnx, c.bny, c.bx0, c.by0, c.nx, c.ny, c.x0, c.y0);
+        }
+        r->objs[r->n++] = c;
     }
     r->stats.objects_kept = (long)r->n;
     qsort(r->objs, r->n, sizeof *r->objs, by_row);
@@ -113,6 +122,7 @@ void wf_renderer_destroy(wf_renderer *r)
     free(r->acc);
     free(r->piece);
     free(r->skyrow);
+    free(r->hbuf);
     free(r);
 }
 
@@ -155,8 +165,8 @@ static void compact(wf_renderer *r)
     r->pool_used = used;
 }
 
-/* A pointer to rows [ya, yb) of object i's stamp: the cached whole stamp when it fits the
- * pool, else a piece drawn now. */
+/* A pointer to rows [ya, yb) of object i's box: the cached whole box when it fits the pool,
+ * else a piece drawn now. */
 static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const float **rows)
 {
     const wf_render_object *o = &r->objs[i];
@@ -167,21 +177,22 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
         if (r->pool_used + dbytes > r->cfg.pool_bytes && r->live_bytes + dbytes <= r->cfg.pool_bytes) compact(r);
         if (r->pool_used + dbytes <= r->cfg.pool_bytes) {
             double *dst = (double *)(void *)(r->pool + r->pool_used);
-            wf_status st = r->draw(r->draw_ctx, o, o->y0, o->y0 + o->ny, dst);
+            wf_status st = r->draw(r->draw_ctx, o, o->by0, o->by0 + o->bny, dst);
             if (st) return st;
-            to_float_in_place(dst, (size_t)o->nx * (size_t)o->ny);
+            to_float_in_place(dst, (size_t)o->bnx * (size_t)o->bny);
             r->stamp_off[i] = r->pool_used;
             r->pool_used += bytes;
             r->live_bytes += bytes;
             if (r->pool_used > r->stats.pool_high_water) r->stats.pool_high_water = r->pool_used;
+            if (r->live_bytes > r->stats.live_high_water) r->stats.live_high_water = r->live_bytes;
             r->stats.stamps_drawn++;
         }
     }
     if (r->stamp_off[i] != NO_STAMP) {
-        *rows = (const float *)(const void *)(r->pool + r->stamp_off[i]) + (size_t)(ya - o->y0) * o->nx;
+        *rows = (const float *)(const void *)(r->pool + r->stamp_off[i]) + (size_t)(ya - o->by0) * o->bnx;
         return WF_OK;
     }
-    size_t need = (size_t)(yb - ya) * (size_t)o->nx;
+    size_t need = (size_t)(yb - ya) * (size_t)o->bnx;
     if (need * sizeof(double) > r->cfg.max_row_bytes)
         return wf_error(WF_ERR_NOMEM, "renderer: object %llu needs %zu bytes for %d rows, above the "
                         "piece limit of %zu", (unsigned long long)o->id, need * sizeof(double), yb - ya,
@@ -191,6 +202,37 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
     if ((st = r->draw(r->draw_ctx, o, ya, yb, r->piece))) return st;
     r->stats.pieces_drawn++;
     *rows = to_float_in_place(r->piece, need);
+    return WF_OK;
+}
+
+/* Rows [ya, yb) of halo object i, columns [xa, xb): its box's pixels plus its halo,
+ * negatives set to zero, into *out[(y - ya) (xb - xa) + x - xa]. */
+static wf_status halo_rows(wf_renderer *r, size_t i, int ya, int yb, int xa, int xb, const double **out)
+{
+    const wf_render_object *o = &r->objs[i];
+    size_t w = (size_t)(xb - xa);
+    wf_status st = grow(&r->hbuf, &r->hbuf_cap, (size_t)(yb - ya) * w, "halo rows");
+    if (st) return st;
+    double *buf = r->hbuf;
+    memset(buf, 0, (size_t)(yb - ya) * w * sizeof *buf);
+    int ba = o->by0 > ya ? o->by0 : ya, bb = o->by0 + o->bny < yb ? o->by0 + o->bny : yb;
+    int ca = o->bx0 > xa ? o->bx0 : xa, cb = o->bx0 + o->bnx < xb ? o->bx0 + o->bnx : xb;
+    if (ba < bb && ca < cb) {
+        const float *src = NULL;
+        if ((st = stamp_rows(r, i, ba, bb, &src))) return st;
+        for (int y = ba; y < bb; y++) {
+            const float *s = src + (size_t)(y - ba) * o->bnx + (ca - o->bx0);
+            double *d = buf + (size_t)(y - ya) * w + (ca - xa);
+            for (int x = 0; x < cb - ca; x++) d[x] += s[x];
+        }
+    }
+    for (int y = ya; y < yb; y++) {
+        double *d = buf + (size_t)(y - ya) * w;
+        if ((st = r->cfg.halo(r->draw_ctx, o, y, xa, xb, d))) return st;
+        for (size_t x = 0; x < w; x++)
+            if (d[x] < 0.0) d[x] = 0.0;
+    }
+    *out = buf;
     return WF_OK;
 }
 
@@ -219,6 +261,15 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
         else r->active[keep++] = r->active[a];
     }
     r->nactive = keep;
+    /* a halo object's box is not needed once the tiles have passed it, though its halo is */
+    for (size_t a = 0; a < r->nactive; a++) {
+        size_t i = r->active[a];
+        const wf_render_object *o = &r->objs[i];
+        if (o->halo && o->by0 + o->bny <= y0 && r->stamp_off[i] != NO_STAMP) {
+            r->live_bytes -= stamp_bytes(o);
+            r->stamp_off[i] = NO_STAMP;
+        }
+    }
     while (r->next < r->n && r->objs[r->next].y0 < y1) {
         const wf_render_object *o = &r->objs[r->next];
         if (o->y0 + o->ny > y0) r->active[r->nactive++] = r->next;
@@ -240,9 +291,19 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
         const wf_render_object *o = &r->objs[i];
         int ya = o->y0 > y0 ? o->y0 : y0, yb = o->y0 + o->ny < y1 ? o->y0 + o->ny : y1;
         if (ya >= yb) continue;
+        int xa = o->x0 > 0 ? o->x0 : 0, xb = o->x0 + o->nx < ncols ? o->x0 + o->nx : ncols;
+        if (o->halo) {
+            const double *h = NULL;
+            if ((st = halo_rows(r, i, ya, yb, xa, xb, &h))) return st;
+            for (int y = ya; y < yb; y++) {
+                const double *s = h + (size_t)(y - ya) * (size_t)(xb - xa);
+                double *acc = r->acc + (size_t)(y - y0) * ncols + xa;
+                for (int x = 0; x < xb - xa; x++) acc[x] += s[x];
+            }
+            continue;
+        }
         const float *src = NULL;
         if ((st = stamp_rows(r, i, ya, yb, &src))) return st;
-        int xa = o->x0 > 0 ? o->x0 : 0, xb = o->x0 + o->nx < ncols ? o->x0 + o->nx : ncols;
         for (int y = ya; y < yb; y++) {
             const float *s = src + (size_t)(y - ya) * o->nx - o->x0;
             double *acc = r->acc + (size_t)(y - y0) * ncols;
@@ -268,10 +329,21 @@ static wf_status fill_slope(void *ctx, int y0, int y1, int ncols, float *slope, 
         if (o->rel_slope == 0.0) continue;
         int ya = o->y0 > y0 ? o->y0 : y0, yb = o->y0 + o->ny < y1 ? o->y0 + o->ny : y1;
         if (ya >= yb) continue;
-        const float *src = NULL;
-        wf_status st = stamp_rows(r, i, ya, yb, &src);
-        if (st) return st;
         int xa = o->x0 > 0 ? o->x0 : 0, xb = o->x0 + o->nx < ncols ? o->x0 + o->nx : ncols;
+        wf_status st;
+        if (o->halo) {
+            const double *h = NULL;
+            if ((st = halo_rows(r, i, ya, yb, xa, xb, &h))) return st;
+            for (int y = ya; y < yb; y++) {
+                const double *s = h + (size_t)(y - ya) * (size_t)(xb - xa);
+                float *dst = slope + (size_t)(y - y0) * ncols + xa;
+                for (int x = 0; x < xb - xa; x++) dst[x] += (float)(o->rel_slope * s[x]);
+            }
+            *any = 1;
+            continue;
+        }
+        const float *src = NULL;
+        if ((st = stamp_rows(r, i, ya, yb, &src))) return st;
         for (int y = ya; y < yb; y++) {
             const float *sr = src + (size_t)(y - ya) * o->nx - o->x0;
             float *dst = slope + (size_t)(y - y0) * ncols;

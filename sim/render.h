@@ -4,8 +4,11 @@
  * is dropped once the tiles have passed it. Stamps live in a pool of fixed size; an object
  * whose stamp does not fit is drawn in pieces (the rows a tile needs), never dropped.
  * Objects entirely off the SCA are never drawn. Stamps are drawn in double and kept in the
- * pool as float. The rate of a pixel is the sky plus the objects in (first row, id) order,
- * summed in double, so it does not depend on how the rows are split into tiles. */
+ * pool as float. An object may keep only a box of its footprint in the pool and have the
+ * rest of its light (over the whole footprint) added row by row by a halo function: a PSF
+ * wing that is cheap to recompute costs no pool. The rate of a pixel is the sky plus the
+ * objects in (first row, id) order, summed in double, so it does not depend on how the
+ * rows are split into tiles. */
 #ifndef WF_RENDER_H
 #define WF_RENDER_H
 
@@ -19,17 +22,25 @@ typedef struct wf_render_object {
     const void *data;   /* the drawing function's description of the object */
     double rel_slope;   /* d ln(brightness) / dt at the exposure mid-time, 1/s (0: constant;
                          * a supernova): feeds the source's fill_slope (hal/scene.h) */
+    int halo;           /* 1: the config's halo function adds light over the footprint */
+    int bx0, by0, bnx, bny; /* the drawn and kept box, within the footprint (bnx 0: all) */
 } wf_render_object;
 
-/* Draws rows [ya, yb) (absolute SCA rows inside the footprint) of the object's stamp, in
- * e-/s per pixel, into out[(y - ya) * nx + i] for columns x0 + i. A row must come out the
- * same whether it is drawn with the whole stamp or in a piece. */
+/* Draws rows [ya, yb) (absolute SCA rows inside the box) of the object's box, in e-/s per
+ * pixel, into out[(y - ya) * bnx + i] for columns bx0 + i. A row must come out the same
+ * whether it is drawn with the whole box or in a piece. */
 typedef wf_status (*wf_draw_fn)(void *ctx, const wf_render_object *obj, int ya, int yb,
                                 double *out);
 
 /* Sky rate of row y, written into out[ncols]: lets the sky follow the pixel area. NULL
  * sky function: constant `sky` e-/pixel/s. */
 typedef wf_status (*wf_sky_fn)(void *ctx, int y, int ncols, double *out);
+
+/* Adds a halo object's light of row y, columns [xa, xb) (within its footprint and the SCA),
+ * into out[x - xa]; called with the draw function's ctx. The
+ * box's pixels and the halo are summed per pixel, negatives set to zero, then added. */
+typedef wf_status (*wf_halo_fn)(void *ctx, const wf_render_object *obj, int y, int xa, int xb,
+                                double *out);
 
 typedef struct wf_renderer_config {
     int ncols, nrows;
@@ -38,6 +49,7 @@ typedef struct wf_renderer_config {
     void *sky_ctx;
     size_t pool_bytes;      /* stamp pool; a stamp larger than it is drawn in pieces */
     size_t max_row_bytes;   /* piece buffer: the most rows x width a piece may hold [pool/4] */
+    wf_halo_fn halo;        /* for objects with halo set [NULL: none may] */
 } wf_renderer_config;
 
 typedef struct wf_renderer_stats {
@@ -46,6 +58,7 @@ typedef struct wf_renderer_stats {
     long objects_kept;      /* objects on (or reaching onto) the SCA */
     long objects_skipped;   /* objects entirely off the SCA */
     size_t pool_high_water; /* most pool bytes in use */
+    size_t live_high_water; /* most bytes of stamps still needed at once (<= the above) */
 } wf_renderer_stats;
 
 typedef struct wf_renderer wf_renderer;

@@ -100,7 +100,7 @@ void wf_scene_setup_default(wf_scene_setup *s)
     s->core_radius = 2.0;
     s->noise_tolerance = 1.0;
     s->exptime = 300.0;
-    s->pool_bytes = (size_t)32 << 20; /* float stamps: as many as 64 MiB of doubles held */
+    s->pool_bytes = (size_t)16 << 20; /* float stamps; split galaxies keep only their core box */
     s->threads = 1;
     s->sky_on = 1;
 }
@@ -197,33 +197,45 @@ static wf_status pixel_shape(const wf_scene *s, double x, double y, double e1, d
     return WF_OK;
 }
 
+/* Rows [ya, yb) of the object's box: its whole stamp, or for a galaxy drawn with the split
+ * PSF (ro->halo) the Fourier box of galaxy x core, its wing added by halo_row. */
 static wf_status draw_object(void *ctx, const wf_render_object *ro, int ya, int yb, double *out)
 {
     thread_state *ts = ctx;
     const object *o = ro->data;
-    size_t whole = (size_t)ro->nx * ro->ny;
-    int full = ya == ro->y0 && yb == ro->y0 + ro->ny;
+    size_t whole = (size_t)ro->bnx * ro->bny;
+    int full = ya == ro->by0 && yb == ro->by0 + ro->bny;
     double *buf = out;
     if (!full) {
         if (whole > ts->stamp_cap) {
             double *p = realloc(ts->stamp, whole * sizeof *p);
-            if (!p) return wf_error(WF_ERR_NOMEM, "scene: cannot hold a %d x %d stamp", ro->nx, ro->ny);
+            if (!p) return wf_error(WF_ERR_NOMEM, "scene: cannot hold a %d x %d stamp", ro->bnx, ro->bny);
             ts->stamp = p;
             ts->stamp_cap = whole;
         }
         buf = ts->stamp;
     }
-    wf_stamp st = {ro->x0, ro->y0, ro->nx, ro->ny, buf, 0, 0, 0};
+    wf_stamp st = {ro->bx0, ro->by0, ro->bnx, ro->bny, buf, 0, 0, 0};
     const wf_profile_accuracy *acc = &ts->scene->acc;
     wf_status s = wf_profile_work_tune(&ts->work, acc->flux_fraction, o->fold, acc->kvalue_accuracy, o->wing_tol);
     if (s) return s;
-    s = o->kind == OBJ_GALAXY
-                      ? wf_profile_draw_galaxy(&ts->work, &o->g, &ts->scene->ppsf, o->x, o->y, &st)
-                      : wf_profile_draw_point(&ts->work, o->wide ? &ts->scene->ppsf_wide : &ts->scene->ppsf,
-                                              o->flux, o->x, o->y, &st);
+    s = o->kind != OBJ_GALAXY ? wf_profile_draw_point(&ts->work, o->wide ? &ts->scene->ppsf_wide : &ts->scene->ppsf,
+                                                      o->flux, o->x, o->y, &st)
+        : ro->halo            ? wf_profile_draw_galaxy_core(&ts->work, &o->g, &ts->scene->ppsf, o->x, o->y, &st)
+                              : wf_profile_draw_galaxy(&ts->work, &o->g, &ts->scene->ppsf, o->x, o->y, &st);
     if (s) return s;
-    if (!full) memcpy(out, buf + (size_t)(ya - ro->y0) * ro->nx, (size_t)(yb - ya) * ro->nx * sizeof *out);
+    if (!full) memcpy(out, buf + (size_t)(ya - ro->by0) * ro->bnx, (size_t)(yb - ya) * ro->bnx * sizeof *out);
     return WF_OK;
+}
+
+/* A split galaxy's wing over row y, columns [xa, xb): recomputed as the tiles pass, so that
+ * the pool keeps only the core box (a few times smaller than the stamp). */
+static wf_status halo_row(void *ctx, const wf_render_object *ro, int y, int xa, int xb, double *out)
+{
+    const thread_state *ts = ctx;
+    const object *o = ro->data;
+    wf_stamp row = {xa, y, xb - xa, 1, out, 0, 0, 0};
+    return wf_profile_add_wing(&ts->scene->ppsf, o->g.flux, o->x, o->y, &row);
 }
 
 static long long object_id(const wf_scene *s, const object *o)
@@ -540,7 +552,17 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
             st = wf_error(WF_ERR_RANGE, "scene: supernova %lld: flux slope is not finite", object_id(s, o));
             goto bad;
         }
-        s->robj[kept++] = (wf_render_object){id * 4u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o, rel};
+        /* a galaxy drawn with the split PSF keeps only its Fourier box in the pool */
+        wf_stamp box = b;
+        int split = 0;
+        if (o->kind == OBJ_GALAXY) {
+            if ((st = wf_profile_work_tune(&s->ts[0].work, s->acc.flux_fraction, o->fold, s->acc.kvalue_accuracy,
+                                           o->wing_tol)) ||
+                (st = wf_profile_galaxy_core(&s->ts[0].work, &o->g, &s->ppsf, o->x, o->y, &b, &box, &split)))
+                goto bad;
+        }
+        s->robj[kept++] = (wf_render_object){id * 4u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o, rel, split,
+                                             box.x0, box.y0, box.nx, box.ny};
         if (rel != 0.0) s->time_variable = 1;
         if (b.x0 < setup->ncols && b.x0 + b.nx > 0 && b.y0 < setup->nrows && b.y0 + b.ny > 0) {
             if (o->kind == OBJ_GALAXY) s->stats.galaxies++;
@@ -548,7 +570,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
             else s->stats.sne++;
         }
     }
-    wf_renderer_config rc = {setup->ncols, setup->nrows, 0.0, sky_row, s, setup->pool_bytes, 0};
+    wf_renderer_config rc = {setup->ncols, setup->nrows, 0.0, sky_row, s, setup->pool_bytes, 0, halo_row};
     s->nrobj = (size_t)kept;
     for (int t = 0; t < setup->threads; t++)
         if ((st = wf_renderer_create(&rc, s->robj, (size_t)kept, draw_object, &s->ts[t], &s->ts[t].renderer))) goto bad;
@@ -607,9 +629,24 @@ wf_status wf_scene_draw_object(wf_scene *s, size_t k, wf_scene_object *info, int
     if (k >= s->nrobj) return wf_error(WF_ERR_RANGE, "scene: object %zu of %zu", k, s->nrobj);
     const wf_render_object *ro = &s->robj[k];
     const object *o = ro->data;
-    double *buf = malloc((size_t)ro->nx * ro->ny * sizeof *buf);
-    if (!buf) return wf_error(WF_ERR_NOMEM, "scene: a %d x %d stamp", ro->nx, ro->ny);
-    wf_status st = draw_object(&s->ts[0], ro, ro->y0, ro->y0 + ro->ny, buf);
+    /* the whole stamp: the box, and for a split galaxy its wing, summed as the renderer does */
+    double *buf = calloc((size_t)ro->nx * ro->ny, sizeof *buf);
+    double *bx = malloc((size_t)ro->bnx * ro->bny * sizeof *bx);
+    if (!buf || !bx) {
+        free(buf), free(bx);
+        return wf_error(WF_ERR_NOMEM, "scene: a %d x %d stamp", ro->nx, ro->ny);
+    }
+    wf_status st = draw_object(&s->ts[0], ro, ro->by0, ro->by0 + ro->bny, bx);
+    for (int j = 0; j < ro->bny && !st; j++)
+        memcpy(buf + (size_t)(ro->by0 - ro->y0 + j) * ro->nx + (ro->bx0 - ro->x0), bx + (size_t)j * ro->bnx,
+               (size_t)ro->bnx * sizeof *bx);
+    free(bx);
+    for (int j = 0; j < ro->ny && !st && ro->halo; j++) {
+        double *row = buf + (size_t)j * ro->nx;
+        st = halo_row(&s->ts[0], ro, ro->y0 + j, ro->x0, ro->x0 + ro->nx, row);
+        for (int i = 0; i < ro->nx; i++)
+            if (row[i] < 0.0) row[i] = 0.0;
+    }
     if (st) { free(buf); return st; }
     info->id = object_id(s, o);
     info->kind = (int)o->kind;

@@ -1,5 +1,6 @@
 /* The tile renderer with an analytic Gaussian stamp: output independent of tile height and
- * pool size, flux conserved, objects off the SCA never drawn, crowded and empty tiles. */
+ * pool size, flux conserved, objects off the SCA never drawn, crowded and empty tiles; objects
+ * that keep only a box in the pool and add a halo row by row. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -7,7 +8,7 @@
 #include "sim/render.h"
 #include "tests/testutil.h"
 
-typedef struct gauss { double x, y, sigma, flux; } gauss;
+typedef struct gauss { double x, y, sigma, flux, halo_sigma, halo_flux; } gauss;
 typedef struct counter { long calls; long rows; } counter;
 
 static double frac(int i, double c, double s)
@@ -22,10 +23,20 @@ static wf_status draw_gauss(void *ctx, const wf_render_object *o, int ya, int yb
     const gauss *g = o->data;
     c->calls++;
     c->rows += yb - ya;
-    for (int y = ya; y < yb; y++) {
+    for (int y = ya; y < yb; y++) { /* the box (the whole footprint unless set) */
         double fy = g->flux * frac(y, g->y, g->sigma);
-        for (int i = 0; i < o->nx; i++) out[(size_t)(y - ya) * o->nx + i] = fy * frac(o->x0 + i, g->x, g->sigma);
+        for (int i = 0; i < o->bnx; i++) out[(size_t)(y - ya) * o->bnx + i] = fy * frac(o->bx0 + i, g->x, g->sigma);
     }
+    return WF_OK;
+}
+
+/* The wider Gaussian of a halo object, added over the footprint. */
+static wf_status halo_gauss(void *ctx, const wf_render_object *o, int y, int xa, int xb, double *out)
+{
+    (void)ctx;
+    const gauss *g = o->data;
+    double fy = g->halo_flux * frac(y, g->y, g->halo_sigma);
+    for (int x = xa; x < xb; x++) out[x - xa] += fy * frac(x, g->x, g->halo_sigma);
     return WF_OK;
 }
 
@@ -38,7 +49,7 @@ static void make_objects(int n, int ncols, int nrows, gauss *g, wf_render_object
         g[i].sigma = 0.5 + 4.0 * rand() / (double)RAND_MAX;
         g[i].flux = 10.0 + 1000.0 * rand() / (double)RAND_MAX;
         int h = (int)ceil(6 * g[i].sigma);
-        o[i] = (wf_render_object){(uint64_t)i, (int)floor(g[i].x) - h, (int)floor(g[i].y) - h, 2 * h + 2, 2 * h + 2, &g[i], 0.0};
+        o[i] = (wf_render_object){(uint64_t)i, (int)floor(g[i].x) - h, (int)floor(g[i].y) - h, 2 * h + 2, 2 * h + 2, &g[i], 0.0, 0, 0, 0, 0, 0};
     }
 }
 
@@ -74,7 +85,7 @@ START_TEST(tile_height_and_pool_do_not_matter)
     static gauss g[N];
     static wf_render_object o[N];
     make_objects(N, W, H, g, o, 7);
-    wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0};
+    wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0, NULL};
     counter c = {0, 0};
     float *ref = render_all(&cfg, o, N, H, &c);
     const int tiles[] = {1, 7, 64};
@@ -92,6 +103,59 @@ START_TEST(tile_height_and_pool_do_not_matter)
 }
 END_TEST
 
+/* Objects made of a core kept in a box and a halo three times wider over the footprint: the
+ * same image whatever the tile height and pool (pieces), and the flux of both parts within
+ * the SCA to 1e-6 (float rates). */
+START_TEST(halo_objects)
+{
+    enum { N = 150, W = 100, H = 120 };
+    static gauss g[N];
+    static wf_render_object o[N];
+    make_objects(N, W, H, g, o, 11);
+    double total = 0.0;
+    for (int i = 0; i < N; i++) {
+        g[i].halo_sigma = 3.0 * g[i].sigma;
+        g[i].halo_flux = 0.05 * g[i].flux;
+        int hb = (int)ceil(6 * g[i].sigma), hf = (int)ceil(6 * g[i].halo_sigma);
+        o[i].x0 = (int)floor(g[i].x) - hf, o[i].y0 = (int)floor(g[i].y) - hf;
+        o[i].nx = o[i].ny = 2 * hf + 2;
+        o[i].bx0 = (int)floor(g[i].x) - hb, o[i].by0 = (int)floor(g[i].y) - hb;
+        o[i].bnx = o[i].bny = 2 * hb + 2;
+        o[i].halo = 1;
+    }
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 22, 0, halo_gauss};
+    counter c = {0, 0};
+    float *ref = render_all(&cfg, o, N, H, &c);
+    const int tiles[] = {1, 9, 40};
+    for (int t = 0; t < 3; t++) {
+        float *img = render_all(&cfg, o, N, tiles[t], &c);
+        ck_assert_msg(!memcmp(ref, img, sizeof(float) * W * H), "tile height %d changes the rates", tiles[t]);
+        free(img);
+    }
+    cfg.pool_bytes = 3000;
+    float *small = render_all(&cfg, o, N, 7, &c);
+    ck_assert_msg(!memcmp(ref, small, sizeof(float) * W * H), "pieces change the rates");
+    free(small);
+    /* flux: every part of every object inside the SCA */
+    for (int i = 0; i < N; i++) {
+        double fx = 0, fy = 0, hx = 0, hy = 0;
+        for (int x = 0; x < W; x++) {
+            if (x >= o[i].bx0 && x < o[i].bx0 + o[i].bnx) fx += frac(x, g[i].x, g[i].sigma);
+            if (x >= o[i].x0 && x < o[i].x0 + o[i].nx) hx += frac(x, g[i].x, g[i].halo_sigma);
+        }
+        for (int y = 0; y < H; y++) {
+            if (y >= o[i].by0 && y < o[i].by0 + o[i].bny) fy += frac(y, g[i].y, g[i].sigma);
+            if (y >= o[i].y0 && y < o[i].y0 + o[i].ny) hy += frac(y, g[i].y, g[i].halo_sigma);
+        }
+        total += g[i].flux * fx * fy + g[i].halo_flux * hx * hy;
+    }
+    double sum = 0.0;
+    for (int k = 0; k < W * H; k++) sum += ref[k];
+    ck_assert_msg(fabs(sum / total - 1) < 1e-6, "flux %.8g of %.8g", sum, total);
+    free(ref);
+}
+END_TEST
+
 START_TEST(flux_conserved_and_off_sca_skipped)
 {
     enum { N = 300, W = 100, H = 90 };
@@ -102,7 +166,7 @@ START_TEST(flux_conserved_and_off_sca_skipped)
     o[0].x0 = W + 5;
     o[1].y0 = -o[1].ny - 3;
     o[2].x0 = -o[2].nx;
-    wf_renderer_config cfg = {W, H, 0.25, NULL, NULL, 1u << 22, 0};
+    wf_renderer_config cfg = {W, H, 0.25, NULL, NULL, 1u << 22, 0, NULL};
     counter c = {0, 0};
     wf_renderer *r;
     ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
@@ -134,7 +198,7 @@ START_TEST(crowded_tile_and_empty_scene)
     gauss *g = malloc(N * sizeof *g);
     wf_render_object *o = malloc(N * sizeof *o);
     make_objects(N, W, 8, g, o, 3); /* 10,000 objects on the first rows */
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0, NULL};
     counter c = {0, 0};
     float *img = render_all(&cfg, o, N, 64, &c);
     double sum = 0;
@@ -146,7 +210,7 @@ START_TEST(crowded_tile_and_empty_scene)
     ck_assert_msg(c.calls <= N, "%ld draws for %d objects", c.calls, N);
     free(img);
     /* empty: the sky and nothing else */
-    wf_renderer_config e = {W, H, 1.5, NULL, NULL, 0, 0};
+    wf_renderer_config e = {W, H, 1.5, NULL, NULL, 0, 0, NULL};
     float *sky = render_all(&e, NULL, 0, 16, &c);
     for (int i = 0; i < W * H; i++) ck_assert(sky[i] == 1.5f);
     free(sky);
@@ -161,7 +225,7 @@ START_TEST(each_stamp_drawn_once)
     static gauss g[N];
     static wf_render_object o[N];
     make_objects(N, W, H, g, o, 5);
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0, NULL};
     counter c = {0, 0};
     wf_renderer *r;
     ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
@@ -184,6 +248,7 @@ static Suite *suite(void)
     tcase_add_test(tc, flux_conserved_and_off_sca_skipped);
     tcase_add_test(tc, crowded_tile_and_empty_scene);
     tcase_add_test(tc, each_stamp_drawn_once);
+    tcase_add_test(tc, halo_objects);
     suite_add_tcase(s, tc);
     return s;
 }
