@@ -31,7 +31,8 @@ typedef struct object {
     double ra, dec, mag, flux;
     wf_galaxy g;      /* galaxies: pixel-frame shape */
     int wide;         /* bright point source: the wide PSF */
-    double fold, wing_tol; /* its folding threshold and wing tolerance (noise_tolerance) */
+    double fold, kval, wing_tol; /* its folding threshold, Fourier cut and wing tolerance
+                                  * (noise_tolerance) */
 } object;
 
 typedef struct thread_state {
@@ -217,7 +218,7 @@ static wf_status draw_object(void *ctx, const wf_render_object *ro, int ya, int 
     }
     wf_stamp st = {ro->bx0, ro->by0, ro->bnx, ro->bny, buf, 0, 0, 0};
     const wf_profile_accuracy *acc = &ts->scene->acc;
-    wf_status s = wf_profile_work_tune(&ts->work, acc->flux_fraction, o->fold, acc->kvalue_accuracy, o->wing_tol);
+    wf_status s = wf_profile_work_tune(&ts->work, acc->flux_fraction, o->fold, o->kval, o->wing_tol);
     if (s) return s;
     s = o->kind != OBJ_GALAXY ? wf_profile_draw_point(&ts->work, o->wide ? &ts->scene->ppsf_wide : &ts->scene->ppsf,
                                                       o->flux, o->x, o->y, &st)
@@ -499,7 +500,10 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     const double reach = 2.0 * setup->psf_size / setup->psf_oversample + 1.0;
     /* Per-object knobs from the noise (docs/ACCURACY.md): light wrapping into the Fourier
      * box stays in the stamp, moved across the box, and moves no pixel by more than
-     * fold x flux; the split PSF's wing moves none by more than flux x wing_max. Each may be
+     * fold x flux; the Fourier modes dropped below kvalue x flux move none by more than their
+     * count over the box's M^2 pixels, < WF_SCENE_KVALUE_MODES kvalue x flux (the fine grid
+     * holds ~pi (1.19 M)^2 samples to the Y106 band); the split PSF's wing moves none by more
+     * than 2 flux wing_max. Each may be
      * as large as noise_tolerance x one pixel's sky noise over the exposure, in e-. With no
      * sky there is no noise to hide in. */
     if (!(setup->noise_tolerance >= 0.0) || (setup->noise_tolerance > 0.0 && !(setup->exptime > 0.0))) {
@@ -512,8 +516,12 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     for (size_t i = 0; i < s->nobj; i++) {
         object *o = &s->obj[i];
         o->fold = s->acc.folding_threshold;
+        o->kval = s->acc.kvalue_accuracy;
         o->wing_tol = tol_rate; /* e-/s per pixel, the unit of the stamps */
-        if (tol_rate > 0.0 && o->flux > 0.0) o->fold = fmin(WF_SCENE_FOLD_MAX, fmax(o->fold, tol_rate / o->flux));
+        if (tol_rate > 0.0 && o->flux > 0.0) {
+            o->fold = fmin(WF_SCENE_FOLD_MAX, fmax(o->fold, tol_rate / o->flux));
+            o->kval = fmin(WF_SCENE_KVALUE_MAX, fmax(o->kval, tol_rate / (WF_SCENE_KVALUE_MODES * o->flux)));
+        }
         int near = o->x > -reach && o->y > -reach && o->x < setup->ncols + reach && o->y < setup->nrows + reach;
         if (o->kind != OBJ_GALAXY && o->flux > 0 && o->mag < setup->bright_mag && near) {
             o->wide = 1;
@@ -556,8 +564,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
         wf_stamp box = b;
         int split = 0;
         if (o->kind == OBJ_GALAXY) {
-            if ((st = wf_profile_work_tune(&s->ts[0].work, s->acc.flux_fraction, o->fold, s->acc.kvalue_accuracy,
-                                           o->wing_tol)) ||
+            if ((st = wf_profile_work_tune(&s->ts[0].work, s->acc.flux_fraction, o->fold, o->kval, o->wing_tol)) ||
                 (st = wf_profile_galaxy_core(&s->ts[0].work, &o->g, &s->ppsf, o->x, o->y, &b, &box, &split)))
                 goto bad;
         }

@@ -46,8 +46,9 @@ typedef struct wf_scene_setup {
     double core_radius;     /* arcsec, the PSF's core and wing split (sim/profile.h); 0: none [2] */
     double noise_tolerance; /* per object, looser knobs whose error bound stays below this x
                              * the sky noise of one pixel over exptime: folding (in [the
-                             * profile default, WF_SCENE_FOLD_MAX]) and the split PSF's wing
-                             * for objects of any size; 0: the same knobs for all [1] */
+                             * profile default, WF_SCENE_FOLD_MAX]), the Fourier cut (up to
+                             * WF_SCENE_KVALUE_MAX) and the split PSF's wing; 0: the same
+                             * knobs for all [1] */
     double exptime;         /* s, for noise_tolerance [300] */
     size_t pool_bytes;      /* stamp pool per renderer (float stamps) [16 MiB] */
     int threads;            /* renderers to prepare [1] */
@@ -61,7 +62,9 @@ typedef struct wf_scene_setup {
     size_t nsne;
 } wf_scene_setup;
 
-#define WF_SCENE_FOLD_MAX 0.05
+#define WF_SCENE_FOLD_MAX 0.05    /* noise_tolerance: folding at most this */
+#define WF_SCENE_KVALUE_MAX 1e-3  /* and the Fourier cut at most this (docs/ACCURACY.md) */
+#define WF_SCENE_KVALUE_MODES 4.5 /* fine-grid samples per box pixel bounding the cut's error */
 
 typedef struct wf_scene_stats {
     long galaxies, stars, sne; /* drawn (reach the SCA) */
