@@ -440,7 +440,8 @@ START_TEST(plan_read_back)
     ck_assert(out && fwrite(bytes, 1, len, out) == len && fclose(out) == 0);
     free(bytes);
     ck_assert_int_eq(wf_survey_read_plan(bad, &rows, &n), WF_ERR_INPUT);
-    ck_assert_ptr_nonnull(strstr(wf_error_message(), "damaged.fits: not a plan whose checksums verify"));
+    ck_assert_msg(strstr(wf_error_message(), "damaged.fits: not a plan whose checksums verify") &&
+                  strstr(wf_error_message(), "section 2: DATASUM does not verify"), "%s", wf_error_message());
 
     snprintf(bad, sizeof bad, "%s/nan.fits", dir);
     altered_plan(path, bad, 0);
@@ -523,6 +524,11 @@ START_TEST(checksums_cover_the_whole_file)
     LONGLONG h2[4], d2[4], e2[4];
     ck_assert_int_eq(hdu_layout(bad, h2, d2, e2), 1); /* the blind spot being closed */
     assert_refused(bad, 0, "trailing bytes after section 1: damaged or truncated");
+    wf_survey_row *rows;
+    size_t n;
+    ck_assert_int_eq(wf_survey_read_plan(bad, &rows, &n), WF_ERR_INPUT);
+    ck_assert_msg(strstr(wf_error_message(), "header2.fits: not a plan whose checksums verify") &&
+                  strstr(wf_error_message(), "trailing bytes after section 1"), "%s", wf_error_message());
 
     /* the same in the last section */
     snprintf(bad, sizeof bad, "%s/header3.fits", dir);
@@ -547,6 +553,7 @@ START_TEST(checksums_cover_the_whole_file)
     write_bytes(bad, bytes, (size_t)head[3]);
     ck_assert_msg(wf_fits_verify_checksums(bad, 0) == WF_OK, "%s", wf_error_message());
     assert_refused(bad, 3, "2 sections, expected 3");
+    ck_assert_int_eq(wf_survey_read_plan(bad, &rows, &n), WF_ERR_INPUT); /* it knows the count */
 
     /* appended: a few bytes, and a whole block that is not a section */
     char *longer = malloc(len + 2880);
