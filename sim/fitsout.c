@@ -4,6 +4,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #define CHECKSUM_ZERO "0000000000000000"
@@ -75,6 +76,59 @@ wf_status wf_fits_checksum_all(fitsfile *f, const char *path)
         if (st) return st;
     }
     return WF_OK;
+}
+
+#define FITS_BLOCK 2880LL
+
+static wf_status verify_open(fitsfile *f, const char *path, int expect)
+{
+    int status = 0, nhdu = 0;
+    if (fits_get_num_hdus(f, &nhdu, &status)) return wf_fits_error(status, path, "counting sections");
+    if (nhdu < 1) return wf_error(WF_ERR_CORRUPT, "%s: no section", path);
+    struct stat sb;
+    if (stat(path, &sb) != 0) return wf_error(WF_ERR_IO, "%s: %s", path, strerror(errno));
+    LONGLONG head = 0, data = 0, end = 0;
+    if (fits_movabs_hdu(f, nhdu, NULL, &status) || fits_get_hduaddrll(f, &head, &data, &end, &status))
+        return wf_fits_error(status, path, "locating the last section");
+    /* The whole-file test comes before the checksums: on a truncated file those would fail
+     * with a cfitsio read error that says less than this. */
+    end = (end + FITS_BLOCK - 1) / FITS_BLOCK * FITS_BLOCK;
+    LONGLONG size = (LONGLONG)sb.st_size;
+    if (end > size)
+        return wf_error(WF_ERR_CORRUPT, "%s: section %d ends at byte %lld but the file has %lld: truncated",
+                        path, nhdu, (long long)end, (long long)size);
+    if (end < size)
+        return wf_error(WF_ERR_CORRUPT, "%s: %lld trailing bytes after section %d: damaged or truncated", path,
+                        (long long)(size - end), nhdu);
+    if (expect > 0 && nhdu != expect)
+        return wf_error(WF_ERR_CORRUPT, "%s: %d sections, expected %d%s", path, nhdu, expect,
+                        nhdu < expect ? ": truncated" : "");
+    for (int h = 1; h <= nhdu; h++) {
+        int dataok = 0, hduok = 0;
+        char doing[64];
+        snprintf(doing, sizeof doing, "verifying the checksums of section %d", h);
+        if (fits_movabs_hdu(f, h, NULL, &status) || fits_verify_chksum(f, &dataok, &hduok, &status))
+            return wf_fits_error(status, path, doing);
+        /* 0 means the keyword is absent: a file this project wrote always has both */
+        if (hduok == 0 || dataok == 0)
+            return wf_error(WF_ERR_CORRUPT, "%s: section %d has no %s", path, h, hduok == 0 ? "CHECKSUM" : "DATASUM");
+        if (dataok != 1)
+            return wf_error(WF_ERR_CORRUPT, "%s: section %d: DATASUM does not verify (data damaged)", path, h);
+        if (hduok != 1)
+            return wf_error(WF_ERR_CORRUPT, "%s: section %d: CHECKSUM does not verify (header damaged)", path, h);
+    }
+    return WF_OK;
+}
+
+wf_status wf_fits_verify_checksums(const char *path, int nhdu)
+{
+    fitsfile *f;
+    int status = 0;
+    if (fits_open_diskfile(&f, path, READONLY, &status)) return wf_fits_error(status, path, "opening");
+    wf_status st = verify_open(f, path, nhdu);
+    fits_close_file(f, &status);
+    fits_clear_errmsg();
+    return st;
 }
 
 int wf_fits_double_digits(double v)

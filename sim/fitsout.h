@@ -23,6 +23,17 @@ wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path);
 /* The same for every HDU of the file; leaves the last HDU current. */
 wf_status wf_fits_checksum_all(fitsfile *f, const char *path);
 
+/* Proves the FITS file at path is whole, as the resume of `wfisim survey run` and the plan
+ * reader rely on: every section (HDU) has a CHECKSUM and DATASUM that verify, and the sections
+ * cfitsio finds cover every byte of the file. cfitsio stops counting sections silently at the
+ * first header it cannot parse, so checksums alone would pass a file whose later section is
+ * damaged; its bytes are then left over after the last section found and the file is refused.
+ * A file cut exactly between two sections is caught only by nhdu: when > 0, the file must hold
+ * exactly that many sections (0: any number). A file cfitsio cannot open or read (its primary
+ * header included) is WF_ERR_IO, any other failure WF_ERR_CORRUPT; the message names the file
+ * and the section (1 = the primary HDU). */
+wf_status wf_fits_verify_checksums(const char *path, int nhdu);
+
 /* Products are written to "<path>.tmp" and renamed into place only when complete, so a
  * failure never leaves a partial product. wf_fits_begin creates the temporary file (an old
  * one is removed; tmp receives its name); wf_fits_finish checksums every HDU (unless st is

@@ -983,23 +983,8 @@ static const struct {
     {"EXPTIME", TDOUBLE, offsetof(wf_survey_row, exptime)},
 };
 #define PLAN_NCOLS (sizeof plan_columns / sizeof *plan_columns)
+#define PLAN_HDUS 3               /* wf_survey_write_plan: primary, PLAN, POINTINGS */
 #define FILTER_READ_MAX 31        /* widest FILTER column read (the text is then cut to 15) */
-
-/* 1 when every HDU of f has a CHECKSUM and DATASUM that verify: the test of
- * wf_survey_product_ok (tools/surveyrun.c), on the handle the plan is then read from. */
-static int checksums_verify(fitsfile *f)
-{
-    int status = 0, nhdu = 0, ok = 1;
-    fits_get_num_hdus(f, &nhdu, &status);
-    for (int h = 1; h <= nhdu && ok && !status; h++) {
-        int type, dataok = 0, hduok = 0;
-        fits_movabs_hdu(f, h, &type, &status);
-        fits_verify_chksum(f, &dataok, &hduok, &status);
-        ok = !status && dataok == 1 && hduok == 1;
-    }
-    fits_clear_errmsg();
-    return ok && !status && nhdu > 0;
-}
 
 static wf_status read_plan_close(fitsfile *f, wf_survey_row *rows, wf_status st)
 {
@@ -1014,15 +999,18 @@ wf_status wf_survey_read_plan(const char *path, wf_survey_row **rows, size_t *n)
 {
     *rows = NULL;
     *n = 0;
+    if (wf_fits_verify_checksums(path, PLAN_HDUS)) {
+        char why[1024]; /* copied: wf_error rewrites the buffer wf_error_message points to */
+        const char *m = wf_error_message();
+        size_t len = strlen(path);
+        if (!strncmp(m, path, len) && !strncmp(m + len, ": ", 2)) m += len + 2; /* path said once */
+        snprintf(why, sizeof why, "%s", m);
+        return wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one with `wfisim survey plan`): %s",
+                        path, why);
+    }
     fitsfile *f;
     int status = 0;
-    if (fits_open_diskfile(&f, path, READONLY, &status)) {
-        fits_clear_errmsg();
-        return wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one with `wfisim survey plan`)", path);
-    }
-    if (!checksums_verify(f))
-        return read_plan_close(f, NULL, wf_error(WF_ERR_INPUT, "%s: not a plan whose checksums verify (write one "
-                                                 "with `wfisim survey plan`)", path));
+    if (fits_open_diskfile(&f, path, READONLY, &status)) return wf_fits_error(status, path, "opening");
     if (fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status))
         return read_plan_close(f, NULL, wf_error(WF_ERR_INPUT, "%s: no PLAN table", path));
     int col[PLAN_NCOLS];

@@ -160,10 +160,11 @@ typedef struct wf_survey_row {
     double exptime;                 /* s */
 } wf_survey_row;
 
-/* The PLAN table of a plan file written by wf_survey_write_plan, in file order. Every HDU's
- * CHECKSUM and DATASUM must verify (a damaged plan would place every image wrongly). A file
- * that cannot be opened or does not verify, no PLAN table, a missing column or a non-finite
- * number is WF_ERR_INPUT naming the file (and the column and row); a failed read WF_ERR_IO.
+/* The PLAN table of a plan file written by wf_survey_write_plan, in file order. The file must
+ * be whole (wf_fits_verify_checksums: its three HDUs' CHECKSUM and DATASUM verify and nothing
+ * follows them), since a damaged plan would place every image wrongly. A file that cannot be
+ * opened or is not whole, no PLAN table, a missing column or a non-finite number is
+ * WF_ERR_INPUT naming the file (and the section, column or row); a failed read WF_ERR_IO.
  * *rows is allocated, also for an empty table: free() it. */
 wf_status wf_survey_read_plan(const char *path, wf_survey_row **rows, size_t *n);
 

@@ -10,6 +10,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "sim/fitsout.h"
 #include "sim/survey.h"
 #include "sim/wcs.h"
 #include "tests/testutil.h"
@@ -439,7 +440,8 @@ START_TEST(plan_read_back)
     ck_assert(out && fwrite(bytes, 1, len, out) == len && fclose(out) == 0);
     free(bytes);
     ck_assert_int_eq(wf_survey_read_plan(bad, &rows, &n), WF_ERR_INPUT);
-    ck_assert_ptr_nonnull(strstr(wf_error_message(), "damaged.fits: not a plan whose checksums verify"));
+    ck_assert_msg(strstr(wf_error_message(), "damaged.fits: not a plan whose checksums verify") &&
+                  strstr(wf_error_message(), "section 2: DATASUM does not verify"), "%s", wf_error_message());
 
     snprintf(bad, sizeof bad, "%s/nan.fits", dir);
     altered_plan(path, bad, 0);
@@ -454,6 +456,133 @@ START_TEST(plan_read_back)
     ck_assert_msg(strstr(wf_error_message(), "short.fits: PLAN table has no column MJD_START"), "%s",
                   wf_error_message());
     wf_survey_plan_free(&plan);
+}
+END_TEST
+
+static void write_bytes(const char *path, const char *bytes, size_t len)
+{
+    FILE *out = fopen(path, "wb");
+    ck_assert(out && fwrite(bytes, 1, len, out) == len && fclose(out) == 0);
+}
+
+/* Where each HDU of a file starts (head[h], data[h]) and its data ends, 1-based; returns the
+ * HDU count cfitsio reports. */
+static int hdu_layout(const char *path, LONGLONG head[4], LONGLONG data[4], LONGLONG end[4])
+{
+    fitsfile *f;
+    int status = 0, nhdu = 0;
+    fits_open_file(&f, path, READONLY, &status);
+    fits_get_num_hdus(f, &nhdu, &status);
+    for (int h = 1; h <= nhdu && h < 4; h++) {
+        fits_movabs_hdu(f, h, NULL, &status);
+        fits_get_hduaddrll(f, &head[h], &data[h], &end[h], &status);
+    }
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    return nhdu;
+}
+
+static void assert_refused(const char *path, int nhdu, const char *why)
+{
+    ck_assert_int_eq(wf_fits_verify_checksums(path, nhdu), WF_ERR_CORRUPT);
+    ck_assert_msg(strstr(wf_error_message(), path) && strstr(wf_error_message(), why), "%s: got '%s'", why,
+                  wf_error_message());
+}
+
+/* wf_fits_verify_checksums on a plan (3 sections): an intact file passes; one whose second
+ * header cfitsio cannot parse (it then reports 1 section, so checksums alone pass), one cut
+ * inside its last section or exactly between sections, or one with bytes appended, is refused
+ * naming the file and the section. */
+START_TEST(checksums_cover_the_whole_file)
+{
+    wf_focal_plane fp;
+    wf_wcs_focal_plane_builtin(&fp);
+    wf_survey_plan plan;
+    const char *sets[] = {"survey.visits=1", NULL};
+    make_plan(&fp, sets, &plan);
+    const char *dir = wf_test_tmpdir();
+    char path[4200], bad[4200];
+    snprintf(path, sizeof path, "%s/plan.fits", dir);
+    ck_assert_msg(wf_survey_write_plan(&plan, NULL, path) == WF_OK, "%s", wf_error_message());
+    wf_survey_plan_free(&plan);
+    ck_assert_msg(wf_fits_verify_checksums(path, 0) == WF_OK, "%s", wf_error_message());
+    ck_assert_msg(wf_fits_verify_checksums(path, 3) == WF_OK, "%s", wf_error_message());
+    assert_refused(path, 4, "3 sections, expected 4");
+    LONGLONG head[4], data[4], end[4];
+    ck_assert_int_eq(hdu_layout(path, head, data, end), 3);
+    size_t len;
+    char *bytes = wf_test_slurp(path, &len);
+    ck_assert_ptr_nonnull(bytes);
+    ck_assert_int_eq((LONGLONG)len, end[3]);
+    ck_assert(!memcmp(bytes + head[2], "XTENSION=", 9));
+
+    /* the second section's first card no longer reads XTENSION= */
+    snprintf(bad, sizeof bad, "%s/header2.fits", dir);
+    memcpy(bytes + head[2], "XTENSIOM=", 9);
+    write_bytes(bad, bytes, len);
+    memcpy(bytes + head[2], "XTENSION=", 9);
+    LONGLONG h2[4], d2[4], e2[4];
+    ck_assert_int_eq(hdu_layout(bad, h2, d2, e2), 1); /* the blind spot being closed */
+    assert_refused(bad, 0, "trailing bytes after section 1: damaged or truncated");
+    wf_survey_row *rows;
+    size_t n;
+    ck_assert_int_eq(wf_survey_read_plan(bad, &rows, &n), WF_ERR_INPUT);
+    ck_assert_msg(strstr(wf_error_message(), "header2.fits: not a plan whose checksums verify") &&
+                  strstr(wf_error_message(), "trailing bytes after section 1"), "%s", wf_error_message());
+
+    /* the same in the last section */
+    snprintf(bad, sizeof bad, "%s/header3.fits", dir);
+    memcpy(bytes + head[3], "GARBAGE!!", 9);
+    write_bytes(bad, bytes, len);
+    memcpy(bytes + head[3], "XTENSION=", 9);
+    assert_refused(bad, 0, "trailing bytes after section 2: damaged or truncated");
+
+    /* cut in the middle of the last section's data */
+    snprintf(bad, sizeof bad, "%s/cut.fits", dir);
+    write_bytes(bad, bytes, (size_t)(data[3] + end[3]) / 2);
+    assert_refused(bad, 0, "section 3 ends at byte");
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "truncated"));
+
+    /* cut in the middle of the last section's header */
+    snprintf(bad, sizeof bad, "%s/cuthead.fits", dir);
+    write_bytes(bad, bytes, (size_t)head[3] + 100);
+    assert_refused(bad, 0, "100 trailing bytes after section 2");
+
+    /* cut exactly between sections 2 and 3: whole sections that verify, only the count tells */
+    snprintf(bad, sizeof bad, "%s/cutedge.fits", dir);
+    write_bytes(bad, bytes, (size_t)head[3]);
+    ck_assert_msg(wf_fits_verify_checksums(bad, 0) == WF_OK, "%s", wf_error_message());
+    assert_refused(bad, 3, "2 sections, expected 3");
+    ck_assert_int_eq(wf_survey_read_plan(bad, &rows, &n), WF_ERR_INPUT); /* it knows the count */
+
+    /* appended: a few bytes, and a whole block that is not a section */
+    char *longer = malloc(len + 2880);
+    ck_assert_ptr_nonnull(longer);
+    memcpy(longer, bytes, len);
+    memset(longer + len, 'x', 2880);
+    snprintf(bad, sizeof bad, "%s/tail.fits", dir);
+    write_bytes(bad, longer, len + 10);
+    assert_refused(bad, 0, "10 trailing bytes after section 3");
+    snprintf(bad, sizeof bad, "%s/block.fits", dir);
+    write_bytes(bad, longer, len + 2880);
+    assert_refused(bad, 3, "2880 trailing bytes after section 3");
+    free(longer);
+
+    /* a header damaged where cfitsio still parses it: the CHECKSUM names the section */
+    snprintf(bad, sizeof bad, "%s/card.fits", dir);
+    char *c = NULL; /* the EXTNAME value of section 3 (the data before it hold NUL bytes) */
+    for (LONGLONG i = head[3]; i + 9 <= data[3] && !c; i++)
+        if (!memcmp(bytes + i, "POINTINGS", 9)) c = bytes + i;
+    ck_assert_ptr_nonnull(c);
+    c[0] = 'Q';
+    write_bytes(bad, bytes, len);
+    assert_refused(bad, 0, "section 3: CHECKSUM does not verify");
+    c[0] = 'P';
+
+    snprintf(bad, sizeof bad, "%s/missing.fits", dir);
+    ck_assert_int_eq(wf_fits_verify_checksums(bad, 0), WF_ERR_IO);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "missing.fits"));
+    free(bytes);
 }
 END_TEST
 
@@ -579,6 +708,7 @@ static Suite *survey_suite(void)
     tcase_add_test(tc, coverage_areas);
     tcase_add_test(tc, fits_products);
     tcase_add_test(tc, plan_read_back);
+    tcase_add_test(tc, checksums_cover_the_whole_file);
     tcase_add_test(tc, survey_command);
     tcase_add_test(tc, bad_parameters);
     tcase_add_test(tc, key_documentation);

@@ -9,6 +9,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "sim/fitsout.h"
 #include "tests/testutil.h"
 #include "tools/surveyrun.h"
 
@@ -123,6 +124,22 @@ START_TEST(run_resume_and_independence)
                          bin, plan, d, log), 0);
     ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones), 3 already done"), "damage not redone");
     assert_same_file(img, keep);
+    /* the second section's header of another image no longer parses: cfitsio then sees one
+     * section whose checksums verify, but the file is not whole */
+    snprintf(img, sizeof img, "%s/a/wfisim_e000015_sca03.fits", d);
+    ck_assert_msg(wf_fits_verify_checksums(img, 0) == WF_OK, "%s", wf_error_message());
+    f = fopen(img, "r+b");
+    ck_assert_ptr_nonnull(f);
+    char card[9];
+    ck_assert(fseek(f, 2880, SEEK_SET) == 0);
+    while (fread(card, 1, 9, f) == 9 && memcmp(card, "XTENSION=", 9)) fseek(f, 2880 - 9, SEEK_CUR);
+    ck_assert_msg(!memcmp(card, "XTENSION=", 9), "%s has no second section", img);
+    fseek(f, -9, SEEK_CUR);
+    fputs("XTENSIOM=", f);
+    fclose(f);
+    ck_assert_int_eq(wf_fits_verify_checksums(img, 0), WF_ERR_CORRUPT);
+    ck_assert_msg(strstr(wf_error_message(), "trailing bytes after section 1: damaged or truncated"), "%s",
+                  wf_error_message());
     /* the survey-level record names the plan, its checksum, the seed and the catalogs */
     char man[4200];
     snprintf(man, sizeof man, "%s/a/survey_run.txt", d);
