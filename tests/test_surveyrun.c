@@ -1,6 +1,7 @@
 /* `wfisim survey run` end to end on a one-visit plan and a small SCA: each product carries its
  * plan row's pointing, filter, time and read pattern; a second run skips what verifies and
- * redoes what is damaged, byte for byte; a product does not depend on which others were run. */
+ * redoes what is damaged (data, or a header cfitsio cannot parse), byte for byte; a product
+ * does not depend on which others were run. */
 #include <fitsio.h>
 #include <math.h>
 #include <stdarg.h>
@@ -128,6 +129,9 @@ START_TEST(run_resume_and_independence)
      * section whose checksums verify, but the file is not whole */
     snprintf(img, sizeof img, "%s/a/wfisim_e000015_sca03.fits", d);
     ck_assert_msg(wf_fits_verify_checksums(img, 0) == WF_OK, "%s", wf_error_message());
+    char keep15[4200];
+    snprintf(keep15, sizeof keep15, "%s/keep15.fits", d);
+    ck_assert_int_eq(wf_test_run("cp %s %s", img, keep15), 0);
     f = fopen(img, "r+b");
     ck_assert_ptr_nonnull(f);
     char card[9];
@@ -140,6 +144,14 @@ START_TEST(run_resume_and_independence)
     ck_assert_int_eq(wf_fits_verify_checksums(img, 0), WF_ERR_CORRUPT);
     ck_assert_msg(strstr(wf_error_message(), "trailing bytes after section 1: damaged or truncated"), "%s",
                   wf_error_message());
+    /* ... so the resume redoes it, to the same bytes */
+    ck_assert(!wf_survey_product_ok(img));
+    snprintf(log, sizeof log, "%s/log4", d);
+    ck_assert_int_eq(wf_test_run("%s survey run --plan %s --exposures 15:16 --scas 3,7 " SMALL " --out %s/a 2>%s",
+                         bin, plan, d, log), 0);
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones), 3 already done"),
+                  "damaged header not redone");
+    assert_same_file(img, keep15);
     /* the survey-level record names the plan, its checksum, the seed and the catalogs */
     char man[4200];
     snprintf(man, sizeof man, "%s/a/survey_run.txt", d);

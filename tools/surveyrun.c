@@ -8,6 +8,7 @@
 #include <time.h>
 
 #include "hal/clock.h"
+#include "sim/fitsout.h"
 #include "sim/survey.h"
 #include "tools/pipeline.h"
 
@@ -57,19 +58,8 @@ wf_status wf_survey_parse_scas(const char *text, int *scas, int *n)
 
 int wf_survey_product_ok(const char *path)
 {
-    fitsfile *f;
-    int status = 0, nhdu = 0, ok = 1;
-    if (fits_open_diskfile(&f, path, READONLY, &status)) return 0;
-    fits_get_num_hdus(f, &nhdu, &status);
-    for (int h = 1; h <= nhdu && ok && !status; h++) {
-        int type, dataok = 0, hduok = 0;
-        fits_movabs_hdu(f, h, &type, &status);
-        fits_verify_chksum(f, &dataok, &hduok, &status);
-        ok = !status && dataok == 1 && hduok == 1;
-    }
-    int cs = 0;
-    fits_close_file(f, &cs);
-    return ok && !status && nhdu > 0;
+    /* Whether it is missing, damaged or cut short, a product that is not whole is redone. */
+    return wf_fits_verify_checksums(path, 0) == WF_OK;
 }
 
 /* The rows of the plan with EXPID in [first, last] (last < 0: to the end), in file order. */

@@ -43,7 +43,8 @@ wf_status wf_survey_parse_range(const char *text, long *first, long *last);
 /* Parses "1,2,5-7" into SCA numbers (1..18, no repeats). */
 wf_status wf_survey_parse_scas(const char *text, int *scas, int *n);
 
-/* 1 when every HDU of the FITS file at path has a CHECKSUM and DATASUM that verify. */
+/* 1 when the FITS file at path is whole (wf_fits_verify_checksums: every HDU's CHECKSUM and
+ * DATASUM verify and the HDUs cover the whole file). */
 int wf_survey_product_ok(const char *path);
 
 wf_status wf_survey_run(const wf_config *cfg, const wf_survey_run_options *opt,
