@@ -29,6 +29,13 @@ size_t wf_arena_cost(size_t size)
 
 wf_status wf_arena_alloc(wf_arena *arena, size_t size, const char *what, void **out)
 {
+    wf_status st = wf_arena_reserve(arena, size, what, out);
+    if (!st) memset(*out, 0, size);
+    return st;
+}
+
+wf_status wf_arena_reserve(wf_arena *arena, size_t size, const char *what, void **out)
+{
     *out = NULL;
     size_t need = wf_arena_cost(size);
     if (need < size || need > arena->capacity - arena->used)
@@ -40,7 +47,6 @@ wf_status wf_arena_alloc(wf_arena *arena, size_t size, const char *what, void **
     arena->used += need;
     if (arena->used > arena->high_water)
         arena->high_water = arena->used;
-    memset(p, 0, size);
     *out = p;
     return WF_OK;
 }

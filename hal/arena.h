@@ -22,6 +22,10 @@ wf_status wf_arena_init(wf_arena *arena, void *memory, size_t capacity, const ch
 /* Reserves `size` bytes aligned to 64 (cache line, SIMD), zero-filled, for `what`. */
 wf_status wf_arena_alloc(wf_arena *arena, size_t size, const char *what, void **out);
 
+/* The same, not zero-filled: for buffers whose every read follows a write, so that pages the
+ * run never reaches stay out of resident memory. */
+wf_status wf_arena_reserve(wf_arena *arena, size_t size, const char *what, void **out);
+
 /* Typed convenience: count * elem bytes, with overflow check. */
 wf_status wf_arena_calloc(wf_arena *arena, size_t count, size_t elem, const char *what, void **out);
 

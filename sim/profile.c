@@ -155,15 +155,18 @@ wf_status wf_profile_work_init(wf_profile_work *w, const wf_profile_accuracy *ac
     work_layout l;
     layout(acc, &l);
     size_t m = (size_t)l.max_m, d = sizeof(double);
-    if ((st = wf_arena_calloc(arena, m * (m + 2), d, "profile FFT", (void **)&w->fft)) ||
+    /* The FFT buffer, the knot phase lines and the knot lattice are not zeroed here: each
+     * draw clears or writes what it reads (the lines' padding lanes only feed unused sums),
+     * so pages beyond the largest box drawn are never touched and cost no resident memory. */
+    if ((st = wf_arena_reserve(arena, m * (m + 2) * d, "profile FFT", (void **)&w->fft)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line * 2, d, "profile phases",
                               (void **)&w->ex)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line * 2, d, "profile phases",
                               (void **)&w->ey)) ||
-        (st = wf_arena_calloc(arena, (size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2, d,
-                              "knot phases", (void **)&w->kx)) ||
-        (st = wf_arena_calloc(arena, (size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2, d,
-                              "knot phases", (void **)&w->ky)) ||
+        (st = wf_arena_reserve(arena, (size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2 * d,
+                               "knot phases", (void **)&w->kx)) ||
+        (st = wf_arena_reserve(arena, (size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2 * d,
+                               "knot phases", (void **)&w->ky)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line, sizeof(int), "PSF taps",
                               (void **)&w->ix)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line, sizeof(int), "PSF taps",
@@ -177,7 +180,7 @@ wf_status wf_profile_work_init(wf_profile_work *w, const wf_profile_accuracy *ac
                               (void **)&w->knot_pos)) ||
         (st = wf_arena_calloc(arena, (size_t)WF_PROFILE_MAX_KNOTS * 2, d, "knot positions",
                               (void **)&w->knot_box)) ||
-        (st = wf_arena_calloc(arena, lattice_cap(&l), d, "knot lattice", (void **)&w->lat)) ||
+        (st = wf_arena_reserve(arena, lattice_cap(&l) * d, "knot lattice", (void **)&w->lat)) ||
         (st = wf_arena_calloc(arena, lattice_ring(&l), d, "knot lattice rows",
                               (void **)&w->ring)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line, sizeof(int), "profile rows",

@@ -101,7 +101,7 @@ void wf_scene_setup_default(wf_scene_setup *s)
     s->core_radius = 2.0;
     s->noise_tolerance = 1.0;
     s->exptime = 300.0;
-    s->pool_bytes = (size_t)16 << 20; /* float stamps; split galaxies keep only their core box */
+    s->pool_bytes = (size_t)24 << 20; /* float stamps; split galaxies keep only their core box */
     s->threads = 1;
     s->sky_on = 1;
 }

@@ -50,7 +50,7 @@ typedef struct wf_scene_setup {
                              * WF_SCENE_KVALUE_MAX) and the split PSF's wing; 0: the same
                              * knobs for all [1] */
     double exptime;         /* s, for noise_tolerance [300] */
-    size_t pool_bytes;      /* stamp pool per renderer (float stamps) [16 MiB] */
+    size_t pool_bytes;      /* stamp pool per renderer (float stamps) [24 MiB] */
     int threads;            /* renderers to prepare [1] */
     int sky_on;             /* add the sky [1] */
     double stray_light;     /* zodiacal light x (1 + this) [0.1, SPEC 2 / GalSim] */

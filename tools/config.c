@@ -201,7 +201,7 @@ static const key_desc keys[] = {
      .doc = "Add the sky (zodiacal light, stray light, thermal) to object scenes; false for checks on an empty sky."},
     {.name = "scene.stray_light", .type = KT_DOUBLE, .unit = "", .def = "0.1", MIN(0), MAX(10), FIELD(stray_light),
      .doc = "Stray light as a fraction of the zodiacal light (GalSim's stray_light_fraction)."},
-    {.name = "scene.stamp_pool", .type = KT_DOUBLE, .unit = "MiB", .def = "16", MIN(1), MAX(4096), FIELD(stamp_pool_mib),
+    {.name = "scene.stamp_pool", .type = KT_DOUBLE, .unit = "MiB", .def = "24", MIN(1), MAX(4096), FIELD(stamp_pool_mib),
      .doc = "Stamp pool of each readout thread (float stamps); a stamp that does not fit is drawn in pieces, "
             "row band by row band: never dropped, but redrawn."},
     {.name = "scene.flux_fraction", .type = KT_DOUBLE, .unit = "", .def = "0.995", ABOVE(0.5), MAX(0.99999),
