@@ -108,8 +108,10 @@ if [ -f "$REF/scene_catalog_sca1_pointingA.csv.gz" ] && [ $N = 4088 ]; then
     echo "GalSim 2.8.4 on the same kind of machine (../shared/reference/galsim/README.md): FFT"
     echo "drawing 184 s wall / ≈184 CPU-s, 1.98 GB; photon shooting 16.3 s wall / ≈21 CPU-s,"
     echo "2.32 GB; detector chain alone 1.9 s. wfisim draws in Fourier space (stamps holding"
-    echo "≥ 99.5% of the flux), single-frame detector chain. An empty scene (sky only) shows what"
-    echo "the detector chain and sky cost alone."
+    echo "≥ 99.5% of the flux; faint objects with the knobs their sky noise allows,"
+    echo "\`scene.noise_tolerance\` 1, and the split PSF), single-frame detector chain. \"every"
+    echo "object exact\" sets \`scene.noise_tolerance=0\`. An empty scene (sky only) shows what the"
+    echo "detector chain and sky cost alone."
     echo
     echo "| case | command | wall s | CPU s | peak RSS MiB |"
     echo "|---|---|---|---|---|"
@@ -122,6 +124,11 @@ if [ -f "$REF/scene_catalog_sca1_pointingA.csv.gz" ] && [ $N = 4088 ]; then
     echo "  galsim scene $th: $r" >&2
     rm -rf "$d"
   done
+  d=$(mktemp -d)
+  r=$($B/rss bin/wfisim expose $SC --set scene.kind=galsim --set scene.catalog=$REF/scene_catalog_sca1_pointingA.csv.gz --set scene.noise_tolerance=0 --threads 1 --out "$d" 2>&1 | grep '^rss:')
+  echo "| GalSim scene, every object exact, 1 thread | \`wfisim expose ... --set scene.noise_tolerance=0\` | $(field "$r" wall_s) | $(field "$r" cpu_s) | $(field "$r" peak_rss_MiB) |" >>"$tmp"
+  echo "  galsim scene exact: $r" >&2
+  rm -rf "$d"
   # time against the number of objects: the first N rows of the catalog (galaxies)
   sub=$(mktemp -d)
   for n in 1000 2000 4000 8000; do
@@ -139,13 +146,19 @@ if [ -f "$REF/scene_catalog_sca1_pointingA.csv.gz" ] && [ $N = 4088 ]; then
   rm -rf "$d"
 fi
 if [ -f "$REF/scene_catalog_sca1_pointingA.csv.gz" ]; then
-  prof=$($B/bench_profile 2>&1)
+  pd=$(mktemp -d)
+  exact=$($B/bench_profile --tol 0 --dump "$pd/exact.bin" 2>&1)
+  prof=$($B/bench_profile --compare "$pd/exact.bin" 2>&1)
+  rm -rf "$pd"
   {
     echo
     echo "Drawing alone, per object (\`bench_profile\`: every object of the GalSim scene drawn once, as"
-    echo "the renderer draws it, no detector chain; by stamp side):"
+    echo "the renderer draws it, no detector chain; by stamp side). Every object exact"
+    echo "(\`--tol 0\`), then the defaults compared with it (worst pixel in units of the object's"
+    echo "peak and of one pixel's sky noise over 300 s):"
     echo
     echo '```'
+    echo "$exact"
     echo "$prof"
     echo '```'
   } >>"$tmp"
