@@ -359,18 +359,6 @@ static void row_noise(wf_readout *ro, int y, uint32_t read, wf_purpose purpose, 
     if (z) wf_norm_from_u32(ro->words, (int)nc, z);
 }
 
-/* Full well and nonlinearity: what the read-out would measure from the charge. */
-static void measure(wf_readout *ro, const double *charge, int npix)
-{
-    const wf_detector *d = &ro->cfg.det;
-    for (int i = 0; i < npix; i++) {
-        double q = charge[i];
-        if (d->on.saturation && q > d->full_well) q = d->full_well;
-        if (d->on.nonlinearity) q = wf_det_nonlinearity(q, d->nl_beta);
-        ro->meas[i] = q;
-    }
-}
-
 /* IPC for tile row y (absolute) from the measured halo block that starts at row h0. */
 static const double *ipc_row(wf_readout *ro, int y, int h0, int h1)
 {
@@ -463,7 +451,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
         if (d->on.saturation)
             for (int i = 0; i < hn; i++)
                 if (ro->charge[i] > d->full_well) ro->charge[i] = d->full_well;
-        measure(ro, ro->charge, hn);
+        wf_det_measure_row(d, ro->charge, hn, ro->meas);
         int last_of_resultant = ro->clock.ma.read[ro->clock.ma.first[r + 1] - 1] == k;
         int nreads = ro->clock.ma.first[r + 1] - ro->clock.ma.first[r];
         for (int y = y0; y < y1; y++) {
@@ -600,7 +588,7 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
             if (d->on.saturation && ro->charge[i] > d->full_well) ro->charge[i] = d->full_well;
             if (d->on.saturation && avg[i] > d->full_well) avg[i] = d->full_well;
         }
-        measure(ro, avg, hn);
+        wf_det_measure_row(d, avg, hn, ro->meas); /* in place: avg is ro->meas */
         for (int y = y0; y < y1; y++) {
             const double *v = ipc_row(ro, y, h0, h1);
             const double *q = ro->charge + (size_t)(y - h0) * nc;

@@ -3,14 +3,7 @@
 
 #include <math.h>
 
-/* Positive half of the 16-point Gauss–Legendre rule (nodes, weights), from
- * numpy.polynomial.legendre.leggauss(16) printed to 17 digits. */
-static const double gl16[8][2] = {
-    {0.095012509837637454, 0.18945061045506859}, {0.28160355077925892, 0.18260341504492361},
-    {0.45801677765722737, 0.16915651939500262},  {0.61787624440264377, 0.14959598881657676},
-    {0.755404408355003, 0.12462897125553403},    {0.86563120238783176, 0.095158511682492591},
-    {0.9445750230732326, 0.062253523938647706},  {0.98940093499164994, 0.027152459411754037},
-};
+#include "sim/quadrature.h"
 
 /* Widest panel in u = (1+z)^(-1/2); see the header for why 0.1 is enough. */
 #define PANEL_U 0.1
@@ -18,17 +11,7 @@ static const double gl16[8][2] = {
 double wf_cosmo_gauss_legendre(double (*f)(double x, void *ctx), void *ctx, double a, double b,
                                int panels)
 {
-    if (panels < 1) panels = 1;
-    double w = (b - a) / panels, sum = 0.0;
-    for (int p = 0; p < panels; p++) {
-        /* the last panel ends exactly at b, so no rounding drift reaches the end point */
-        double lo = a + p * w, hi = p == panels - 1 ? b : a + (p + 1) * w;
-        double mid = 0.5 * (lo + hi), half = 0.5 * (hi - lo), s = 0.0;
-        for (int k = 0; k < 8; k++)
-            s += gl16[k][1] * (f(mid - half * gl16[k][0], ctx) + f(mid + half * gl16[k][0], ctx));
-        sum += half * s;
-    }
-    return sum;
+    return wf_quad_gl(&wf_quad_gl16, f, ctx, a, b, panels);
 }
 
 static wf_status check_z(const wf_cosmo *c, double z, const char *what)
@@ -90,7 +73,7 @@ static double dc_over_dh(const wf_cosmo *c, double z)
     /* 1 - 1/s written without cancellation so tiny z keeps its relative accuracy */
     double width = z / (s * (s + 1.0));
     int panels = (int)ceil(width / PANEL_U);
-    return wf_cosmo_gauss_legendre(dv_integrand, (void *)c, -width, 0.0, panels);
+    return wf_quad_gl(&wf_quad_gl16, dv_integrand, (void *)c, -width, 0.0, panels);
 }
 
 wf_status wf_cosmo_comoving_distance(const wf_cosmo *c, double z, double *mpc)

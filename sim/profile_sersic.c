@@ -21,9 +21,9 @@
 
 #include "sim/profile.h"
 #include "sim/profile_int.h"
+#include "sim/quadrature.h"
 
 #define SERSIC_N 4
-#define NGL 14
 #define WYNN_TERMS 30
 #define S_MAX 60.0 /* e^-60 60^7 / 7! < 1e-17 */
 #define SERIES_TERMS 600
@@ -64,37 +64,16 @@ double wf_sersic_b(int n)
 
 /* ---------------------------------------------------------------- quadrature (small q) */
 
-static double gl_x[NGL], gl_w[NGL];
-
-static void gauss_legendre_nodes(void)
-{
-    for (int i = 0; i < NGL; i++) {
-        double x = cos(M_PI * (i + 0.75) / (NGL + 0.5)), dp = 1.0;
-        for (int it = 0; it < 100; it++) {
-            double p0 = 1.0, p1 = x;
-            for (int k = 2; k <= NGL; k++) {
-                double p2 = ((2 * k - 1) * x * p1 - (k - 1) * p0) / k;
-                p0 = p1;
-                p1 = p2;
-            }
-            dp = NGL * (x * p1 - p0) / (x * x - 1.0);
-            double dx = p1 / dp;
-            x -= dx;
-            if (fabs(dx) < 1e-16) break;
-        }
-        gl_x[i] = x;
-        gl_w[i] = 2.0 / ((1.0 - x * x) * dp * dp);
-    }
-}
-
 static double quad_piece(double a, double b, double q, double bn)
 {
+    const wf_quad_rule *gl = &wf_quad_gl14;
     double mid = 0.5 * (a + b), half = 0.5 * (b - a), sum = 0.0;
-    for (int i = 0; i < NGL; i++) {
-        double s = mid + half * gl_x[i];
+    /* top node first, the order this sum has always taken: the table keeps its bits */
+    for (int i = gl->n - 1; i >= 0; i--) {
+        double s = mid + half * gl->x[i];
         double u = s / bn;
         u *= u;
-        sum += gl_w[i] * exp(-s + 7.0 * log(s)) * j0(q * u * u);
+        sum += gl->w[i] * exp(-s + 7.0 * log(s)) * j0(q * u * u);
     }
     return sum * half;
 }
@@ -219,7 +198,6 @@ static double hankel_value(double q, double bn)
 static void table_build(void)
 {
     wf_sersic_table *t = &g_table;
-    gauss_legendre_nodes();
     t->b = wf_sersic_b(SERSIC_N);
     t->b1 = wf_sersic_b(1);
     t->dev_norm = pow(t->b, 8.0) / (8.0 * M_PI * 5040.0);

@@ -9,6 +9,8 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "sim/quadrature.h"
+
 #define H_CGS 6.62607015e-27 /* erg s, as sim/bandpass.c */
 #define C_CGS 2.99792458e10  /* cm / s */
 #define SALT_SCALE 1e-12     /* x0 normalisation of the template values (SNANA X0SCALE) */
@@ -644,12 +646,6 @@ wf_status wf_salt_bandmag(const wf_salt_model *m, const wf_salt_params *p,
 
 /* ------------------------------------------------------------------ fast light curve */
 
-/* Gauss–Legendre, 3 points on [-1, 1]: exact for the degree-5 polynomial T·λ·M that the
- * integrand is on every piece (T and λ linear, M cubic), leaving only the smooth colour
- * factor's variation over ≤ 5 nm. */
-static const double gl_x[3] = {-0.7745966692414834, 0.0, 0.7745966692414834};
-static const double gl_w[3] = {0.5555555555555556, 0.8888888888888888, 0.5555555555555556};
-
 /* Adds weight wq, carried by rest wavelength lr, to the template nodes that interpolate it:
  * to core (cubic rule) or edge (bilinear edge intervals), and to lin (linear scheme). */
 static void spread(const wf_salt_model *m, double lr, double wq, double *core, double *edge,
@@ -721,11 +717,15 @@ wf_status wf_salt_lc_init(const wf_salt_model *m, const wf_salt_params *p,
             if (j < nw && m->wave[j] * zp1 / 10.0 < xb) next = m->wave[j] * zp1 / 10.0;
             if (ta != 0.0 || tb != 0.0) {
                 double half = 0.5 * (next - x), mid = 0.5 * (next + x);
-                for (int q = 0; q < 3; q++) {
-                    double lam = mid + half * gl_x[q];
+                /* 3 points are exact for the degree-5 polynomial T·λ·M that the integrand is
+                 * on every piece (T and λ linear, M cubic), leaving only the smooth colour
+                 * factor's variation over ≤ 5 nm */
+                const wf_quad_rule *gl = &wf_quad_gl3;
+                for (int q = 0; q < gl->n; q++) {
+                    double lam = mid + half * gl->x[q];
                     double t = ta + (tb - ta) * (lam - xa) / (xb - xa);
                     double lr = 10.0 * lam / zp1;
-                    double wq = gl_w[q] * half * t * lam * color_factor(m, p->c, lr);
+                    double wq = gl->w[q] * half * t * lam * color_factor(m, p->c, lr);
                     spread(m, lr, wq, wcore, wedge, wlin, &jmin, &jmax);
                 }
             }

@@ -1,7 +1,7 @@
 /* `wfisim sn generate | lightcurves | lightcurve` as users run them: the count against the rate
  * law, positions inside the footprint, hosts within the redshift tolerance and inside their
- * 99% light ellipse, reproducibility by seed, light curves consistent between the commands,
- * and bad input named. */
+ * 99% light ellipse, reproducibility by seed (all 64 bits of it), light curves consistent
+ * between the commands, and bad input named. */
 #include <fitsio.h>
 #include <math.h>
 #include <stdarg.h>
@@ -321,6 +321,72 @@ START_TEST(configuration_keys)
 }
 END_TEST
 
+/* The sample drawn with a seed: its redshifts and peak dates (the header's SEED card would
+ * tell two files apart even when the draws were the same). */
+static int same_draws(const char *a, const char *b)
+{
+    wf_sn_sample x, y;
+    ck_assert_int_eq(wf_sn_sample_read(a, &x), 0);
+    ck_assert_int_eq(wf_sn_sample_read(b, &y), 0);
+    ck_assert(x.n > 3 && y.n > 3);
+    int same = x.n == y.n && !memcmp(x.z, y.z, x.n * sizeof *x.z) && !memcmp(x.t0, y.t0, x.n * sizeof *x.t0);
+    wf_sn_sample_free(&x);
+    wf_sn_sample_free(&y);
+    return same;
+}
+
+static unsigned long long header_seed(const char *path)
+{
+    fitsfile *f;
+    int status = 0;
+    unsigned long long v = 0;
+    fits_open_file(&f, path, READONLY, &status);
+    fits_read_key(f, TULONGLONG, "SEED", &v, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_msg(status == 0, "%s: no SEED", path);
+    return v;
+}
+
+/* --seed takes all 64 bits: 2^53 and 2^53 + 1 are one double, but two samples; the largest
+ * seed is kept exactly in the header; anything else is refused, naming the option. The
+ * configuration's seed (--set seed=) reaches the draws unrounded too. */
+START_TEST(seed_takes_64_bits)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the SALT model data");
+    const char *d = wf_test_tmpdir();
+    const char *common = "--area 0.05 --start 61420 --days 60 --hostless";
+    static const char *const seeds[] = {"9007199254740992", "9007199254740993", "18446744073709551615"};
+    char path[4][4200], log[4200];
+    for (int k = 0; k < 3; k++) {
+        snprintf(path[k], sizeof path[k], "%s/s%d.fits", d, k);
+        ck_assert_int_eq(wf_test_run("%s sn generate --data %s %s --seed %s --out %s >/dev/null", bin, data, common,
+                                     seeds[k], path[k]), 0);
+        ck_assert_msg(header_seed(path[k]) == strtoull(seeds[k], NULL, 10), "SEED %llu, asked for %s",
+                      header_seed(path[k]), seeds[k]);
+    }
+    ck_assert_msg(!same_draws(path[0], path[1]), "seeds 2^53 and 2^53 + 1 drew the same sample");
+    snprintf(path[3], sizeof path[3], "%s/s3.fits", d);
+    ck_assert_int_eq(wf_test_run("%s sn generate --data %s %s --set seed=9007199254740993 --out %s >/dev/null", bin,
+                                 data, common, path[3]), 0);
+    ck_assert_msg(same_draws(path[1], path[3]), "--set seed=2^53+1 and --seed 2^53+1 differ");
+
+    snprintf(log, sizeof log, "%s/log", d);
+    static const struct { const char *arg, *why; } bad[] = {
+        {"18446744073709551616", "out of range"}, {"-1", "non-negative integer"},
+        {"1e3", "non-negative integer"},          {"12x", "non-negative integer"},
+        {"' 5'", "non-negative integer"},         {"''", "non-negative integer"},
+    };
+    for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+        ck_assert_int_eq(wf_test_run("%s sn generate --data %s %s --seed %s --out %s/x.fits >/dev/null 2>%s", bin, data,
+                                     common, bad[k].arg, d, log), 2);
+        ck_assert_msg(wf_test_file_contains(log, "--seed") && wf_test_file_contains(log, bad[k].why),
+                      "--seed %s: the message does not say '--seed ... %s'", bad[k].arg, bad[k].why);
+    }
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("sncmd");
@@ -333,6 +399,7 @@ static Suite *suite(void)
     tcase_add_test(tc, lightcurve_command);
     tcase_add_test(tc, extreme_parameters);
     tcase_add_test(tc, configuration_keys);
+    tcase_add_test(tc, seed_takes_64_bits);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -1,6 +1,10 @@
 #include "tools/sncmd.h"
 
+#include <ctype.h>
+#include <errno.h>
 #include <fitsio.h>
+#include <inttypes.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -75,8 +79,9 @@ typedef struct opts {
     const char *plan, *out, *catalog, *model, *data, *sne, *grid, *filters, *plot, *plot_dir;
     const char *band, *mjd, *interp, *dztol;
     const char *rate[MAX_RATE_LINES];
-    int nrate, hostless, window;
-    double area, start, days, ra, dec, seed;
+    int nrate, hostless, window, have_seed;
+    uint64_t seed;
+    double area, start, days, ra, dec;
     double h0, om, alpha, beta, sigma_int, dz, zmin, zmax;
     double z, t0, x1, c, x0, mu;
     char model_buf[WF_PATH_MAX + 32];
@@ -100,11 +105,33 @@ static int number(const char *flag, const char *text, double *out)
     return 0;
 }
 
+/* A seed takes all 64 bits: through a double, seeds above 2^53 would fall onto their
+ * neighbours and silently give their samples. */
+_Static_assert(ULLONG_MAX == UINT64_MAX, "strtoull covers exactly the seeds");
+static int seed_number(const char *flag, const char *text, uint64_t *out)
+{
+    char *end = NULL;
+    unsigned long long v = 0;
+    errno = 0;
+    /* strtoull would skip blanks and wrap a minus sign around: digits only */
+    if (isdigit((unsigned char)text[text[0] == '+'])) v = strtoull(text, &end, 10);
+    if (!end || *end) {
+        fprintf(stderr, "wfisim sn: %s '%s' is not a non-negative integer\n", flag, text);
+        return 2;
+    }
+    if (errno == ERANGE) {
+        fprintf(stderr, "wfisim sn: %s '%s' is out of range (0 to 2^64-1)\n", flag, text);
+        return 2;
+    }
+    *out = v;
+    return 0;
+}
+
 static int parse(int argc, char **argv, opts *o)
 {
     memset(o, 0, sizeof *o);
     o->area = o->start = o->days = o->x0 = o->mu = o->z = o->t0 = NAN;
-    o->ra = 71.0, o->dec = -53.0, o->seed = NAN;
+    o->ra = 71.0, o->dec = -53.0;
     o->h0 = o->om = o->fmax = NAN;
     o->alpha = o->beta = o->sigma_int = o->dz = o->zmin = o->zmax = NAN;
     wf_config_defaults(&sn_cfg);
@@ -125,7 +152,7 @@ static int parse(int argc, char **argv, opts *o)
     static const struct { const char *flag; size_t off; } nums[] = {
         {"--area", offsetof(opts, area)},   {"--start", offsetof(opts, start)},
         {"--days", offsetof(opts, days)},   {"--ra", offsetof(opts, ra)},
-        {"--dec", offsetof(opts, dec)},     {"--seed", offsetof(opts, seed)},
+        {"--dec", offsetof(opts, dec)},
         {"--h0", offsetof(opts, h0)},       {"--om", offsetof(opts, om)},
         {"--alpha", offsetof(opts, alpha)}, {"--beta", offsetof(opts, beta)},
         {"--sigma-int", offsetof(opts, sigma_int)}, {"--dz", offsetof(opts, dz)},
@@ -160,6 +187,11 @@ static int parse(int argc, char **argv, opts *o)
                 if (number(a, val, (double *)((char *)o + nums[k].off))) return 2;
                 done = 1;
             }
+        if (!done && !strcmp(a, "--seed")) {
+            if (!val) return usage_error("%s needs a value", a);
+            if (seed_number(a, val, &o->seed)) return 2;
+            o->have_seed = done = 1;
+        }
         if (!done && !strcmp(a, "--rate")) {
             if (!val) return usage_error("%s needs 'A B zmin zmax'", a);
             if (o->nrate == MAX_RATE_LINES) return usage_error("at most 8 %s pieces", a);
@@ -176,7 +208,7 @@ static int parse(int argc, char **argv, opts *o)
     const wf_config *c = &sn_cfg;
     /* the configuration's seed by default: the synthetic host field is then the one
      * `survey run` draws with the same configuration */
-    if (isnan(o->seed)) o->seed = (double)c->seed;
+    if (!o->have_seed) o->seed = c->seed;
     if (!o->data) o->data = c->data_dir;
     if (!o->model && c->sn.model[0]) o->model = c->sn.model;
     if (isnan(o->h0)) o->h0 = c->sn.h0;
@@ -384,7 +416,7 @@ static wf_status load_hosts(const opts *o, const footprint *fp, wf_catalog *gal)
         wf_synth_config sc;
         wf_synth *syn;
         wf_synth_defaults(&sc);
-        sc.seed = (uint64_t)o->seed;
+        sc.seed = o->seed;
         if ((st = wf_synth_create(&sc, &syn))) return st;
         wf_skyregion reg;
         double r = fp->circle ? fp->radius : 0.5 * hypot(fp->nx * fabs(fp->cd11), fp->ny * fabs(fp->cd22));
@@ -412,7 +444,6 @@ static int cmd_generate(int argc, char **argv)
     if (!o.out) return usage_error("%s is required", "--out FILE");
     if (!o.plan && !(isfinite(o.area) && isfinite(o.start) && isfinite(o.days)))
         return usage_error("%s", "give --plan plan.fits, or --area DEG2 --start MJD --days N");
-    if (o.seed < 0 || o.seed != floor(o.seed)) return usage_error("%s must be a non-negative integer", "--seed");
     wf_status st;
     wf_cosmo cosmo;
     wf_snrate law;
@@ -467,7 +498,7 @@ static int cmd_generate(int argc, char **argv)
     memset(&out, 0, sizeof out);
     uint32_t count = 0;
     long nhostless = 0;
-    st = wf_snrate_gen_init(&gen, &law, &cosmo, &sv, (uint64_t)o.seed);
+    st = wf_snrate_gen_init(&gen, &law, &cosmo, &sv, o.seed);
     if (st) goto done;
     if (!o.hostless) {
         if ((st = load_hosts(&o, &fp, &hosts))) goto done;
@@ -482,7 +513,7 @@ static int cmd_generate(int argc, char **argv)
             (st = wf_cosmo_distance_modulus(&cosmo, z, &mu)))
             break;
         wf_rng rng;
-        wf_sn_rng((uint64_t)o.seed, i, WF_SN_DRAW_POP, &rng);
+        wf_sn_rng(o.seed, i, WF_SN_DRAW_POP, &rng);
         wf_sn_params sp;
         if ((st = wf_snpop_draw(&pop, &rng, mu, &sp))) break;
         out.id[r] = (int64_t)i + 1;
@@ -490,10 +521,10 @@ static int cmd_generate(int argc, char **argv)
         out.x0[r] = sp.x0, out.x1[r] = sp.x1, out.c[r] = sp.c, out.delta[r] = sp.delta;
         long row = -1, ncand = 0;
         if (hix) {
-            wf_sn_rng((uint64_t)o.seed, i, WF_SN_DRAW_HOST, &rng);
+            wf_sn_rng(o.seed, i, WF_SN_DRAW_HOST, &rng);
             if ((st = wf_snhost_choose(hix, z, wf_rng_uniform53(&rng), &row, &ncand))) break;
         }
-        wf_sn_rng((uint64_t)o.seed, i, WF_SN_DRAW_POS, &rng);
+        wf_sn_rng(o.seed, i, WF_SN_DRAW_POS, &rng);
         if (row >= 0) {
             wf_snhost_position pos;
             if ((st = wf_snhost_place(&hosts, (size_t)row, &rng, &hc, &pos))) break;
@@ -515,7 +546,7 @@ static int cmd_generate(int argc, char **argv)
         base = base && base[1] ? base + 1 : o.model;
         snprintf(out.model, sizeof out.model, "%s", base);
         int n = snprintf(out.cards, sizeof out.cards,
-                         "SEED = %.0f / generation seed\n"
+                         "SEED = %" PRIu64 " / generation seed\n"
                          "H0 = %.6g / [km/s/Mpc] flat LCDM\n"
                          "OMEGAM = %.6g / matter density\n"
                          "ALPHA = %.6g / stretch standardisation\n"
