@@ -8,12 +8,6 @@
 /* Widest panel in u = (1+z)^(-1/2); see the header for why 0.1 is enough. */
 #define PANEL_U 0.1
 
-double wf_cosmo_gauss_legendre(double (*f)(double x, void *ctx), void *ctx, double a, double b,
-                               int panels)
-{
-    return wf_quad_gl(&wf_quad_gl16, f, ctx, a, b, panels);
-}
-
 static wf_status check_z(const wf_cosmo *c, double z, const char *what)
 {
     if (!c) return wf_error(WF_ERR_INPUT, "cosmology: %s: no cosmology given", what);

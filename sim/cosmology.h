@@ -58,9 +58,5 @@ wf_status wf_cosmo_distance_modulus(const wf_cosmo *c, double z, double *mu);
 /* Comoving volume element dV/dz/dΩ = (c/H0) D_C² / E(z), Mpc³ sr⁻¹. */
 wf_status wf_cosmo_dvdz(const wf_cosmo *c, double z, double *mpc3_per_sr);
 
-/* wf_quad_gl(&wf_quad_gl16, ...) (sim/quadrature.h): the rule the distances use, under the
- * name sim/snrate.c calls it by. */
-double wf_cosmo_gauss_legendre(double (*f)(double x, void *ctx), void *ctx, double a, double b,
-                               int panels);
 
 #endif

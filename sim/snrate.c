@@ -1,5 +1,6 @@
 /* SN Ia rates, counts, redshifts and peak dates: see sim/snrate.h and docs/SN_POPULATION.md. */
 #include "sim/snrate.h"
+#include "sim/quadrature.h"
 
 #include <errno.h>
 #include <math.h>
@@ -264,7 +265,7 @@ wf_status wf_snrate_integral(const wf_snrate *r, const wf_cosmo *c, double zmin,
     for (int s = 0; s < ns; s++) {
         if (which[s] < 0) continue;
         seg_ctx ctx = {c, &r->p[which[s]]};
-        sum += wf_cosmo_gauss_legendre(seg_density, &ctx, edge[s], edge[s + 1],
+        sum += wf_quad_gl(&wf_quad_gl16, seg_density, &ctx, edge[s], edge[s + 1],
                                        intervals_in(edge[s], edge[s + 1], which[s]));
     }
     *per_sr_yr = sum;
@@ -331,7 +332,7 @@ wf_status wf_snrate_table_build(const wf_snrate *r, const wf_cosmo *c, double zm
             t->z[k + 1] = z1;
             t->dl[k] = seg_density(z0, &ctx);
             t->dr[k] = seg_density(z1, &ctx);
-            t->g[k + 1] = t->g[k] + (ctx.pc ? wf_cosmo_gauss_legendre(seg_density, &ctx, z0, z1, 1)
+            t->g[k + 1] = t->g[k] + (ctx.pc ? wf_quad_gl(&wf_quad_gl16, seg_density, &ctx, z0, z1, 1)
                                             : 0.0);
         }
     }
