@@ -2,6 +2,7 @@
 
 #include <fitsio.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdint.h>
 #include <sys/mman.h>
 #include <unistd.h>
@@ -35,6 +36,11 @@ typedef struct object {
                                   * (noise_tolerance) */
 } object;
 
+typedef struct object_plan {
+    wf_stamp bounds, box; /* stamp bounds; the part kept in the pool */
+    int split;            /* a galaxy drawn with the split PSF (box only, wing per row) */
+} object_plan;
+
 typedef struct thread_state {
     wf_scene *scene;
     void *memory;
@@ -48,6 +54,7 @@ typedef struct thread_state {
 
 struct wf_scene {
     wf_scene_setup setup;
+    object_plan *plans;      /* while building: per object */
     wf_filter filter;
     wf_focal_plane fp;
     wf_wcs wcs;
@@ -389,6 +396,66 @@ static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const 
     return WF_OK;
 }
 
+/* Planning of objects [first, end) with thread t's drawing work (see wf_scene_create). */
+typedef struct plan_job {
+    wf_scene *s;
+    int t;
+    size_t first, end;
+    wf_status st;
+    size_t failed; /* the object whose planning failed */
+    char message[512];
+} plan_job;
+
+static void *plan_range(void *arg)
+{
+    plan_job *j = arg;
+    wf_scene *s = j->s;
+    wf_profile_work *w = &s->ts[j->t].work;
+    for (size_t i = j->first; i < j->end; i++) {
+        const object *o = &s->obj[i];
+        object_plan *pl = &s->plans[i];
+        if (o->kind == OBJ_SN && !(o->flux > 0)) continue;
+        wf_status st = o->kind == OBJ_GALAXY
+                           ? wf_profile_galaxy_bounds(w, &o->g, &s->ppsf, o->x, o->y, &pl->bounds, NULL)
+                           : wf_profile_point_bounds(w, o->wide ? &s->ppsf_wide : &s->ppsf, o->x, o->y, &pl->bounds,
+                                                     NULL);
+        pl->box = pl->bounds;
+        if (!st && o->kind == OBJ_GALAXY) /* a split galaxy keeps only its Fourier box in the pool */
+            st = wf_profile_work_tune(w, s->acc.flux_fraction, o->fold, o->kval, o->wing_tol);
+        if (!st && o->kind == OBJ_GALAXY)
+            st = wf_profile_galaxy_core(w, &o->g, &s->ppsf, o->x, o->y, &pl->bounds, &pl->box, &pl->split);
+        if (st) {
+            j->st = st;
+            j->failed = i;
+            snprintf(j->message, sizeof j->message, "%s", wf_error_message());
+            return NULL;
+        }
+    }
+    return NULL;
+}
+
+static wf_status plan_objects(wf_scene *s)
+{
+    int T = s->setup.threads;
+    plan_job jobs[64];
+    if (T > 64) T = 64;
+    pthread_t th[64];
+    int started = 0;
+    for (int t = 0; t < T; t++)
+        jobs[t] = (plan_job){s, t, s->nobj * (size_t)t / (size_t)T, s->nobj * (size_t)(t + 1) / (size_t)T,
+                             WF_OK, 0, ""};
+    for (int t = 1; t < T; t++) {
+        if (pthread_create(&th[t], NULL, plan_range, &jobs[t]) != 0) break;
+        started = t;
+    }
+    for (int t = started + 1; t < T; t++) plan_range(&jobs[t]); /* threads that did not start */
+    plan_range(&jobs[0]);
+    for (int t = 1; t <= started; t++) pthread_join(th[t], NULL);
+    for (int t = 0; t < T; t++) /* the first failure in object order, whatever the threads */
+        if (jobs[t].st) return wf_error(jobs[t].st, "%s", jobs[t].message);
+    return WF_OK;
+}
+
 wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
                           const wf_catalog *stars, wf_scene **out)
 {
@@ -545,30 +612,27 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
         if ((st = wf_profile_work_init(&ts->work, &s->acc, &ts->arena))) goto bad;
         ts->work_ready = 1;
     }
+    /* Each object's stamp bounds and, for a galaxy, whether it takes the split PSF and its
+     * box: independent per object, so planned by the threads in parallel (each with its own
+     * drawing work), then gathered in order. */
+    if (!(s->plans = calloc(s->nobj ? s->nobj : 1, sizeof *s->plans))) {
+        st = wf_error(WF_ERR_NOMEM, "scene: out of memory");
+        goto bad;
+    }
+    if ((st = plan_objects(s))) goto bad;
     long kept = 0;
     for (size_t i = 0; i < s->nobj; i++) {
         object *o = &s->obj[i];
         if (o->kind == OBJ_SN && !(o->flux > 0)) continue; /* nothing to draw; truth only */
-        wf_stamp b;
-        st = o->kind == OBJ_GALAXY ? wf_profile_galaxy_bounds(&s->ts[0].work, &o->g, &s->ppsf, o->x, o->y, &b, NULL)
-                                   : wf_profile_point_bounds(&s->ts[0].work, o->wide ? &s->ppsf_wide : &s->ppsf,
-                                                             o->x, o->y, &b, NULL);
-        if (st) goto bad;
+        const object_plan *pl = &s->plans[i];
+        const wf_stamp b = pl->bounds, box = pl->box;
         uint64_t id = (uint64_t)object_id(s, o);
         double rel = o->kind == OBJ_SN ? setup->sne[o->row].dlnf_dt : 0.0;
         if (!isfinite(rel)) {
             st = wf_error(WF_ERR_RANGE, "scene: supernova %lld: flux slope is not finite", object_id(s, o));
             goto bad;
         }
-        /* a galaxy drawn with the split PSF keeps only its Fourier box in the pool */
-        wf_stamp box = b;
-        int split = 0;
-        if (o->kind == OBJ_GALAXY) {
-            if ((st = wf_profile_work_tune(&s->ts[0].work, s->acc.flux_fraction, o->fold, o->kval, o->wing_tol)) ||
-                (st = wf_profile_galaxy_core(&s->ts[0].work, &o->g, &s->ppsf, o->x, o->y, &b, &box, &split)))
-                goto bad;
-        }
-        s->robj[kept++] = (wf_render_object){id * 4u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o, rel, split,
+        s->robj[kept++] = (wf_render_object){id * 4u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o, rel, pl->split,
                                              box.x0, box.y0, box.nx, box.ny};
         if (rel != 0.0) s->time_variable = 1;
         if (b.x0 < setup->ncols && b.x0 + b.nx > 0 && b.y0 < setup->nrows && b.y0 + b.ny > 0) {
@@ -577,6 +641,8 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
             else s->stats.sne++;
         }
     }
+    free(s->plans);
+    s->plans = NULL;
     wf_renderer_config rc = {setup->ncols, setup->nrows, 0.0, sky_row, s, setup->pool_bytes, 0, halo_row};
     s->nrobj = (size_t)kept;
     for (int t = 0; t < setup->threads; t++)
@@ -603,6 +669,7 @@ void wf_scene_destroy(wf_scene *s)
         }
     free(s->ts);
     free(s->robj);
+    free(s->plans);
     free(s->obj);
     free(s->psf_memory);
     free(s->psf_pix);
