@@ -109,7 +109,7 @@ static const key_desc keys[] = {
      .doc = "MultiAccum table: built-in Rev F `4`, `6`, `11`, or a table file (path from the "
             "working directory)."},
     {.name = "readout.compress", .type = KT_BOOL, .unit = "", .def = "true",
-     FIELD(ro.compress), .doc = "Deflate packet payloads on the link."},
+     FIELD(ro.compress), .doc = "Deflate packet payloads of a written stream (--stream); the in-process link of expose, demo and survey run is never deflated (the FITS is the same either way)."},
 
     {.name = "run.threads", .type = KT_INT, .unit = "", .def = "1", MIN(1), MAX(1024),
      FIELD(threads), .doc = "Readout instances run in parallel; products do not depend on it."},
