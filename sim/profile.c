@@ -510,7 +510,8 @@ static void cubic_taps(double t, int kr, int *first, double *wgt)
     wgt[3] = 0.5 * (f3 - f2);
 }
 
-static int floor_div(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+static long floor_div_l(long a, long b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+static int floor_div(int a, int b) { return (int)floor_div_l(a, b); }
 
 /* run[i] += sum_j c_j x_j[i] for i < n, complex, split into real and imaginary arrays; knot
  * j's phase line is x_j = kx + 2 j ks (real parts, then ks further the imaginary ones).
@@ -1470,8 +1471,6 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
     }
 }
 
-static long div_floor_l(long a, long b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
-
 /* stamp += flux x wing at (x, y): bilinear between the table's 1 / wing_os pixel samples.
  * The fractional position is the same for every pixel, so each row reads four contiguous
  * runs of the phase planes. */
@@ -1484,10 +1483,10 @@ static void add_wing(const wf_profile_psf *psf, double flux, double x, double y,
     double sx = K * (h - x), sy = K * (h - y);
     double fx0 = floor(sx), fy0 = floor(sy), fx = sx - fx0, fy = sy - fy0;
     long ax = (long)fx0, ay = (long)fy0;
-    int a0 = (int)(ax - div_floor_l(ax, K) * K), a1 = (int)(ax + 1 - div_floor_l(ax + 1, K) * K);
-    int b0 = (int)(ay - div_floor_l(ay, K) * K), b1 = (int)(ay + 1 - div_floor_l(ay + 1, K) * K);
-    long ox0 = div_floor_l(ax, K), ox1 = div_floor_l(ax + 1, K);
-    long oy0 = div_floor_l(ay, K), oy1 = div_floor_l(ay + 1, K);
+    int a0 = (int)(ax - floor_div_l(ax, K) * K), a1 = (int)(ax + 1 - floor_div_l(ax + 1, K) * K);
+    int b0 = (int)(ay - floor_div_l(ay, K) * K), b1 = (int)(ay + 1 - floor_div_l(ay + 1, K) * K);
+    long ox0 = floor_div_l(ax, K), ox1 = floor_div_l(ax + 1, K);
+    long oy0 = floor_div_l(ay, K), oy1 = floor_div_l(ay + 1, K);
     const double w00 = flux * (1.0 - fy) * (1.0 - fx), w01 = flux * (1.0 - fy) * fx;
     const double w10 = flux * fy * (1.0 - fx), w11 = flux * fy * fx;
     long i0 = (long)stamp->x0 > -ox0 ? (long)stamp->x0 : -ox0;
@@ -1497,13 +1496,14 @@ static void add_wing(const wf_profile_psf *psf, double flux, double x, double y,
     for (int yy = 0; yy < stamp->ny; yy++) {
         long j = (long)stamp->y0 + yy, ny0 = j + oy0, ny1 = j + oy1;
         if (ny0 < 0 || ny1 > np - 1) continue;
-        const float *r00 = psf->wing + (size_t)(b0 * K + a0) * plane + (size_t)ny0 * np + ox0;
-        const float *r01 = psf->wing + (size_t)(b0 * K + a1) * plane + (size_t)ny0 * np + ox1;
-        const float *r10 = psf->wing + (size_t)(b1 * K + a0) * plane + (size_t)ny1 * np + ox0;
-        const float *r11 = psf->wing + (size_t)(b1 * K + a1) * plane + (size_t)ny1 * np + ox1;
-        double *dst = stamp->pix + (size_t)yy * stamp->nx - stamp->x0;
-        for (long i = i0; i <= i1; i++)
-            dst[i] += w00 * r00[i] + w01 * r01[i] + w10 * r10[i] + w11 * r11[i];
+        /* rows of the four phase planes from the column of pixel i0 on */
+        const float *r00 = psf->wing + (size_t)(b0 * K + a0) * plane + (size_t)ny0 * np + (size_t)(i0 + ox0);
+        const float *r01 = psf->wing + (size_t)(b0 * K + a1) * plane + (size_t)ny0 * np + (size_t)(i0 + ox1);
+        const float *r10 = psf->wing + (size_t)(b1 * K + a0) * plane + (size_t)ny1 * np + (size_t)(i0 + ox0);
+        const float *r11 = psf->wing + (size_t)(b1 * K + a1) * plane + (size_t)ny1 * np + (size_t)(i0 + ox1);
+        double *dst = stamp->pix + (size_t)yy * stamp->nx + (size_t)(i0 - stamp->x0);
+        for (long k = 0; k <= i1 - i0; k++)
+            dst[k] += w00 * r00[k] + w01 * r01[k] + w10 * r10[k] + w11 * r11[k];
     }
 }
 
@@ -1542,7 +1542,7 @@ static double smooth_density(const job *jb, const wf_sersic_table *t, double x, 
  * interpolated bilinearly, and subtracted. The lattice belongs to the box, not to the
  * stamp asked for, so pieces of a stamp get the same pixels. */
 static wf_status dewrap(const wf_profile_work *w, const job *jb, const grid *gd, double x,
-                        double y, wf_stamp *stamp)
+                        double y, wf_stamp *stamp, int box_only)
 {
     const wf_sersic_table *t = w->sersic;
     const double p = w->acc.pixel_scale, period = gd->m * p;
@@ -1572,12 +1572,15 @@ static wf_status dewrap(const wf_profile_work *w, const job *jb, const grid *gd,
             node[b * (DEWRAP_NODES + 1) + a] = wsum * p * p;
         }
     for (int yy = 0; yy < stamp->ny; yy++) {
+        /* with a split PSF the stamp reaches beyond the box, where nothing wrapped in */
+        if (box_only && (stamp->y0 + yy < by || stamp->y0 + yy >= by + gd->m)) continue;
         double fy = (stamp->y0 + yy - by) / h;
         int b = (int)floor(fy);
         if (b < b0) b = b0;
         if (b > b1 - 1) b = b1 - 1 >= b0 ? b1 - 1 : b0;
         double ty = fy - b;
         for (int xx = 0; xx < stamp->nx; xx++) {
+            if (box_only && (stamp->x0 + xx < bx || stamp->x0 + xx >= bx + gd->m)) continue;
             double fx = (stamp->x0 + xx - bx) / h;
             int a = (int)floor(fx);
             if (a < a0) a = a0;
@@ -1824,7 +1827,7 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
      * would gain nothing: its box is set by the PSF either way). */
     wf_profile_psf view;
     const int split = psf->core_radius > 0.0 &&
-                      jb->fpoint == 0.0 && 2.0 * jb->flux * psf->wing_max <= w->acc.wing_tolerance;
+                      jb->fpoint == 0.0 && 2.0 * jb->flux * psf->wing_max < w->acc.wing_tolerance;
     if (psf->core_radius > 0.0) {
         view = *psf;
         if (split) {
@@ -1845,6 +1848,9 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
         plan[0] = split, plan[1] = gd.m;
         return WF_OK;
     }
+    if (!wing && !split)
+        return wf_error(WF_ERR_INPUT, "profile: a core-only draw of an object that does not take the "
+                        "split PSF with these knobs (wf_profile_galaxy_core says which do)");
     int clamped = gd.m < need_fold;
     gd.half = gd.m / 2;
     gd.dk = 2.0 * M_PI / (gd.m * p);
@@ -1949,7 +1955,7 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
         for (long xx = xb; xx < (long)stamp->x0 + stamp->nx; xx++) dst[xx - stamp->x0] = 0.0;
     }
     if (split && wing) add_wing(psf, jb->flux, x, y, stamp);
-    if (clamped && jb->fpoint == 0.0 && (st = dewrap(w, jb, &gd, x, y, stamp))) return st;
+    if (clamped && jb->fpoint == 0.0 && (st = dewrap(w, jb, &gd, x, y, stamp, split))) return st;
     double clipped = 0.0;
     for (size_t i = 0; i < (size_t)stamp->nx * stamp->ny; i++)
         if (stamp->pix[i] < 0.0) { /* ringing and rounding */

@@ -333,7 +333,18 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
     size_t nee = ee_count(img);
     const int split = acc->core_radius > 0.0;
     split_geom g = {0};
-    if (split) split_layout(img, acc, &g);
+    if (split) {
+        split_layout(img, acc, &g);
+        double edge = 0.5 * (img->n - 1) * img->scale_arcsec;
+        if (!(acc->core_radius < edge))
+            return wf_error(WF_ERR_RANGE, "profile: core_radius %g arcsec reaches the PSF image's edge "
+                            "(%g arcsec): there would be no wing", acc->core_radius, edge);
+        /* the wing table's period must hold it without overlap */
+        if (g.lw < g.np)
+            return wf_error(WF_ERR_RANGE, "profile: a %d-sample PSF image (%g arcsec) is wider than "
+                            "psf_table_fft %d pixels allows for its wing table; raise psf_table_fft",
+                            img->n, 2.0 * edge, acc->psf_table_fft);
+    }
     if ((st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&re)) ||
         (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&im)) ||
         (st = wf_arena_calloc(arena, nee, sizeof(double), "PSF encircled energy", (void **)&ee)) ||

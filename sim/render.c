@@ -95,12 +95,18 @@ wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_obje
         if (off) { r->stats.objects_skipped++; continue; }
         wf_render_object c = *o;
         if (!c.bnx) c.bx0 = c.x0, c.by0 = c.y0, c.bnx = c.nx, c.bny = c.ny;
+        const char *bad = NULL;
         if (c.bnx < 1 || c.bny < 1 || c.bx0 < c.x0 || c.by0 < c.y0 || (long)c.bx0 + c.bnx > (long)c.x0 + c.nx ||
-            (long)c.by0 + c.bny > (long)c.y0 + c.ny || (c.halo && !cfg->halo)) {
+            (long)c.by0 + c.bny > (long)c.y0 + c.ny)
+            bad = "is not within its footprint";
+        else if (!c.halo && (c.bx0 != c.x0 || c.by0 != c.y0 || c.bnx != c.nx || c.bny != c.ny))
+            bad = "is smaller than its footprint, but nothing adds the rest (no halo)";
+        else if (c.halo && !cfg->halo)
+            bad = "has a halo, but the renderer has no halo function";
+        if (bad) {
             wf_renderer_destroy(r);
-            return wf_error(WF_ERR_INPUT, "renderer: object %llu: box %d x %d at (%d, %d) not within its %d x %d "
-                            "footprint at (%d, %d), or a halo without a halo function", (unsigned long long)o->id,
-                            c.bnx, c.bny, c.bx0, c.by0, c.nx, c.ny, c.x0, c.y0);
+            return wf_error(WF_ERR_INPUT, "renderer: object %llu: box %d x %d at (%d, %d) %s (%d x %d at (%d, %d))",
+                            (unsigned long long)o->id, c.bnx, c.bny, c.bx0, c.by0, bad, c.nx, c.ny, c.x0, c.y0);
         }
         r->objs[r->n++] = c;
     }
@@ -206,7 +212,8 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
 }
 
 /* Rows [ya, yb) of halo object i, columns [xa, xb): its box's pixels plus its halo,
- * negatives set to zero, into *out[(y - ya) (xb - xa) + x - xa]. */
+ * negatives set to zero, into *out[(y - ya) (xb - xa) + x - xa]. The buffer holds at most a
+ * tile's rows of one footprint (footprints are at most max_fft pixels wide). */
 static wf_status halo_rows(wf_renderer *r, size_t i, int ya, int yb, int xa, int xb, const double **out)
 {
     const wf_render_object *o = &r->objs[i];

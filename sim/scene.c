@@ -402,7 +402,6 @@ typedef struct plan_job {
     int t;
     size_t first, end;
     wf_status st;
-    size_t failed; /* the object whose planning failed */
     char message[512];
 } plan_job;
 
@@ -426,8 +425,7 @@ static void *plan_range(void *arg)
             st = wf_profile_galaxy_core(w, &o->g, &s->ppsf, o->x, o->y, &pl->bounds, &pl->box, &pl->split);
         if (st) {
             j->st = st;
-            j->failed = i;
-            snprintf(j->message, sizeof j->message, "%s", wf_error_message());
+            snprintf(j->message, sizeof j->message, "object %zu of the scene: %s", i, wf_error_message());
             return NULL;
         }
     }
@@ -443,7 +441,7 @@ static wf_status plan_objects(wf_scene *s)
     int started = 0;
     for (int t = 0; t < T; t++)
         jobs[t] = (plan_job){s, t, s->nobj * (size_t)t / (size_t)T, s->nobj * (size_t)(t + 1) / (size_t)T,
-                             WF_OK, 0, ""};
+                             WF_OK, ""};
     for (int t = 1; t < T; t++) {
         if (pthread_create(&th[t], NULL, plan_range, &jobs[t]) != 0) break;
         started = t;
@@ -568,16 +566,21 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     /* Per-object knobs from the noise (docs/ACCURACY.md): light wrapping into the Fourier
      * box stays in the stamp, moved across the box, and moves no pixel by more than
      * fold x flux; the Fourier modes dropped below kvalue x flux move none by more than their
-     * count over the box's M^2 pixels, < WF_SCENE_KVALUE_MODES kvalue x flux (the fine grid
-     * holds ~pi (1.19 M)^2 samples to the Y106 band); the split PSF's wing moves none by more
-     * than 2 flux wing_max. Each may be
-     * as large as noise_tolerance x one pixel's sky noise over the exposure, in e-. With no
-     * sky there is no noise to hide in. */
-    if (!(setup->noise_tolerance >= 0.0) || (setup->noise_tolerance > 0.0 && !(setup->exptime > 0.0))) {
+     * count over the box's M^2 pixels, modes x kvalue x flux, with modes = pi (kmax p / 2 pi)^2
+     * the fine-grid samples per box pixel out to the PSF's band (4.5 at Y106, 13 at R062); the
+     * split PSF's wing moves none by more than 2 flux wing_max. Each may be as large as
+     * noise_tolerance x one pixel's sky noise over the exposure, in e-. With no sky there is
+     * no noise to hide in. */
+    if (!(setup->noise_tolerance >= 0.0 && setup->noise_tolerance < INFINITY)) {
+        st = wf_error(WF_ERR_RANGE, "scene: noise_tolerance %g is not a finite value >= 0", setup->noise_tolerance);
+        goto bad;
+    }
+    if (setup->noise_tolerance > 0.0 && !(setup->exptime > 0.0 && setup->exptime < INFINITY)) {
         st = wf_error(WF_ERR_RANGE, "scene: noise_tolerance %g needs a positive exposure time (%g s)",
                       setup->noise_tolerance, setup->exptime);
         goto bad;
     }
+    const double kp = s->ppsf.kmax * s->acc.pixel_scale / (2.0 * M_PI), modes = M_PI * kp * kp;
     const double sky_sigma = setup->sky_on && s->stats.sky_min > 0.0 ? sqrt(s->stats.sky_min * setup->exptime) : 0.0;
     const double tol_rate = setup->noise_tolerance > 0.0 ? setup->noise_tolerance * sky_sigma / setup->exptime : 0.0;
     for (size_t i = 0; i < s->nobj; i++) {
@@ -587,7 +590,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
         o->wing_tol = tol_rate; /* e-/s per pixel, the unit of the stamps */
         if (tol_rate > 0.0 && o->flux > 0.0) {
             o->fold = fmin(WF_SCENE_FOLD_MAX, fmax(o->fold, tol_rate / o->flux));
-            o->kval = fmin(WF_SCENE_KVALUE_MAX, fmax(o->kval, tol_rate / (WF_SCENE_KVALUE_MODES * o->flux)));
+            o->kval = fmin(WF_SCENE_KVALUE_MAX, fmax(o->kval, tol_rate / (modes * o->flux)));
         }
         int near = o->x > -reach && o->y > -reach && o->x < setup->ncols + reach && o->y < setup->nrows + reach;
         if (o->kind != OBJ_GALAXY && o->flux > 0 && o->mag < setup->bright_mag && near) {
@@ -636,7 +639,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
                                              box.x0, box.y0, box.nx, box.ny};
         if (rel != 0.0) s->time_variable = 1;
         if (b.x0 < setup->ncols && b.x0 + b.nx > 0 && b.y0 < setup->nrows && b.y0 + b.ny > 0) {
-            if (o->kind == OBJ_GALAXY) s->stats.galaxies++;
+            if (o->kind == OBJ_GALAXY) s->stats.galaxies++, s->stats.split += pl->split;
             else if (o->kind == OBJ_STAR) s->stats.stars++;
             else s->stats.sne++;
         }
@@ -703,7 +706,8 @@ wf_status wf_scene_draw_object(wf_scene *s, size_t k, wf_scene_object *info, int
     if (k >= s->nrobj) return wf_error(WF_ERR_RANGE, "scene: object %zu of %zu", k, s->nrobj);
     const wf_render_object *ro = &s->robj[k];
     const object *o = ro->data;
-    /* the whole stamp: the box, and for a split galaxy its wing, summed as the renderer does */
+    /* the whole stamp as the renderer sums it: the box (kept as float), and for a split
+     * galaxy its wing, negatives set to zero */
     double *buf = calloc((size_t)ro->nx * ro->ny, sizeof *buf);
     double *bx = malloc((size_t)ro->bnx * ro->bny * sizeof *bx);
     if (!buf || !bx) {
@@ -711,9 +715,10 @@ wf_status wf_scene_draw_object(wf_scene *s, size_t k, wf_scene_object *info, int
         return wf_error(WF_ERR_NOMEM, "scene: a %d x %d stamp", ro->nx, ro->ny);
     }
     wf_status st = draw_object(&s->ts[0], ro, ro->by0, ro->by0 + ro->bny, bx);
-    for (int j = 0; j < ro->bny && !st; j++)
-        memcpy(buf + (size_t)(ro->by0 - ro->y0 + j) * ro->nx + (ro->bx0 - ro->x0), bx + (size_t)j * ro->bnx,
-               (size_t)ro->bnx * sizeof *bx);
+    for (int j = 0; j < ro->bny && !st; j++) {
+        double *dst = buf + (size_t)(ro->by0 - ro->y0 + j) * ro->nx + (ro->bx0 - ro->x0);
+        for (int i = 0; i < ro->bnx; i++) dst[i] = (float)bx[(size_t)j * ro->bnx + i];
+    }
     free(bx);
     for (int j = 0; j < ro->ny && !st && ro->halo; j++) {
         double *row = buf + (size_t)j * ro->nx;

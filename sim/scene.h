@@ -64,10 +64,10 @@ typedef struct wf_scene_setup {
 
 #define WF_SCENE_FOLD_MAX 0.05    /* noise_tolerance: folding at most this */
 #define WF_SCENE_KVALUE_MAX 1e-3  /* and the Fourier cut at most this (docs/ACCURACY.md) */
-#define WF_SCENE_KVALUE_MODES 4.5 /* fine-grid samples per box pixel bounding the cut's error */
 
 typedef struct wf_scene_stats {
     long galaxies, stars, sne; /* drawn (reach the SCA) */
+    long split;                /* of the galaxies, drawn with the split PSF (noise_tolerance) */
     double sky_min, sky_max;   /* e-/pixel/s over the SCA */
     double zodi;               /* e-/s/arcsec^2 at the SCA centre */
     double psf_lambda_nm;

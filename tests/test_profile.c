@@ -1300,7 +1300,8 @@ END_TEST
 
 /* ------------------------------------------------------------------- core and wing */
 
-/* A PSF with a wing: 90% in a Gaussian of sigma s1, 10% in one of s2, n x n samples at
+/* A PSF with a wing: 90% in a Gaussian of sigma s1, 10% in one of s2 centred 0.25" along x
+ * and -0.15" along y (so that a mirrored or transposed wing table shows), n x n samples at
  * P / 4, normalised. */
 static double *halo_psf(int n, double s1, double s2, wf_psf_image *img)
 {
@@ -1308,8 +1309,9 @@ static double *halo_psf(int n, double s1, double s2, wf_psf_image *img)
     for (int j = 0; j < n; j++)
         for (int i = 0; i < n; i++) {
             double r2 = ((i - c) * (i - c) + (j - c) * (j - c)) * h * h;
+            double dx = (i - c) * h - 0.25, dy = (j - c) * h + 0.15, q2 = dx * dx + dy * dy;
             pix[j * n + i] = 0.9 * exp(-0.5 * r2 / (s1 * s1)) / (s1 * s1) +
-                             0.1 * exp(-0.5 * r2 / (s2 * s2)) / (s2 * s2);
+                             0.1 * exp(-0.5 * q2 / (s2 * s2)) / (s2 * s2);
             s += pix[j * n + i];
         }
     for (int i = 0; i < n * n; i++) pix[i] /= s;

@@ -156,6 +156,44 @@ START_TEST(halo_objects)
 }
 END_TEST
 
+/* A halo that goes negative where the box's light has ended: each pixel is the box (as
+ * float) plus the halo, set to zero where the sum is negative. */
+static wf_status halo_dip(void *ctx, const wf_render_object *o, int y, int xa, int xb, double *out)
+{
+    (void)ctx;
+    const gauss *g = o->data;
+    for (int x = xa; x < xb; x++) out[x - xa] += g->halo_flux * (fabs(x - g->x) + fabs(y - g->y) - 8.0);
+    return WF_OK;
+}
+
+START_TEST(halo_clipped)
+{
+    enum { W = 40, H = 30 };
+    static gauss g[1] = {{20.3, 14.6, 1.2, 500.0, 0.0, 0.5}};
+    wf_render_object o = {1, 5, 2, 30, 26, &g[0], 0.0, 1, 15, 10, 12, 10};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 20, 0, halo_dip};
+    counter c = {0, 0};
+    float *img = render_all(&cfg, &o, 1, 7, &c);
+    int zero = 0, positive_halo = 0;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            double box = 0.0, halo = 0.0;
+            if (x >= o.x0 && x < o.x0 + o.nx && y >= o.y0 && y < o.y0 + o.ny)
+                halo = g[0].halo_flux * (fabs(x - g[0].x) + fabs(y - g[0].y) - 8.0);
+            else { ck_assert(img[y * W + x] == 0.0f); continue; }
+            if (x >= o.bx0 && x < o.bx0 + o.bnx && y >= o.by0 && y < o.by0 + o.bny)
+                box = (float)(g[0].flux * frac(y, g[0].y, g[0].sigma) * frac(x, g[0].x, g[0].sigma));
+            double want = box + halo < 0.0 ? 0.0 : box + halo;
+            ck_assert_msg(img[y * W + x] == (float)want, "pixel (%d, %d): %.9g, expected %.9g", x, y,
+                          img[y * W + x], want);
+            zero += want == 0.0;
+            positive_halo += halo > 0.0 && box == 0.0;
+        }
+    ck_assert(zero > 10 && positive_halo > 10); /* both branches were exercised */
+    free(img);
+}
+END_TEST
+
 START_TEST(flux_conserved_and_off_sca_skipped)
 {
     enum { N = 300, W = 100, H = 90 };
@@ -249,6 +287,7 @@ static Suite *suite(void)
     tcase_add_test(tc, crowded_tile_and_empty_scene);
     tcase_add_test(tc, each_stamp_drawn_once);
     tcase_add_test(tc, halo_objects);
+    tcase_add_test(tc, halo_clipped);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -188,6 +188,9 @@ START_TEST(noise_tolerance_bounds)
         wf_scene_stats st;
         wf_scene_get_stats(scene, &st);
         sigma = sqrt(st.sky_min * ss.exptime) / ss.exptime; /* e-/s, the stamps' unit */
+        printf("noise tolerance: mode %d: %ld of %ld galaxies drawn with the split PSF\n", m, st.split, st.galaxies);
+        if (m == 1) ck_assert_msg(st.split >= 2, "only %ld galaxies took the split", st.split);
+        else ck_assert_int_eq(st.split, 0);
         for (int k = 0; k < N; k++) {
             wf_scene_object info;
             int x0, y0;
