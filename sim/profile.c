@@ -48,6 +48,7 @@ void wf_profile_accuracy_default(wf_profile_accuracy *acc)
     acc->psf_table_fft = 192;
     acc->core_radius = 0.0;
     acc->wing_tolerance = 0.0;
+    acc->knot_accuracy = WF_PROFILE_KNOT_ACCURACY;
 }
 
 wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
@@ -71,6 +72,9 @@ wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
     if (!(acc->core_radius >= 0.0 && acc->core_radius <= 60.0))
         return wf_error(WF_ERR_RANGE, "profile: core_radius %g arcsec outside [0, 60]",
                         acc->core_radius);
+    if (!(acc->knot_accuracy >= 1e-15 && acc->knot_accuracy <= 0.01))
+        return wf_error(WF_ERR_RANGE, "profile: knot_accuracy %g outside [1e-15, 0.01]",
+                        acc->knot_accuracy);
     if (!(acc->wing_tolerance >= 0.0 && acc->wing_tolerance < INFINITY))
         return wf_error(WF_ERR_RANGE, "profile: wing_tolerance %g is not a finite value >= 0",
                         acc->wing_tolerance);
@@ -462,6 +466,7 @@ typedef struct grid {
     size_t ks;           /* entries per knot phase line (2 u + 1, and 8 or more of padding) */
     struct lattice *lat; /* the knots on a coarse lattice, or NULL (direct sums) */
     const int *rim;      /* rim[|v|] = floor(sqrt(u^2 - v^2)): the row's extent */
+    double lat_exp;      /* the knot lattice's E = -ln(knot_accuracy) */
 } grid;
 
 /* e^{-i u theta} (-1)^u (alt) or e^{-i u theta} for u = lo .. hi into re[(u - lo) st],
@@ -612,15 +617,14 @@ static void knot_sum(int n, int nkb, const double *ckr, const double *cki, const
  * e^{-i n Delta x_j}, equals by Poisson's formula K(k) plus the knots' images at x_j + m L
  * (m != 0) weighted by Phi(x_j + m L) / Phi(x_j): with the Kaiser-Bessel shape
  * (sim/profile_int.h) and beta = pi w (1 - rho) that ratio is ~exp(-pi w sqrt(1 - 2 rho)),
- * exp(-LAT_EXP) below, times a prefactor of order 10: the stamps differ from the direct
- * sum's by <= 2e-9 of their peak in tests/test_profile.c, 1e-8 over the GalSim scene
- * (bench/bench_profile.c). Separable in x and y: g on ~(2 U / r + w)^2 lattice
+ * exp(-E) with E = -ln(acc.knot_accuracy), times a prefactor of order 10: at the default
+ * E = 20 the stamps differ from the direct sum's by <= 2e-9 of their peak in
+ * tests/test_profile.c, 1e-8 over the GalSim scene (bench/bench_profile.c); a scene lowers E
+ * for faint objects (sim/scene.c), down to narrower kernels and coarser lattices. Separable in x and y: g on ~(2 U / r + w)^2 lattice
  * points costs one complex multiply-add per knot (half of them, g being Hermitian); each
  * coarse row is interpolated along u once, each fine sample then takes w real-by-complex
  * multiply-adds from w such rows. Wider kernels allow a larger rho, hence a coarser
  * lattice, for more taps per sample: each draw takes the cheapest. */
-#define LAT_EXP 20.0
-
 typedef struct lattice {
     int r, w, mh, nh, U;
     int nk;                        /* the knots it holds, (x, y) from the object */
@@ -638,10 +642,10 @@ typedef struct lattice {
     int next;                      /* next coarse row the ring takes */
 } lattice;
 
-/* rho for a kernel of w taps: pi w sqrt(1 - 2 rho) = LAT_EXP. */
-static double lat_rho(int w)
+/* rho for a kernel of w taps: pi w sqrt(1 - 2 rho) = E (negative: w too narrow for E). */
+static double lat_rho(int w, double e)
 {
-    double a = LAT_EXP / (M_PI * w);
+    double a = e / (M_PI * w);
     return 0.5 * (1.0 - a * a);
 }
 
@@ -664,7 +668,9 @@ static int lat_nmax(const lattice *l, int m)
  * would not be coarser than the fine grid). */
 static int lat_step(const grid *gd, double p, double x, int w)
 {
-    double r = x > 0.0 ? floor(lat_rho(w) * gd->m * p / x) : LAT_RMAX;
+    double rho = lat_rho(w, gd->lat_exp);
+    if (!(rho > 0.0)) return 0;
+    double r = x > 0.0 ? floor(rho * gd->m * p / x) : LAT_RMAX;
     if (r > LAT_RMAX) r = LAT_RMAX;
     if (r > gd->u / 2) r = gd->u / 2;
     return r >= 2 ? (int)r : 0;
@@ -683,7 +689,7 @@ static int lat_size(const wf_profile_work *w, const grid *gd, int r, int wd, lat
 {
     l->r = r;
     l->w = wd;
-    l->rho = lat_rho(wd);
+    l->rho = lat_rho(wd, gd->lat_exp);
     l->U = gd->u;
     l->rim = gd->rim;
     l->mh = gd->u / r + wd / 2;
@@ -779,7 +785,7 @@ static int rank_cmp(const void *pa, const void *pb)
  * lattice's, each in a fixed order). 0: all knots directly. */
 static int knot_plan(wf_profile_work *w, grid *gd, double p, lattice *l)
 {
-    static const int widths[] = {10, 12, 14, 16};
+    static const int widths[] = {6, 8, 10, 12, 14, 16};
     const int nk = gd->nk, forced = w->knot_method == WF_KNOTS_LATTICE;
     knot_rank rk[WF_PROFILE_MAX_KNOTS];
     for (int j = 0; j < nk; j++) {
@@ -1807,6 +1813,7 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
     gd.jc = (int)lround(y);
     gd.dx = (x - gd.ic) * p;
     gd.dy = (y - gd.jc) * p;
+    gd.lat_exp = -log(w->acc.knot_accuracy);
 
     /* FFT side. The stamp must lie inside the box [ic - M/2, ic + M/2 - 1]; the light
      * beyond the box, which wraps in, must stay below folding_threshold; and the side
@@ -1974,13 +1981,14 @@ void wf_profile_knot_method(wf_profile_work *work, int method) { work->knot_meth
 
 wf_status wf_profile_work_tune(wf_profile_work *work, double flux_fraction,
                                double folding_threshold, double kvalue_accuracy,
-                               double wing_tolerance)
+                               double wing_tolerance, double knot_accuracy)
 {
     wf_profile_accuracy acc = work->acc;
     acc.flux_fraction = flux_fraction;
     acc.folding_threshold = folding_threshold;
     acc.kvalue_accuracy = kvalue_accuracy;
     acc.wing_tolerance = wing_tolerance;
+    acc.knot_accuracy = knot_accuracy;
     wf_status st = wf_profile_check_accuracy(&acc);
     if (st) return st;
     work->acc = acc;

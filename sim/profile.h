@@ -42,6 +42,7 @@
 #define WF_PROFILE_PIXEL_SCALE 0.11 /* arcsec, Roman WFI */
 #define WF_PROFILE_MAX_KNOTS 1024
 #define WF_PROFILE_MAX_KNOT_FRAC 0.25 /* SPEC §4.2: knots hold at most 25% of the disk */
+#define WF_PROFILE_KNOT_ACCURACY 2.0611536224385579e-09 /* e^-20, the default knot_accuracy */
 
 /* Accuracy knobs; wf_profile_accuracy_default gives the values in brackets. */
 typedef struct wf_profile_accuracy {
@@ -58,6 +59,8 @@ typedef struct wf_profile_accuracy {
     double wing_tolerance;    /* with a split PSF, extended objects whose wing error bound
                                  2 flux wing_max stays below this (flux per pixel) take the
                                  split [0: none] */
+    double knot_accuracy;     /* the knot lattice's aliasing, e^-E: a pixel moves by ~10 e^-E
+                                 of the knots' flux at most [e^-20 = 2.1e-9] */
 } wf_profile_accuracy;
 
 void wf_profile_accuracy_default(wf_profile_accuracy *acc);
@@ -171,7 +174,7 @@ void wf_profile_work_free(wf_profile_work *work);
  * flux_fraction for bright stars); the others fix the buffers and stay. */
 wf_status wf_profile_work_tune(wf_profile_work *work, double flux_fraction,
                                double folding_threshold, double kvalue_accuracy,
-                               double wing_tolerance);
+                               double wing_tolerance, double knot_accuracy);
 
 /* Bytes wf_profile_psf_init keeps (*bytes) and the scratch it needs while running (*scratch). */
 wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy *acc,

@@ -32,8 +32,8 @@ typedef struct object {
     double ra, dec, mag, flux;
     wf_galaxy g;      /* galaxies: pixel-frame shape */
     int wide;         /* bright point source: the wide PSF */
-    double fold, kval, wing_tol; /* its folding threshold, Fourier cut and wing tolerance
-                                  * (noise_tolerance) */
+    double fold, kval, wing_tol, knot_acc; /* its folding threshold, Fourier cut, wing
+                                            * tolerance and knot accuracy (noise_tolerance) */
 } object;
 
 typedef struct object_plan {
@@ -225,7 +225,7 @@ static wf_status draw_object(void *ctx, const wf_render_object *ro, int ya, int 
     }
     wf_stamp st = {ro->bx0, ro->by0, ro->bnx, ro->bny, buf, 0, 0, 0};
     const wf_profile_accuracy *acc = &ts->scene->acc;
-    wf_status s = wf_profile_work_tune(&ts->work, acc->flux_fraction, o->fold, o->kval, o->wing_tol);
+    wf_status s = wf_profile_work_tune(&ts->work, acc->flux_fraction, o->fold, o->kval, o->wing_tol, o->knot_acc);
     if (s) return s;
     s = o->kind != OBJ_GALAXY ? wf_profile_draw_point(&ts->work, o->wide ? &ts->scene->ppsf_wide : &ts->scene->ppsf,
                                                       o->flux, o->x, o->y, &st)
@@ -420,7 +420,7 @@ static void *plan_range(void *arg)
                                                      NULL);
         pl->box = pl->bounds;
         if (!st && o->kind == OBJ_GALAXY) /* a split galaxy keeps only its Fourier box in the pool */
-            st = wf_profile_work_tune(w, s->acc.flux_fraction, o->fold, o->kval, o->wing_tol);
+            st = wf_profile_work_tune(w, s->acc.flux_fraction, o->fold, o->kval, o->wing_tol, o->knot_acc);
         if (!st && o->kind == OBJ_GALAXY)
             st = wf_profile_galaxy_core(w, &o->g, &s->ppsf, o->x, o->y, &pl->bounds, &pl->box, &pl->split);
         if (st) {
@@ -568,7 +568,9 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
      * fold x flux; the Fourier modes dropped below kvalue x flux move none by more than their
      * count over the box's M^2 pixels, modes x kvalue x flux, with modes = pi (kmax p / 2 pi)^2
      * the fine-grid samples per box pixel out to the PSF's band (4.5 at Y106, 13 at R062); the
-     * split PSF's wing moves none by more than 2 flux wing_max. Each may be as large as
+     * split PSF's wing moves none by more than 2 flux wing_max; the knot lattice's aliasing
+     * none by more than WF_SCENE_KNOT_BOUND knot_accuracy x the knots' flux (measured <= 0.13
+     * in tests/test_profile.c). Each may be as large as
      * noise_tolerance x one pixel's sky noise over the exposure, in e-. With no sky there is
      * no noise to hide in. */
     if (!(setup->noise_tolerance >= 0.0 && setup->noise_tolerance < INFINITY)) {
@@ -588,6 +590,10 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
         o->fold = s->acc.folding_threshold;
         o->kval = s->acc.kvalue_accuracy;
         o->wing_tol = tol_rate; /* e-/s per pixel, the unit of the stamps */
+        o->knot_acc = s->acc.knot_accuracy;
+        const double knots = o->kind == OBJ_GALAXY && o->g.n_knots > 0 ? o->flux * (1.0 - o->g.bulge_frac) * o->g.knot_frac : 0.0;
+        if (tol_rate > 0.0 && knots > 0.0)
+            o->knot_acc = fmin(WF_SCENE_KNOT_MAX, fmax(o->knot_acc, tol_rate / (WF_SCENE_KNOT_BOUND * knots)));
         if (tol_rate > 0.0 && o->flux > 0.0) {
             o->fold = fmin(WF_SCENE_FOLD_MAX, fmax(o->fold, tol_rate / o->flux));
             o->kval = fmin(WF_SCENE_KVALUE_MAX, fmax(o->kval, tol_rate / (modes * o->flux)));

@@ -47,8 +47,9 @@ typedef struct wf_scene_setup {
     double noise_tolerance; /* per object, looser knobs whose error bound stays below this x
                              * the sky noise of one pixel over exptime: folding (in [the
                              * profile default, WF_SCENE_FOLD_MAX]), the Fourier cut (up to
-                             * WF_SCENE_KVALUE_MAX) and the split PSF's wing; 0: the same
-                             * knobs for all [1] */
+                             * WF_SCENE_KVALUE_MAX), the knot lattice's accuracy (up to
+                             * WF_SCENE_KNOT_MAX) and the split PSF's wing; 0: the same knobs
+                             * for all [1] */
     double exptime;         /* s, for noise_tolerance [300] */
     size_t pool_bytes;      /* stamp pool per renderer (float stamps) [24 MiB] */
     int threads;            /* renderers to prepare [1] */
@@ -64,6 +65,9 @@ typedef struct wf_scene_setup {
 
 #define WF_SCENE_FOLD_MAX 0.05    /* noise_tolerance: folding at most this */
 #define WF_SCENE_KVALUE_MAX 1e-3  /* and the Fourier cut at most this (docs/ACCURACY.md) */
+#define WF_SCENE_KNOT_MAX 1e-2    /* and the knot lattice's accuracy at most this */
+#define WF_SCENE_KNOT_BOUND 10.0  /* a pixel moves by at most this x knot_accuracy x the knots'
+                                     flux (sim/profile.c "knot lattice") */
 
 typedef struct wf_scene_stats {
     long galaxies, stars, sne; /* drawn (reach the SCA) */

@@ -895,7 +895,7 @@ START_TEST(test_flux_with_psf)
     ck_assert(s.sum / 500.0 >= acc.flux_fraction - 1e-4 && s.sum / 500.0 <= 1 + 1e-4);
     free(s.pix);
     /* everything: a tight folding threshold and a stamp holding all but 1e-9 */
-    ck_assert(wf_profile_work_tune(&c.work, 1 - 1e-9, 1e-9, 1e-8, 0.0) == WF_OK);
+    ck_assert(wf_profile_work_tune(&c.work, 1 - 1e-9, 1e-9, 1e-8, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
     ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, 300.3, 200.7, &s, NULL) == WF_OK);
     s.pix = calloc((size_t)s.nx * s.ny, sizeof(double));
     ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, 300.3, 200.7, &s) == WF_OK);
@@ -953,7 +953,7 @@ START_TEST(test_sheared_ellipticity)
     wf_profile_accuracy_default(&acc);
     ctx c;
     ctx_open(&c, &acc, NULL);
-    ck_assert(wf_profile_work_tune(&c.work, 1 - 1e-9, 1e-9, 1e-7, 0.0) == WF_OK);
+    ck_assert(wf_profile_work_tune(&c.work, 1 - 1e-9, 1e-9, 1e-7, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
     const double emag[] = {0.3, 0.7, 0.7, 0.7, 0.7, 0.7, 0.7};
     const double beta[] = {-0.3, 0.0, 30.0, 45.0, 60.0, 90.0, 135.0}; /* position angle, deg */
     double worst = 0;
@@ -1366,7 +1366,7 @@ START_TEST(test_core_wing)
         /* tolerated at the default folding: a smaller box */
         int fft_whole = a.fft;
         ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, acc.folding_threshold,
-                                       acc.kvalue_accuracy, 1e30) == WF_OK);
+                                       acc.kvalue_accuracy, 1e30, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
         ck_assert(wf_profile_draw_galaxy(&split.work, &g, &split.psf, x, y, &c) == WF_OK);
         /* (the largest galaxy's box is its own, with or without the wing) */
         ck_assert_msg(h == 2 ? c.fft <= fft_whole : c.fft < fft_whole,
@@ -1374,8 +1374,8 @@ START_TEST(test_core_wing)
                       fft_whole);
         int fft_split = c.fft;
         /* tolerated, both with folding 1e-7 so that only the wing differs */
-        ck_assert(wf_profile_work_tune(&whole.work, acc.flux_fraction, 1e-7, 1e-7, 0.0) == WF_OK);
-        ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 1e30) == WF_OK);
+        ck_assert(wf_profile_work_tune(&whole.work, acc.flux_fraction, 1e-7, 1e-7, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
+        ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 1e30, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
         ck_assert(wf_profile_draw_galaxy(&whole.work, &g, &whole.psf, x, y, &a) == WF_OK);
         ck_assert(wf_profile_draw_galaxy(&split.work, &g, &split.psf, x, y, &c) == WF_OK);
         double peak = 0.0, worst = 0.0;
@@ -1419,10 +1419,10 @@ START_TEST(test_core_wing)
             free(core.pix);
             free(sum.pix);
             /* an untolerated object: the box is the stamp */
-            ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 0.0) == WF_OK);
+            ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
             ck_assert(wf_profile_galaxy_core(&split.work, &g, &split.psf, x, y, &b, &box, &taken) == WF_OK);
             ck_assert(!taken && box.x0 == b.x0 && box.nx == b.nx && box.y0 == b.y0 && box.ny == b.ny);
-            ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 1e30) == WF_OK);
+            ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 1e30, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
         }
         /* pieces of a split stamp are the same pixels as the whole */
         int cut[] = {0, 5, b.ny / 2, b.ny};
@@ -1435,9 +1435,9 @@ START_TEST(test_core_wing)
             free(part.pix);
         }
         ck_assert(wf_profile_work_tune(&whole.work, acc.flux_fraction, acc.folding_threshold,
-                                       acc.kvalue_accuracy, 0.0) == WF_OK);
+                                       acc.kvalue_accuracy, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
         ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, acc.folding_threshold,
-                                       acc.kvalue_accuracy, 0.0) == WF_OK);
+                                       acc.kvalue_accuracy, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
         free(a.pix);
         free(c.pix);
     }
@@ -1446,7 +1446,7 @@ START_TEST(test_core_wing)
     ck_assert(wf_profile_point_bounds(&whole.work, &whole.psf, 10.2, 20.6, &b, NULL) == WF_OK);
     wf_stamp a = stamp_new(b.x0, b.y0, b.nx, b.ny), c = stamp_new(b.x0, b.y0, b.nx, b.ny);
     ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, acc.folding_threshold,
-                                   acc.kvalue_accuracy, 1e30) == WF_OK);
+                                   acc.kvalue_accuracy, 1e30, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
     ck_assert(wf_profile_draw_point(&whole.work, &whole.psf, 50.0, 10.2, 20.6, &a) == WF_OK);
     ck_assert(wf_profile_draw_point(&split.work, &split.psf, 50.0, 10.2, 20.6, &c) == WF_OK);
     ck_assert(!memcmp(a.pix, c.pix, sizeof(double) * b.nx * b.ny));
@@ -1577,6 +1577,58 @@ END_TEST
 
 /* The per-sample kernels in scalar, 2-, 4- and 8-lane versions (as far as the CPU has them)
  * give the same bits: a stamp does not depend on the machine's vector width. */
+/* acc.knot_accuracy (the lattice's aliasing e^-E, loosened for faint objects by a scene):
+ * against the direct sum, no pixel moves by more than 10 knot_accuracy x the knots' flux, the
+ * bound sim/scene.c relies on (measured up to 0.13), and looser settings do use narrower
+ * kernels or coarser lattices. */
+START_TEST(test_knot_accuracy)
+{
+    wf_psf_image img;
+    double *psfpix = halo_psf(256, 0.07, 0.8, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    const double hlr[] = {0.15, 0.4};
+    for (int h = 0; h < 2; h++) {
+        wf_galaxy g = galaxy(100.0, 0.3, hlr[h], 0.5 * hlr[h], 0.2, 0.1);
+        g.n_knots = 100;
+        g.knot_frac = 0.2;
+        g.knot_seed = 9;
+        const double fk = g.flux * (1 - g.bulge_frac) * g.knot_frac, x = 300.3, y = 200.6;
+        wf_stamp b;
+        ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, x, y, &b, NULL) == WF_OK);
+        wf_stamp ref = draw_knots(&c, &g, x, y, &b, WF_KNOTS_DIRECT);
+        int taps_default = 0, step_default = 0;
+        const double es[] = {20.0, 10.0, 6.0, 4.7};
+        for (int e = 0; e < 4; e++) {
+            double ka = exp(-es[e]);
+            ck_assert(wf_profile_work_tune(&c.work, acc.flux_fraction, acc.folding_threshold, acc.kvalue_accuracy, 0.0,
+                                           ka) == WF_OK);
+            wf_stamp t = draw_knots(&c, &g, x, y, &b, WF_KNOTS_LATTICE);
+            double worst = 0.0;
+            for (int k = 0; k < b.nx * b.ny; k++) worst = fmax(worst, fabs(t.pix[k] - ref.pix[k]));
+            printf("knot accuracy e^-%.1f, hlr %.2f: lattice step %d, %d taps: worst pixel %.2e of the knots' flux "
+                   "(%.3f of e^-E)\n",
+                   es[e], hlr[h], c.work.knot_last[0], c.work.knot_last[1], worst / fk, worst / (fk * ka));
+            ck_assert_msg(c.work.knot_last[0] > 0, "no lattice was used");
+            ck_assert_msg(worst <= 10.0 * ka * fk, "e^-%g: %g of the knots' flux", es[e], worst / fk);
+            if (e == 0) taps_default = c.work.knot_last[1], step_default = c.work.knot_last[0];
+            if (e == 3)
+                ck_assert_msg(c.work.knot_last[1] < taps_default || c.work.knot_last[0] > step_default,
+                              "the loosest setting did not lighten the lattice");
+            free(t.pix);
+        }
+        ck_assert(wf_profile_work_tune(&c.work, acc.flux_fraction, acc.folding_threshold, acc.kvalue_accuracy, 0.0,
+                                       acc.knot_accuracy) == WF_OK);
+        wf_profile_knot_method(&c.work, WF_KNOTS_AUTO);
+        free(ref.pix);
+    }
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
 START_TEST(test_simd_identical)
 {
     wf_psf_image img;
@@ -1655,8 +1707,8 @@ START_TEST(test_psf_table_interpolation)
     g.n_knots = 10;
     g.knot_frac = 0.2;
     /* the side from the 201-pixel stamp: 256, which does not divide 192 */
-    ck_assert(wf_profile_work_tune(&c1.work, 0.9, 0.05, 1e-5, 0.0) == WF_OK);
-    ck_assert(wf_profile_work_tune(&c2.work, 0.9, 0.05, 1e-5, 0.0) == WF_OK);
+    ck_assert(wf_profile_work_tune(&c1.work, 0.9, 0.05, 1e-5, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
+    ck_assert(wf_profile_work_tune(&c2.work, 0.9, 0.05, 1e-5, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
     wf_stamp s1 = stamp_new(0, 0, 201, 201), s2 = stamp_new(0, 0, 201, 201);
     ck_assert(wf_profile_draw_galaxy(&c1.work, &g, &c1.psf, 100.0, 100.0, &s1) == WF_OK);
     ck_assert(wf_profile_draw_galaxy(&c2.work, &g, &c2.psf, 100.0, 100.0, &s2) == WF_OK);
@@ -1798,7 +1850,7 @@ START_TEST(test_bad_input)
     a.flux_fraction = 1.0;
     size_t b;
     ck_assert(wf_profile_work_need(&a, &b) == WF_ERR_RANGE);
-    ck_assert(wf_profile_work_tune(&c.work, 0.9, 0.0, 1e-5, 0.0) == WF_ERR_RANGE);
+    ck_assert(wf_profile_work_tune(&c.work, 0.9, 0.0, 1e-5, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_ERR_RANGE);
     /* an arena too small fails cleanly */
     unsigned char small[4096];
     wf_arena tiny;
@@ -1899,6 +1951,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_psf_table_interpolation);
     tcase_add_test(ind, test_psf_any_sampling);
     tcase_add_test(ind, test_knot_lattice);
+    tcase_add_test(ind, test_knot_accuracy);
     tcase_add_test(ind, test_simd_identical);
     suite_add_tcase(s, ind);
     TCase *stiff = tcase_create("stiff");

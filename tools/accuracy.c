@@ -592,7 +592,7 @@ static wf_status gal_knob(acc_run *run, drawer *d, const gal_case *gc, const cha
         g->n_knots = set[k].knots ? gc->n_knots : 0;
         g->knot_seed = 5;
         g->e1 = 0.2, g->e2 = 0.1;
-        if ((st = wf_profile_work_tune(&gd.d->work, set[k].ff, set[k].fold, set[k].kval, set[k].wtol))) break;
+        if ((st = wf_profile_work_tune(&gd.d->work, set[k].ff, set[k].fold, set[k].kval, set[k].wtol, WF_PROFILE_KNOT_ACCURACY))) break;
         double fraction = 1;
         st = gc->star ? wf_profile_point_bounds(&gd.d->work, &gd.d->ppsf, gd.x, gd.y, &gd.stamp, &fraction)
                       : wf_profile_galaxy_bounds(&gd.d->work, g, &gd.d->ppsf, gd.x, gd.y, &gd.stamp, &fraction);
@@ -621,7 +621,7 @@ static wf_status gal_knob(acc_run *run, drawer *d, const gal_case *gc, const cha
     for (int k = 0; k < n; k++) {
         drawer *dk = set[k].d ? set[k].d : d;
         wf_status st2 = wf_profile_work_tune(&dk->work, def.flux_fraction, def.folding_threshold,
-                                             def.kvalue_accuracy, 0.0);
+                                             def.kvalue_accuracy, 0.0, WF_PROFILE_KNOT_ACCURACY);
         if (!st) st = st2;
     }
 out:

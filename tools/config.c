@@ -211,8 +211,9 @@ static const key_desc keys[] = {
      .doc = "Faint objects are drawn with looser knobs where the error bound of each stays below this many times "
             "the sky noise of one pixel over the exposure: light wrapping into the Fourier box (at most 5% of "
             "the object, never stricter than the default 0.5%), Fourier modes dropped (below at most 1e-3 of "
-            "the object), and the PSF wing placed without the object's own blur (psf.core_radius). 0: the same "
-            "knobs for every object. Errors and costs: docs/ACCURACY.md."},
+            "the object), the knot lattice's aliasing (up to 1e-2 of the knots' flux), and the PSF wing placed "
+            "without the object's own blur (psf.core_radius). 0: the same knobs for every object. Errors and "
+            "costs: docs/ACCURACY.md."},
     {.name = "psf.pupil_bin", .type = KT_ENUM, .unit = "", .def = "8", .choices = pupil_bins,
      FIELD(pupil_bin), .doc = "Pupil-plane binning, as GalSim's pupil_bin (8 fast, 4 or 2 for bright stars)."},
     {.name = "psf.nlambda", .type = KT_INT, .unit = "", .def = "1", MIN(1), MAX(64), FIELD(psf_nlambda),
