@@ -2011,9 +2011,9 @@ static void clear_stamp(wf_stamp *stamp)
     stamp->fft = 0;
 }
 
-wf_status wf_profile_draw_galaxy(wf_profile_work *work, const wf_galaxy *g,
-                                 const wf_profile_psf *psf, double x, double y,
-                                 wf_stamp *stamp)
+/* A galaxy's stamp, its split PSF's wing included or (wing 0) left to the caller. */
+static wf_status draw_galaxy(wf_profile_work *work, const wf_galaxy *g, const wf_profile_psf *psf,
+                             double x, double y, wf_stamp *stamp, int wing)
 {
     wf_status st = check_stamp(stamp);
     if (st) return st;
@@ -2023,18 +2023,26 @@ wf_status wf_profile_draw_galaxy(wf_profile_work *work, const wf_galaxy *g,
         clear_stamp(stamp);
         return WF_OK;
     }
-    return draw_job(work, &jb, psf, x, y, stamp, 1, NULL);
+    return draw_job(work, &jb, psf, x, y, stamp, wing, NULL);
+}
+
+wf_status wf_profile_draw_galaxy(wf_profile_work *work, const wf_galaxy *g,
+                                 const wf_profile_psf *psf, double x, double y,
+                                 wf_stamp *stamp)
+{
+    return draw_galaxy(work, g, psf, x, y, stamp, 1);
 }
 
 wf_status wf_profile_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
                                  const wf_profile_psf *psf, double x, double y,
-                                 const wf_stamp *bounds, wf_stamp *box, int *split)
+                                 wf_stamp *bounds, wf_stamp *box, int *split)
 {
+    if (!g) return wf_error(WF_ERR_INPUT, "profile: no galaxy given");
     job jb;
     wf_galaxy lit = *g;
-    if (lit.flux == 0.0) lit.flux = 1.0;
+    if (lit.flux == 0.0) lit.flux = 1.0; /* as wf_profile_galaxy_bounds */
     wf_status st = galaxy_job(work, &lit, &jb);
-    if (st || (st = check_position(x, y))) return st;
+    if (st || (st = bounds_for(work, &jb, psf, x, y, bounds, NULL))) return st;
     int plan[2];
     wf_stamp b = *bounds;
     if ((st = draw_job(work, &jb, psf, x, y, &b, 1, plan))) return st;
@@ -2056,15 +2064,7 @@ wf_status wf_profile_draw_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
                                       const wf_profile_psf *psf, double x, double y,
                                       wf_stamp *stamp)
 {
-    wf_status st = check_stamp(stamp);
-    if (st) return st;
-    job jb;
-    if ((st = galaxy_job(work, g, &jb)) || (st = check_position(x, y))) return st;
-    if (jb.flux == 0.0) {
-        clear_stamp(stamp);
-        return WF_OK;
-    }
-    return draw_job(work, &jb, psf, x, y, stamp, 0, NULL);
+    return draw_galaxy(work, g, psf, x, y, stamp, 0);
 }
 
 wf_status wf_profile_add_wing(const wf_profile_psf *psf, double flux, double x, double y,

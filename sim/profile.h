@@ -206,15 +206,15 @@ wf_status wf_profile_draw_point(wf_profile_work *work, const wf_profile_psf *psf
                                 double x, double y, wf_stamp *stamp);
 
 /* The split PSF piece by piece, for a renderer that keeps only the core box of a stamp:
- * wf_profile_galaxy_core says, with the work's current knobs, whether the galaxy's draw
- * takes the split and, if so, gives its FFT box within the stamp bounds (else *box =
- * *bounds); wf_profile_draw_galaxy_core draws it without the wing (pixels beyond the box are
+ * wf_profile_galaxy_core gives, with the work's current knobs, the galaxy's stamp bounds (as
+ * wf_profile_galaxy_bounds) and whether its draw takes the split and, if so, its FFT box
+ * within them (else *box = *bounds); wf_profile_draw_galaxy_core draws it without the wing (pixels beyond the box are
  * zero; negatives clipped), and wf_profile_add_wing adds flux x wing at (x, y) to any
  * stamp (rows of it: the same pixels). Core plus wing is wf_profile_draw_galaxy's stamp
  * but for the clipping, done there on the sum. */
 wf_status wf_profile_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
                                  const wf_profile_psf *psf, double x, double y,
-                                 const wf_stamp *bounds, wf_stamp *box, int *split);
+                                 wf_stamp *bounds, wf_stamp *box, int *split);
 wf_status wf_profile_draw_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
                                       const wf_profile_psf *psf, double x, double y,
                                       wf_stamp *stamp);

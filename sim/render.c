@@ -257,26 +257,20 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
         r->pool_used = 0;
     }
     r->last_start = y0;
-    /* retire objects that end above this request, then admit those that start before its end */
+    /* release the boxes the request has passed (a halo object's box ends before its
+     * footprint, whose halo is still needed), retire the objects whose footprint it has
+     * passed, then admit those that start before its end */
     size_t keep = 0;
-    for (size_t a = 0; a < r->nactive; a++) {
-        const wf_render_object *o = &r->objs[r->active[a]];
-        if (o->y0 + o->ny <= y0) {
-            if (r->stamp_off[r->active[a]] != NO_STAMP) r->live_bytes -= stamp_bytes(o);
-            r->stamp_off[r->active[a]] = NO_STAMP;
-        }
-        else r->active[keep++] = r->active[a];
-    }
-    r->nactive = keep;
-    /* a halo object's box is not needed once the tiles have passed it, though its halo is */
     for (size_t a = 0; a < r->nactive; a++) {
         size_t i = r->active[a];
         const wf_render_object *o = &r->objs[i];
-        if (o->halo && o->by0 + o->bny <= y0 && r->stamp_off[i] != NO_STAMP) {
+        if (o->by0 + o->bny <= y0 && r->stamp_off[i] != NO_STAMP) {
             r->live_bytes -= stamp_bytes(o);
             r->stamp_off[i] = NO_STAMP;
         }
+        if (o->y0 + o->ny > y0) r->active[keep++] = i;
     }
+    r->nactive = keep;
     while (r->next < r->n && r->objs[r->next].y0 < y1) {
         const wf_render_object *o = &r->objs[r->next];
         if (o->y0 + o->ny > y0) r->active[r->nactive++] = r->next;

@@ -414,15 +414,14 @@ static void *plan_range(void *arg)
         const object *o = &s->obj[i];
         object_plan *pl = &s->plans[i];
         if (o->kind == OBJ_SN && !(o->flux > 0)) continue;
-        wf_status st = o->kind == OBJ_GALAXY
-                           ? wf_profile_galaxy_bounds(w, &o->g, &s->ppsf, o->x, o->y, &pl->bounds, NULL)
-                           : wf_profile_point_bounds(w, o->wide ? &s->ppsf_wide : &s->ppsf, o->x, o->y, &pl->bounds,
-                                                     NULL);
-        pl->box = pl->bounds;
-        if (!st && o->kind == OBJ_GALAXY) /* a split galaxy keeps only its Fourier box in the pool */
+        wf_status st;
+        if (o->kind == OBJ_GALAXY) { /* bounds, and a split galaxy's Fourier box (kept in the pool) */
             st = wf_profile_work_tune(w, s->acc.flux_fraction, o->fold, o->kval, o->wing_tol, o->knot_acc);
-        if (!st && o->kind == OBJ_GALAXY)
-            st = wf_profile_galaxy_core(w, &o->g, &s->ppsf, o->x, o->y, &pl->bounds, &pl->box, &pl->split);
+            if (!st) st = wf_profile_galaxy_core(w, &o->g, &s->ppsf, o->x, o->y, &pl->bounds, &pl->box, &pl->split);
+        } else {
+            st = wf_profile_point_bounds(w, o->wide ? &s->ppsf_wide : &s->ppsf, o->x, o->y, &pl->bounds, NULL);
+            pl->box = pl->bounds;
+        }
         if (st) {
             j->st = st;
             snprintf(j->message, sizeof j->message, "object %zu of the scene: %s", i, wf_error_message());

@@ -1397,9 +1397,10 @@ START_TEST(test_core_wing)
         /* piece by piece, as the renderer keeps it: the core box, then the wing over the
          * stamp, give the split stamp (equal where nothing was clipped) */
         {
-            wf_stamp box;
+            wf_stamp box, bb;
             int taken = 0;
-            ck_assert(wf_profile_galaxy_core(&split.work, &g, &split.psf, x, y, &b, &box, &taken) == WF_OK);
+            ck_assert(wf_profile_galaxy_core(&split.work, &g, &split.psf, x, y, &bb, &box, &taken) == WF_OK);
+            ck_assert(bb.x0 == b.x0 && bb.y0 == b.y0 && bb.nx == b.nx && bb.ny == b.ny); /* the stamp's bounds */
             ck_assert_msg(taken && box.x0 >= b.x0 && box.y0 >= b.y0 && box.x0 + box.nx <= b.x0 + b.nx &&
                               box.y0 + box.ny <= b.y0 + b.ny && box.nx <= c.fft && box.ny <= c.fft,
                           "hlr %g: box %dx%d at (%d, %d)", hlr[h], box.nx, box.ny, box.x0, box.y0);
@@ -1420,7 +1421,7 @@ START_TEST(test_core_wing)
             free(sum.pix);
             /* an untolerated object: the box is the stamp */
             ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
-            ck_assert(wf_profile_galaxy_core(&split.work, &g, &split.psf, x, y, &b, &box, &taken) == WF_OK);
+            ck_assert(wf_profile_galaxy_core(&split.work, &g, &split.psf, x, y, &bb, &box, &taken) == WF_OK);
             ck_assert(!taken && box.x0 == b.x0 && box.nx == b.nx && box.y0 == b.y0 && box.ny == b.ny);
             ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 1e30, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
         }
