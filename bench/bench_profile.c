@@ -3,13 +3,13 @@
  * profile drawer alone, without the detector chain.
  *
  *   bench_profile [--dump FILE] [--compare FILE] [--limit N] [--simd LANES] [--core R]
- *                 [--tol T]
+ *                 [--levels L] [--tol T]
  *
  * --dump writes every stamp (bounds and pixels) so that a later build can be compared with
  * --compare: per object the worst pixel difference over the stamp's peak, and the flux.
  * --simd caps the vector width of the drawing kernels (0: scalar; they all give the same
  * bits, which --dump / --compare across widths shows). --core sets psf.core_radius
- * (arcsec; 0: the whole PSF in every Fourier box), --tol scene.noise_tolerance (0: the same
+ * (arcsec; 0: the whole PSF in every Fourier box), --levels psf.core_levels, --tol scene.noise_tolerance (0: the same
  * knobs for every object); --compare then also gives differences in sky sigma.
  * Data: $WFISIM_DATA (default ../shared/data) and $WFISIM_REFERENCE (../shared/reference). */
 #include <math.h>
@@ -46,6 +46,7 @@ int main(int argc, char **argv)
     long limit = -1;
     int simd = -1;
     double core = -1.0, tol = -1.0;
+    int levels = 0;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--dump") && i + 1 < argc) dump = argv[++i];
         else if (!strcmp(argv[i], "--compare") && i + 1 < argc) compare = argv[++i];
@@ -53,9 +54,10 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--simd") && i + 1 < argc) simd = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--core") && i + 1 < argc) core = atof(argv[++i]);
         else if (!strcmp(argv[i], "--tol") && i + 1 < argc) tol = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--levels") && i + 1 < argc) levels = atoi(argv[++i]);
         else {
             fprintf(stderr, "usage: bench_profile [--dump FILE] [--compare FILE] [--limit N] "
-                            "[--simd LANES] [--core R] [--tol T]\n");
+                            "[--simd LANES] [--core R] [--levels L] [--tol T]\n");
             return 2;
         }
     }
@@ -92,6 +94,7 @@ int main(int argc, char **argv)
     ss.psf_nlambda = cfg.psf_nlambda;
     ss.flux_fraction = cfg.flux_fraction;
     ss.core_radius = core >= 0.0 ? core : cfg.psf_core_radius;
+    ss.core_levels = levels > 0 ? levels : cfg.psf_core_levels;
     ss.noise_tolerance = tol >= 0.0 ? tol : cfg.noise_tolerance;
     ss.exptime = cfg.ro.exptime;
     ss.threads = 1;

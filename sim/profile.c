@@ -47,6 +47,7 @@ void wf_profile_accuracy_default(wf_profile_accuracy *acc)
     acc->max_fft = 1024;
     acc->psf_table_fft = 192;
     acc->core_radius = 0.0;
+    acc->core_levels = 1;
     acc->wing_tolerance = 0.0;
     acc->knot_accuracy = WF_PROFILE_KNOT_ACCURACY;
 }
@@ -72,6 +73,9 @@ wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
     if (!(acc->core_radius >= 0.0 && acc->core_radius <= 60.0))
         return wf_error(WF_ERR_RANGE, "profile: core_radius %g arcsec outside [0, 60]",
                         acc->core_radius);
+    if (acc->core_levels < 1 || acc->core_levels > WF_PROFILE_MAX_CORES)
+        return wf_error(WF_ERR_RANGE, "profile: core_levels %d outside [1, %d]",
+                        acc->core_levels, WF_PROFILE_MAX_CORES);
     if (!(acc->knot_accuracy >= 1e-15 && acc->knot_accuracy <= 0.01))
         return wf_error(WF_ERR_RANGE, "profile: knot_accuracy %g outside [1e-15, 0.01]",
                         acc->knot_accuracy);
@@ -329,13 +333,13 @@ static double galaxy_radius(const job *jb, const wf_sersic_table *t, double eps)
     return exp(hi);
 }
 
-/* Radius of the PSF image holding all but eps of its light; with core set and a split
- * PSF, the core's whole extent (its taper's end, plus half a pixel), so that none of the
+/* Radius of the PSF image holding all but eps of its light; for core c > 0 (core index +
+ * 1), that core's whole extent (its taper's end, plus half a pixel), so that none of the
  * core's light folds: the box then costs ~2x more samples for a star, and the star has the
  * unsplit draw's accuracy. */
 static double psf_radius(const wf_profile_psf *psf, double eps, int core)
 {
-    if (core && psf->core_radius > 0.0) return psf->core_radius + 0.5 * psf->pixel_scale;
+    if (core > 0) return psf->core[core - 1].radius + 0.5 * psf->pixel_scale;
     for (int i = psf->nee - 1; i >= 0; i--)
         if (1.0 - psf->ee[i] > eps) return (i + 2) * psf->ee_dr;
     return psf->ee_dr;
@@ -1480,10 +1484,11 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
 /* stamp += flux x wing at (x, y): bilinear between the table's 1 / wing_os pixel samples.
  * The fractional position is the same for every pixel, so each row reads four contiguous
  * runs of the phase planes. */
-static void add_wing(const wf_profile_psf *psf, double flux, double x, double y,
+static void add_wing(const wf_profile_psf *psf, int core, double flux, double x, double y,
                      wf_stamp *stamp)
 {
     const int K = psf->wing_os, h = psf->wing_half, np = psf->wing_np;
+    const float *wing = psf->core[core - 1].wing;
     const size_t plane = (size_t)np * np;
     /* fine index of pixel i: K (i - x) + K h = K i + s */
     double sx = K * (h - x), sy = K * (h - y);
@@ -1503,10 +1508,10 @@ static void add_wing(const wf_profile_psf *psf, double flux, double x, double y,
         long j = (long)stamp->y0 + yy, ny0 = j + oy0, ny1 = j + oy1;
         if (ny0 < 0 || ny1 > np - 1) continue;
         /* rows of the four phase planes from the column of pixel i0 on */
-        const float *r00 = psf->wing + (size_t)(b0 * K + a0) * plane + (size_t)ny0 * np + (size_t)(i0 + ox0);
-        const float *r01 = psf->wing + (size_t)(b0 * K + a1) * plane + (size_t)ny0 * np + (size_t)(i0 + ox1);
-        const float *r10 = psf->wing + (size_t)(b1 * K + a0) * plane + (size_t)ny1 * np + (size_t)(i0 + ox0);
-        const float *r11 = psf->wing + (size_t)(b1 * K + a1) * plane + (size_t)ny1 * np + (size_t)(i0 + ox1);
+        const float *r00 = wing + (size_t)(b0 * K + a0) * plane + (size_t)ny0 * np + (size_t)(i0 + ox0);
+        const float *r01 = wing + (size_t)(b0 * K + a1) * plane + (size_t)ny0 * np + (size_t)(i0 + ox1);
+        const float *r10 = wing + (size_t)(b1 * K + a0) * plane + (size_t)ny1 * np + (size_t)(i0 + ox0);
+        const float *r11 = wing + (size_t)(b1 * K + a1) * plane + (size_t)ny1 * np + (size_t)(i0 + ox1);
         double *dst = stamp->pix + (size_t)yy * stamp->nx + (size_t)(i0 - stamp->x0);
         for (long k = 0; k <= i1 - i0; k++)
             dst[k] += w00 * r00[k] + w01 * r01[k] + w10 * r10[k] + w11 * r11[k];
@@ -1790,7 +1795,8 @@ static wf_status draw_nopsf(wf_profile_work *w, const job *jb, double x, double 
 }
 
 /* wing 0 leaves a split draw's wing to the caller (wf_profile_add_wing); plan non-NULL
- * only decides: plan[0] the split (0, 1), plan[1] the FFT side; nothing is drawn. */
+ * only decides: plan[0] the core taken (0: none, else its index + 1), plan[1] the FFT
+ * side; nothing is drawn. */
 static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_psf *psf,
                           double x, double y, wf_stamp *stamp, int wing, int *plan)
 {
@@ -1830,20 +1836,19 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
                         stamp->ny, stamp->x0, stamp->y0, ladder_max(w), x, y);
     /* With a split PSF the box of an extended object whose wing error bound is tolerated
      * holds object x core only, whose light ends at the core radius; the stamp's pixels
-     * beyond the box get the wing alone. Other objects take the whole table (a point source
-     * would gain nothing: its box is set by the PSF either way). */
+     * beyond the box get the wing alone. Of the cores it tolerates, the smallest (the
+     * smallest box). Other objects take the whole table (a point source would gain nothing:
+     * its box is set by the PSF either way). split: the core's index + 1, or 0. */
     wf_profile_psf view;
-    const int split = psf->core_radius > 0.0 &&
-                      jb->fpoint == 0.0 && 2.0 * jb->flux * psf->wing_max < w->acc.wing_tolerance;
-    if (psf->core_radius > 0.0) {
+    int split = 0;
+    if (jb->fpoint == 0.0)
+        for (int c = psf->ncore; c >= 1 && !split; c--)
+            if (2.0 * jb->flux * psf->core[c - 1].wing_max < w->acc.wing_tolerance) split = c;
+    if (split) {
         view = *psf;
-        if (split) {
-            view.re = psf->core_re;
-            view.im = psf->core_im;
-            view.env = psf->env_core;
-        } else {
-            view.core_radius = 0.0;
-        }
+        view.re = psf->core[split - 1].re;
+        view.im = psf->core[split - 1].im;
+        view.env = psf->core[split - 1].env;
         psf = &view;
     }
     double rfold = object_radius(jb, t, psf, w->acc.folding_threshold, split);
@@ -1961,7 +1966,7 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
         for (long xx = xa; xx < xb; xx++) dst[xx - stamp->x0] = src[xx - xa] * norm;
         for (long xx = xb; xx < (long)stamp->x0 + stamp->nx; xx++) dst[xx - stamp->x0] = 0.0;
     }
-    if (split && wing) add_wing(psf, jb->flux, x, y, stamp);
+    if (split && wing) add_wing(psf, split, jb->flux, x, y, stamp);
     if (clamped && jb->fpoint == 0.0 && (st = dewrap(w, jb, &gd, x, y, stamp, split))) return st;
     double clipped = 0.0;
     for (size_t i = 0; i < (size_t)stamp->nx * stamp->ny; i++)
@@ -2035,7 +2040,7 @@ wf_status wf_profile_draw_galaxy(wf_profile_work *work, const wf_galaxy *g,
 
 wf_status wf_profile_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
                                  const wf_profile_psf *psf, double x, double y,
-                                 wf_stamp *bounds, wf_stamp *box, int *split)
+                                 wf_stamp *bounds, wf_stamp *box, int *core)
 {
     if (!g) return wf_error(WF_ERR_INPUT, "profile: no galaxy given");
     job jb;
@@ -2047,8 +2052,8 @@ wf_status wf_profile_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
     wf_stamp b = *bounds;
     if ((st = draw_job(work, &jb, psf, x, y, &b, 1, plan))) return st;
     *box = *bounds;
-    *split = plan[0] && g->flux > 0.0;
-    if (*split) { /* the FFT box [ic - M/2, ic + M/2) within the bounds */
+    *core = g->flux > 0.0 ? plan[0] : 0;
+    if (*core) { /* the FFT box [ic - M/2, ic + M/2) within the bounds */
         long ic = lround(x), jc = lround(y), h = plan[1] / 2;
         long x0 = ic - h > bounds->x0 ? ic - h : bounds->x0;
         long y0 = jc - h > bounds->y0 ? jc - h : bounds->y0;
@@ -2067,14 +2072,15 @@ wf_status wf_profile_draw_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
     return draw_galaxy(work, g, psf, x, y, stamp, 0);
 }
 
-wf_status wf_profile_add_wing(const wf_profile_psf *psf, double flux, double x, double y,
-                              wf_stamp *stamp)
+wf_status wf_profile_add_wing(const wf_profile_psf *psf, int core, double flux, double x,
+                              double y, wf_stamp *stamp)
 {
     wf_status st = check_stamp(stamp);
     if (st || (st = check_position(x, y))) return st;
-    if (!psf || !(psf->core_radius > 0.0))
-        return wf_error(WF_ERR_INPUT, "profile: a wing needs a PSF split into core and wing");
-    add_wing(psf, flux, x, y, stamp);
+    if (!psf || core < 1 || core > psf->ncore)
+        return wf_error(WF_ERR_INPUT, "profile: core %d: a wing needs a PSF split into that many "
+                        "cores (it has %d)", core, psf ? psf->ncore : 0);
+    add_wing(psf, core, flux, x, y, stamp);
     return WF_OK;
 }
 

@@ -43,6 +43,7 @@
 #define WF_PROFILE_MAX_KNOTS 1024
 #define WF_PROFILE_MAX_KNOT_FRAC 0.25 /* SPEC §4.2: knots hold at most 25% of the disk */
 #define WF_PROFILE_KNOT_ACCURACY 2.0611536224385579e-09 /* e^-20, the default knot_accuracy */
+#define WF_PROFILE_MAX_CORES 4
 
 /* Accuracy knobs; wf_profile_accuracy_default gives the values in brackets. */
 typedef struct wf_profile_accuracy {
@@ -56,6 +57,9 @@ typedef struct wf_profile_accuracy {
                                  interpolate it (bicubic) [192] */
     double core_radius;       /* arcsec; > 0 splits the PSF into core and wing ("Core and
                                  wing" below) [0: one PSF, the reference] */
+    int core_levels;          /* core radii: core_radius halved at each level, up to
+                                 WF_PROFILE_MAX_CORES; an object takes the smallest its
+                                 wing tolerance allows [1] */
     double wing_tolerance;    /* with a split PSF, extended objects whose wing error bound
                                  2 flux wing_max stays below this (flux per pixel) take the
                                  split [0: none] */
@@ -95,6 +99,21 @@ typedef struct wf_stamp {
     int fft;        /* FFT side used */
 } wf_stamp;
 
+/* One core of a split PSF (wf_profile_psf below). */
+typedef struct wf_profile_core {
+    double radius;             /* arcsec */
+    float *re, *im;            /* the core's table, laid out as the whole one */
+    double *env;               /* its envelope, as env */
+    double *ee;                /* ee[i]: the core's light within (i + 1) ee_dr, a fraction of
+                                  the image's flux */
+    double flux;               /* the core's share of the image's flux */
+    double wing_max;           /* largest |wing| pixel value, per unit flux */
+    float *wing;               /* wing_os^2 phase planes, plane (b, a) at (b wing_os + a)
+                                  wing_np^2: entry [n_y][n_x] is the wing's pixel value at
+                                  offset (n_x - wing_half + a / wing_os, n_y - wing_half +
+                                  b / wing_os) pixels from the object */
+} wf_profile_core;
+
 /* A PSF prepared for drawing: its Fourier transform times the pixel's, once. */
 typedef struct wf_profile_psf {
     double pixel_scale, scale; /* stamp pixel and PSF sample spacing, arcsec */
@@ -108,29 +127,21 @@ typedef struct wf_profile_psf {
     double *ee;                /* ee[i]: fraction of the image's flux within (i + 1) ee_dr */
     double *env;               /* env[i]: max |PSF(k) pixel(k)| over |k| >= i table steps, for
                                   cutting each draw where object x PSF < kvalue_accuracy */
-    /* Core and wing (acc.core_radius > 0; else core_radius 0 and the rest unset). The
-     * core is the image times a taper T(r) (1 within 2/3 core_radius, a raised cosine to 0
-     * at core_radius); the wing is the rest, exactly: the inverse transform of (whole table
-     * - core table), in real space, pixel included. A compact object is drawn as object x
-     * core in a Fourier box sized by the core, plus flux x wing at its position. That is
-     * exact for a point source, but an extended object's wing misses the object's own blur,
-     * which moves no pixel by more than 2 flux wing_max: so an object takes the split only
-     * when that bound is below acc.wing_tolerance (a scene sets it from the sky noise;
-     * errors and costs: docs/ACCURACY.md). Point sources gain nothing and never take it. */
-    double core_radius;        /* arcsec */
-    float *core_re, *core_im;  /* the core's table, laid out as re, im */
-    double *env_core;          /* its envelope, as env */
-    double *ee_core;           /* ee_core[i]: the core's light within (i + 1) ee_dr, a
-                                  fraction of the image's flux */
-    double core_flux;          /* the core's share of the image's flux */
-    double wing_max;           /* largest |wing| pixel value, per unit flux */
+    /* Core and wing (acc.core_radius > 0; else ncore 0). A core is the image times a taper
+     * T(r) (1 within 2/3 of its radius, a raised cosine to 0 at it); its wing is the rest,
+     * exactly: the inverse transform of (whole table - core table), in real space, pixel
+     * included. A compact object is drawn as object x core in a Fourier box sized by the
+     * core, plus flux x wing at its position. That is exact for a point source, but an
+     * extended object's wing misses the object's own blur, which moves no pixel by more
+     * than 2 flux wing_max: so an object takes a core only when that bound is below
+     * acc.wing_tolerance, and of those the smallest (a scene sets the tolerance from the sky
+     * noise, so faint galaxies take small boxes; errors and costs: docs/ACCURACY.md). Point
+     * sources gain nothing and never take one. */
+    int ncore;                 /* cores, by radius halving from core[0] (acc.core_levels) */
+    wf_profile_core core[WF_PROFILE_MAX_CORES];
     int wing_os, wing_half;    /* wing samples every 1 / wing_os pixel, offsets up to
                                   wing_half (+ 1) pixels each way */
     int wing_np;               /* samples per row of one phase plane */
-    float *wing;               /* wing_os^2 phase planes, plane (b, a) at (b wing_os + a)
-                                  wing_np^2: entry [n_y][n_x] is the wing's pixel value at
-                                  offset (n_x - wing_half + a / wing_os, n_y - wing_half +
-                                  b / wing_os) pixels from the object */
 } wf_profile_psf;
 
 struct wf_sersic_table;
@@ -207,19 +218,20 @@ wf_status wf_profile_draw_point(wf_profile_work *work, const wf_profile_psf *psf
 
 /* The split PSF piece by piece, for a renderer that keeps only the core box of a stamp:
  * wf_profile_galaxy_core gives, with the work's current knobs, the galaxy's stamp bounds (as
- * wf_profile_galaxy_bounds) and whether its draw takes the split and, if so, its FFT box
- * within them (else *box = *bounds); wf_profile_draw_galaxy_core draws it without the wing (pixels beyond the box are
- * zero; negatives clipped), and wf_profile_add_wing adds flux x wing at (x, y) to any
- * stamp (rows of it: the same pixels). Core plus wing is wf_profile_draw_galaxy's stamp
- * but for the clipping, done there on the sum. */
+ * wf_profile_galaxy_bounds) and which core its draw takes (*core: 0 none, else the core's
+ * index + 1) and then its FFT box within them (else *box = *bounds);
+ * wf_profile_draw_galaxy_core draws it without the wing (pixels beyond the box are zero;
+ * negatives clipped), and wf_profile_add_wing adds flux x that core's wing at (x, y) to any
+ * stamp (rows of it: the same pixels). Core plus wing is wf_profile_draw_galaxy's stamp but
+ * for the clipping, done there on the sum. */
 wf_status wf_profile_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
                                  const wf_profile_psf *psf, double x, double y,
-                                 wf_stamp *bounds, wf_stamp *box, int *split);
+                                 wf_stamp *bounds, wf_stamp *box, int *core);
 wf_status wf_profile_draw_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
                                       const wf_profile_psf *psf, double x, double y,
                                       wf_stamp *stamp);
-wf_status wf_profile_add_wing(const wf_profile_psf *psf, double flux, double x, double y,
-                              wf_stamp *stamp);
+wf_status wf_profile_add_wing(const wf_profile_psf *psf, int core, double flux, double x,
+                              double y, wf_stamp *stamp);
 
 /* Knot positions (x, y) in arcsec before shear and rotation, as the draw uses them: from
  * g->knot_xy when given, else from the counter-based stream (knot_seed, id,

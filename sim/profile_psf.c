@@ -136,15 +136,17 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
     *bytes = 2 * wf_arena_cost(side * side * sizeof(float)) +
              wf_arena_cost(ee_count(img) * sizeof(double)) +
              wf_arena_cost(((size_t)kr + 2) * sizeof(double));
-    *scratch = wf_arena_cost(side * side * 2 * sizeof(double));
+    /* the transform and the pixel's sinc line */
+    *scratch = wf_arena_cost(side * side * 2 * sizeof(double)) + wf_arena_cost(side * sizeof(double));
     if (acc->core_radius > 0.0) {
         split_geom g;
         split_layout(img, acc, &g);
-        *bytes += 2 * wf_arena_cost(side * side * sizeof(float)) +
-                  wf_arena_cost(((size_t)kr + 2) * sizeof(double)) +
-                  wf_arena_cost(ee_count(img) * sizeof(double)) +
-                  wf_arena_cost((size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np *
-                                sizeof(float));
+        *bytes += (size_t)acc->core_levels *
+                  (2 * wf_arena_cost(side * side * sizeof(float)) +
+                   wf_arena_cost(((size_t)kr + 2) * sizeof(double)) +
+                   wf_arena_cost(ee_count(img) * sizeof(double)) +
+                   wf_arena_cost((size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np *
+                                 sizeof(float)));
         /* the tapered image while the core is transformed, the wing's FFT while the whole
          * is */
         size_t taper = wf_arena_cost((size_t)img->n * (size_t)img->n * sizeof(double));
@@ -154,7 +156,8 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
     int os = integer_oversampling(acc->pixel_scale, img->scale_arcsec);
     if (os) {
         size_t np = (size_t)os * (size_t)acc->psf_table_fft;
-        *scratch += wf_arena_cost(np * 2 * (np / 2 + 1) * sizeof(double));
+        *scratch += wf_arena_cost(np * 2 * (np / 2 + 1) * sizeof(double)) +
+                    wf_arena_cost(side * 2 * sizeof(double)); /* and its phase line */
     } else {
         *scratch += wf_arena_cost((size_t)img->n * side * 2 * sizeof(double)) +
                     wf_arena_cost(side * 2 * sizeof(double));
@@ -190,7 +193,18 @@ static wf_status transform_fft(const wf_psf_image *img, int os, int table_fft, i
     size_t side = 2 * (size_t)kr + 1;
     const fftw_complex *f = (const fftw_complex *)buf;
     size_t half = (size_t)np / 2 + 1;
+    /* the phase is separable, e^{i a (u + v)}: one line of it (the tables are built for
+     * every core, and side^2 sincos calls would cost more than the FFT) */
+    double *line;
+    wf_status st2 = wf_arena_calloc(arena, 2 * side, sizeof(double), "PSF phase line", (void **)&line);
+    if (st2) return st2;
+    for (int u = -kr; u <= kr; u++) {
+        double ph = 2.0 * M_PI * c * u / np;
+        line[2 * (u + kr)] = cos(ph);
+        line[2 * (u + kr) + 1] = sin(ph);
+    }
     for (int v = -kr; v <= kr; v++) {
+        const double pvr = line[2 * (v + kr)], pvi = line[2 * (v + kr) + 1];
         for (int u = -kr; u <= kr; u++) {
             /* Hermitian: only u >= 0 is stored; F(-u, -v) = conj F(u, v) */
             int uu = u, vv = v;
@@ -202,8 +216,8 @@ static wf_status transform_fft(const wf_psf_image *img, int os, int table_fft, i
             }
             size_t row = (size_t)((vv % np + np) % np);
             double re = f[row * half + (size_t)uu][0], im = sgn * f[row * half + (size_t)uu][1];
-            double ph = 2.0 * M_PI * c * (u + v) / np;
-            double cr = cos(ph), ci = sin(ph);
+            const double pur = line[2 * (u + kr)], pui = line[2 * (u + kr) + 1];
+            double cr = pur * pvr - pui * pvi, ci = pur * pvi + pui * pvr;
             double *o = out + 2 * ((size_t)(v + kr) * side + (size_t)(u + kr));
             o[0] = re * cr - im * ci;
             o[1] = re * ci + im * cr;
@@ -271,12 +285,14 @@ static wf_status pixel_transform(const wf_psf_image *img, const wf_profile_accur
     st = os ? transform_fft(img, os, acc->psf_table_fft, kr_s, arena, raw)
             : transform_direct(img, dkt, kr_s, arena, raw);
     if (st) return st;
-    double p = acc->pixel_scale;
+    double p = acc->pixel_scale, *sx;
+    if ((st = wf_arena_calloc(arena, side_s, sizeof(double), "PSF pixel line", (void **)&sx))) return st;
+    for (int u = -kr_s; u <= kr_s; u++) sx[u + kr_s] = sinc(0.5 * u * dkt * p);
     for (int v = -kr_s; v <= kr_s; v++) {
-        double sy = sinc(0.5 * v * dkt * p);
+        double sy = sx[v + kr_s];
         for (int u = -kr_s; u <= kr_s; u++) {
             double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
-            double w = sy * sinc(0.5 * u * dkt * p);
+            double w = sy * sx[u + kr_s];
             o[0] *= w;
             o[1] *= w;
         }
@@ -328,12 +344,12 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
     if (kr > kr_s) kr = kr_s;
     size_t side = 2 * (size_t)kr + 1;
 
-    float *re, *im, *wing = NULL, *cre = NULL, *cim = NULL;
-    double *ee, *env, *ee_core = NULL, *cenv = NULL;
+    float *re, *im;
+    double *ee, *env;
     size_t nee = ee_count(img);
-    const int split = acc->core_radius > 0.0;
+    const int ncore = acc->core_radius > 0.0 ? acc->core_levels : 0;
     split_geom g = {0};
-    if (split) {
+    if (ncore) {
         split_layout(img, acc, &g);
         double edge = 0.5 * (img->n - 1) * img->scale_arcsec;
         if (!(acc->core_radius < edge))
@@ -351,18 +367,21 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF envelope",
                               (void **)&env)))
         return st;
-    if (split &&
-        ((st = wf_arena_calloc(arena, nee, sizeof(double), "PSF core encircled energy",
-                               (void **)&ee_core)) ||
-         (st = wf_arena_calloc(arena, (size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np,
-                               sizeof(float), "PSF wing", (void **)&wing)) ||
-         (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table",
-                               (void **)&cre)) ||
-         (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table",
-                               (void **)&cim)) ||
-         (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF core envelope",
-                               (void **)&cenv))))
-        return st;
+    for (int l = 0; l < ncore; l++) {
+        wf_profile_core *co = &psf->core[l];
+        co->radius = ldexp(acc->core_radius, -l);
+        if ((st = wf_arena_calloc(arena, nee, sizeof(double), "PSF core encircled energy",
+                                  (void **)&co->ee)) ||
+            (st = wf_arena_calloc(arena, (size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np,
+                                  sizeof(float), "PSF wing", (void **)&co->wing)) ||
+            (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table",
+                                  (void **)&co->re)) ||
+            (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table",
+                                  (void **)&co->im)) ||
+            (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF core envelope",
+                                  (void **)&co->env)))
+            return st;
+    }
     /* encircled energy about the image centre, for stamp sizes */
     const double c = 0.5 * (img->n - 1), dr = 0.5 * img->scale_arcsec;
     for (int j = 0; j < img->n; j++)
@@ -370,9 +389,9 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
             size_t bin = (size_t)(hypot(i - c, j - c) * img->scale_arcsec / dr);
             ee[bin < nee ? bin : nee - 1] += img->pix[(size_t)j * img->n + i];
         }
-    /* the whole image's table; with a split, then the core's (the tapered image) */
-    double core_sum = 0.0;
-    for (int pass = 0; pass <= split; pass++) {
+    /* the whole image's table; with a split, then each core's (the tapered image) */
+    for (int pass = 0; pass <= ncore; pass++) {
+        wf_profile_core *co = pass ? &psf->core[pass - 1] : NULL;
         mark = wf_arena_mark(arena);
         wf_psf_image src = *img;
         if (pass) {
@@ -386,9 +405,9 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
                 for (int i = 0; i < img->n; i++) {
                     double r = hypot(i - c, j - c) * img->scale_arcsec;
                     size_t at = (size_t)j * img->n + i, bin = (size_t)(r / dr);
-                    tapered[at] = img->pix[at] * core_taper(r, acc->core_radius);
-                    ee_core[bin < nee ? bin : nee - 1] += tapered[at];
-                    core_sum += tapered[at];
+                    tapered[at] = img->pix[at] * core_taper(r, co->radius);
+                    co->ee[bin < nee ? bin : nee - 1] += tapered[at];
+                    co->flux += tapered[at];
                 }
             src.pix = tapered;
         }
@@ -396,8 +415,8 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
             wf_arena_release(arena, mark);
             return st;
         }
-        float *tr = pass ? cre : re, *ti = pass ? cim : im;
-        double *te = pass ? cenv : env;
+        float *tr = pass ? co->re : re, *ti = pass ? co->im : im;
+        double *te = pass ? co->env : env;
         for (int v = -kr; v <= kr; v++)
             for (int u = -kr; u <= kr; u++) {
                 const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
@@ -411,17 +430,23 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         for (int i = kr; i > 0; i--) te[i - 1] = fmax(te[i - 1], te[i]);
         wf_arena_release(arena, mark);
     }
-    double run = 0.0, run_core = 0.0;
+    double run = 0.0;
     for (size_t bin = 0; bin < nee; bin++) {
         run += ee[bin];
         ee[bin] = run / sum;
-        if (split) {
-            run_core += ee_core[bin];
-            ee_core[bin] = run_core / sum;
+    }
+    for (int l = 0; l < ncore; l++) {
+        wf_profile_core *co = &psf->core[l];
+        run = 0.0;
+        for (size_t bin = 0; bin < nee; bin++) {
+            run += co->ee[bin];
+            co->ee[bin] = run / sum;
         }
+        co->flux /= sum;
     }
 
-    if (split) {
+    for (int l = 0; l < ncore; l++) {
+        wf_profile_core *co = &psf->core[l];
         /* the wing: (whole - core table) at every q-th step, c2r */
         mark = wf_arena_mark(arena);
         const size_t nf = (size_t)g.nfft, half = nf / 2 + 1;
@@ -437,8 +462,8 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
                 size_t at = (size_t)(vq * g.q + kr) * side + (size_t)(uq * g.q + kr);
                 double *bb = buf + 2 * ((size_t)((vq % g.nfft + g.nfft) % g.nfft) * half +
                                         (size_t)uq);
-                bb[0] = (double)re[at] - (double)cre[at];
-                bb[1] = (double)im[at] - (double)cim[at];
+                bb[0] = (double)re[at] - (double)co->re[at];
+                bb[1] = (double)im[at] - (double)co->im[at];
             }
         wf_profile_fftw_lock();
         fftw_plan plan = fftw_plan_dft_c2r_2d(g.nfft, g.nfft, (fftw_complex *)buf, buf,
@@ -457,7 +482,7 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         const long nfl = (long)g.nfft;
         for (int b = 0; b < WING_OS; b++)
             for (int a = 0; a < WING_OS; a++) {
-                float *plane = wing + ((size_t)b * WING_OS + (size_t)a) * (size_t)g.np * g.np;
+                float *plane = co->wing + ((size_t)b * WING_OS + (size_t)a) * (size_t)g.np * g.np;
                 for (int ny = 0; ny < g.np; ny++) {
                     long J = (long)b + (long)WING_OS * (ny - g.h);
                     size_t row = (size_t)(((J % nfl) + nfl) % nfl) * (nf + 2);
@@ -465,21 +490,17 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
                         long I = (long)a + (long)WING_OS * (nx - g.h);
                         float v = (float)(norm * buf[row + (size_t)(((I % nfl) + nfl) % nfl)]);
                         plane[(size_t)ny * g.np + nx] = v;
-                        if (fabs(v) > psf->wing_max) psf->wing_max = fabs(v);
+                        if (fabs(v) > co->wing_max) co->wing_max = fabs(v);
                     }
                 }
             }
         wf_arena_release(arena, mark);
-        psf->core_radius = acc->core_radius;
-        psf->core_re = cre;
-        psf->core_im = cim;
-        psf->env_core = cenv;
-        psf->ee_core = ee_core;
-        psf->core_flux = core_sum / sum;
+    }
+    psf->ncore = ncore;
+    if (ncore) {
         psf->wing_os = WING_OS;
         psf->wing_half = g.h;
         psf->wing_np = g.np;
-        psf->wing = wing;
     }
 
     psf->pixel_scale = acc->pixel_scale;

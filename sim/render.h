@@ -22,7 +22,8 @@ typedef struct wf_render_object {
     const void *data;   /* the drawing function's description of the object */
     double rel_slope;   /* d ln(brightness) / dt at the exposure mid-time, 1/s (0: constant;
                          * a supernova): feeds the source's fill_slope (hal/scene.h) */
-    int halo;           /* 1: the config's halo function adds light over the footprint */
+    int halo;           /* nonzero: the config's halo function adds light over the footprint
+                         * (the value is the caller's, e.g. which halo) */
     int bx0, by0, bnx, bny; /* the drawn and kept box, within the footprint (bnx 0: all) */
 } wf_render_object;
 

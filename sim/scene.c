@@ -38,7 +38,8 @@ typedef struct object {
 
 typedef struct object_plan {
     wf_stamp bounds, box; /* stamp bounds; the part kept in the pool */
-    int split;            /* a galaxy drawn with the split PSF (box only, wing per row) */
+    int split;            /* a galaxy drawn with the split PSF (box only, wing per row): the
+                           * core's index + 1, else 0 */
 } object_plan;
 
 typedef struct thread_state {
@@ -106,6 +107,7 @@ void wf_scene_setup_default(wf_scene_setup *s)
     s->psf_size = 256; /* 7" at 4x: drawing cost grows with its area (docs/BENCHMARKS.md) */
     s->flux_fraction = 0.995;
     s->core_radius = 2.0;
+    s->core_levels = 3;
     s->noise_tolerance = 1.0;
     s->exptime = 300.0;
     s->pool_bytes = (size_t)24 << 20; /* float stamps; split galaxies keep only their core box */
@@ -243,7 +245,7 @@ static wf_status halo_row(void *ctx, const wf_render_object *ro, int y, int xa, 
     const thread_state *ts = ctx;
     const object *o = ro->data;
     wf_stamp row = {xa, y, xb - xa, 1, out, 0, 0, 0};
-    return wf_profile_add_wing(&ts->scene->ppsf, o->g.flux, o->x, o->y, &row);
+    return wf_profile_add_wing(&ts->scene->ppsf, ro->halo, o->g.flux, o->x, o->y, &row);
 }
 
 static long long object_id(const wf_scene *s, const object *o)
@@ -548,6 +550,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     wf_profile_accuracy_default(&s->acc);
     s->acc.flux_fraction = setup->flux_fraction;
     s->acc.core_radius = setup->core_radius;
+    s->acc.core_levels = setup->core_levels;
     size_t keep, scratch;
     if ((st = wf_profile_psf_need(&s->psf_image, &s->acc, &keep, &scratch))) goto bad;
     size_t pbytes = keep + scratch + 4096;
@@ -644,7 +647,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
                                              box.x0, box.y0, box.nx, box.ny};
         if (rel != 0.0) s->time_variable = 1;
         if (b.x0 < setup->ncols && b.x0 + b.nx > 0 && b.y0 < setup->nrows && b.y0 + b.ny > 0) {
-            if (o->kind == OBJ_GALAXY) s->stats.galaxies++, s->stats.split += pl->split;
+            if (o->kind == OBJ_GALAXY) s->stats.galaxies++, s->stats.split += pl->split > 0;
             else if (o->kind == OBJ_STAR) s->stats.stars++;
             else s->stats.sne++;
         }

@@ -44,6 +44,7 @@ typedef struct wf_scene_setup {
     double diffusion;       /* charge diffusion, Gaussian sigma per axis, pixels [0: off] */
     double flux_fraction;   /* stamps hold at least this [0.995] */
     double core_radius;     /* arcsec, the PSF's core and wing split (sim/profile.h); 0: none [2] */
+    int core_levels;        /* core radii core_radius, halved at each level (sim/profile.h) [3] */
     double noise_tolerance; /* per object, looser knobs whose error bound stays below this x
                              * the sky noise of one pixel over exptime: folding (in [the
                              * profile default, WF_SCENE_FOLD_MAX]), the Fourier cut (up to

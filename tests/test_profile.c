@@ -1337,16 +1337,16 @@ START_TEST(test_core_wing)
     acc.core_radius = 1.0;
     ctx_open(&split, &acc, &img);
     const wf_profile_psf *sp = &split.psf;
-    ck_assert(sp->core_radius == 1.0 && sp->wing != NULL);
+    const wf_profile_core *co = &sp->core[0];
+    ck_assert(sp->ncore == 1 && co->radius == 1.0 && co->wing != NULL);
 
     /* the wing's pixels at whole-pixel offsets tile the plane: they sum to its flux */
     double wsum = 0.0;
-    for (int k = 0; k < sp->wing_np * sp->wing_np; k++) wsum += sp->wing[k];
+    for (int k = 0; k < sp->wing_np * sp->wing_np; k++) wsum += co->wing[k];
     printf("core and wing: core %.6f of the flux, wing sums to %.6f, max wing pixel %.3g\n",
-           sp->core_flux, wsum, sp->wing_max);
-    ck_assert_msg(fabs(wsum - (1.0 - sp->core_flux)) < 1e-6, "wing %.8f, core %.8f", wsum,
-                  sp->core_flux);
-    ck_assert(sp->core_flux > 0.9 && sp->core_flux < 0.99);
+           co->flux, wsum, co->wing_max);
+    ck_assert_msg(fabs(wsum - (1.0 - co->flux)) < 1e-6, "wing %.8f, core %.8f", wsum, co->flux);
+    ck_assert(co->flux > 0.9 && co->flux < 0.99);
 
     const double hlr[] = {0.005, 0.2, 0.5};
     for (int h = 0; h < 3; h++) {
@@ -1383,7 +1383,7 @@ START_TEST(test_core_wing)
             peak = fmax(peak, a.pix[k]);
             worst = fmax(worst, fabs(a.pix[k] - c.pix[k]));
         }
-        double bound = 2.0 * g.flux * sp->wing_max;
+        double bound = 2.0 * g.flux * co->wing_max;
         printf("core and wing: hlr %.3f: FFT %d -> %d, flux %.6f -> %.6f, worst pixel %.2e of "
                "the peak, %.3f of the bound\n", hlr[h], fft_whole, fft_split, a.sum / g.flux,
                c.sum / g.flux, worst / peak, worst / bound);
@@ -1409,7 +1409,7 @@ START_TEST(test_core_wing)
             for (int j = 0; j < box.ny; j++)
                 memcpy(sum.pix + (size_t)(box.y0 - b.y0 + j) * b.nx + (box.x0 - b.x0), core.pix + (size_t)j * box.nx,
                        sizeof(double) * box.nx);
-            ck_assert(wf_profile_add_wing(&split.psf, g.flux, x, y, &sum) == WF_OK);
+            ck_assert(wf_profile_add_wing(&split.psf, taken, g.flux, x, y, &sum) == WF_OK);
             double d = 0.0;
             for (int k = 0; k < b.nx * b.ny; k++)
                 if (c.pix[k] > 0.0 && sum.pix[k] > 0.0) d = fmax(d, fabs(sum.pix[k] - c.pix[k]));
@@ -1455,6 +1455,109 @@ START_TEST(test_core_wing)
     free(c.pix);
     ctx_close(&whole);
     ctx_close(&split);
+    free(psfpix);
+}
+END_TEST
+
+/* Core levels (sim/profile.h): radii halve level by level; the first level's tables are
+ * those of a one-core PSF, bit for bit; every wing holds exactly the light its core lacks,
+ * and smaller cores leave more in the wing (the premise of taking the smallest allowed). A
+ * galaxy takes the smallest core whose bound 2 flux wing_max its tolerance allows, gets a
+ * box no larger than with a larger core, stays within that core's bound, and its core box
+ * plus that core's wing is its whole split stamp. */
+START_TEST(test_core_levels)
+{
+    wf_psf_image img;
+    double *psfpix = halo_psf(256, 0.07, 0.8, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx whole, one, three;
+    ctx_open(&whole, &acc, &img);
+    acc.core_radius = 2.0; /* the scene's default ladder: 2", 1", 0.5" */
+    ctx_open(&one, &acc, &img);
+    acc.core_levels = 3;
+    ctx_open(&three, &acc, &img);
+    const wf_profile_psf *p1 = &one.psf, *p3 = &three.psf;
+    ck_assert(p1->ncore == 1 && p3->ncore == 3);
+    size_t tab = (size_t)(2 * p3->kr + 1) * (size_t)(2 * p3->kr + 1);
+    size_t wing = (size_t)p3->wing_os * p3->wing_os * (size_t)p3->wing_np * p3->wing_np;
+    ck_assert(p1->kr == p3->kr && p1->wing_np == p3->wing_np);
+    ck_assert(!memcmp(p1->core[0].re, p3->core[0].re, tab * sizeof(float)) &&
+              !memcmp(p1->core[0].im, p3->core[0].im, tab * sizeof(float)) &&
+              !memcmp(p1->core[0].wing, p3->core[0].wing, wing * sizeof(float)));
+    for (int l = 0; l < 3; l++) {
+        const wf_profile_core *co = &p3->core[l];
+        ck_assert(co->radius == ldexp(2.0, -l));
+        double wsum = 0.0;
+        for (int k = 0; k < p3->wing_np * p3->wing_np; k++) wsum += co->wing[k];
+        printf("core levels: radius %.2f\": core %.6f of the flux, wing %.6f, max wing pixel %.3g\n",
+               co->radius, co->flux, wsum, co->wing_max);
+        ck_assert_msg(fabs(wsum - (1.0 - co->flux)) < 1e-6, "level %d: wing %.8f, core %.8f", l, wsum,
+                      co->flux);
+        if (l) ck_assert(co->flux < p3->core[l - 1].flux && co->wing_max > p3->core[l - 1].wing_max);
+    }
+    wf_stamp junk = stamp_new(0, 0, 3, 3);
+    ck_assert(wf_profile_add_wing(p3, 0, 1.0, 1.0, 1.0, &junk) != WF_OK);
+    ck_assert(wf_profile_add_wing(p3, 4, 1.0, 1.0, 1.0, &junk) != WF_OK);
+    ck_assert(wf_profile_add_wing(p1, 2, 1.0, 1.0, 1.0, &junk) != WF_OK);
+    free(junk.pix);
+
+    wf_galaxy g = galaxy(1000.0, 0.3, 0.15, 0.1, 0.2, -0.1);
+    g.n_knots = 30;
+    g.knot_frac = 0.2;
+    g.knot_seed = 9;
+    const double x = 120.4, y = 88.7;
+    wf_stamp b;
+    ck_assert(wf_profile_galaxy_bounds(&whole.work, &g, &whole.psf, x, y, &b, NULL) == WF_OK);
+    wf_stamp ref = stamp_new(b.x0, b.y0, b.nx, b.ny);
+    ck_assert(wf_profile_work_tune(&whole.work, acc.flux_fraction, 1e-7, 1e-7, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
+    ck_assert(wf_profile_draw_galaxy(&whole.work, &g, &whole.psf, x, y, &ref) == WF_OK);
+    int last_fft = 1 << 30, first_fft = 0;
+    for (int want = 1; want <= 3; want++) {
+        /* a tolerance just above the bound of core `want`, below that of the next */
+        double tol = 2.0 * g.flux * p3->core[want - 1].wing_max * 1.01;
+        if (want < 3) ck_assert(tol < 2.0 * g.flux * p3->core[want].wing_max);
+        ck_assert(wf_profile_work_tune(&three.work, acc.flux_fraction, 1e-7, 1e-7, tol, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
+        wf_stamp bb, box;
+        int taken = 0;
+        ck_assert(wf_profile_galaxy_core(&three.work, &g, p3, x, y, &bb, &box, &taken) == WF_OK);
+        ck_assert_int_eq(taken, want);
+        wf_stamp c = stamp_new(b.x0, b.y0, b.nx, b.ny);
+        /* the box at the default folding (at 1e-7 the galaxy's own light sets it) */
+        ck_assert(wf_profile_work_tune(&three.work, acc.flux_fraction, acc.folding_threshold, acc.kvalue_accuracy, tol,
+                                       WF_PROFILE_KNOT_ACCURACY) == WF_OK);
+        ck_assert(wf_profile_draw_galaxy(&three.work, &g, p3, x, y, &c) == WF_OK);
+        ck_assert_msg(c.fft <= last_fft, "core %d: box %d, larger than %d", want, c.fft, last_fft);
+        last_fft = c.fft;
+        if (want == 1) first_fft = c.fft;
+        ck_assert(wf_profile_work_tune(&three.work, acc.flux_fraction, 1e-7, 1e-7, tol, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
+        ck_assert(wf_profile_draw_galaxy(&three.work, &g, p3, x, y, &c) == WF_OK);
+        double worst = 0.0;
+        for (int k = 0; k < b.nx * b.ny; k++) worst = fmax(worst, fabs(c.pix[k] - ref.pix[k]));
+        double bound = 2.0 * g.flux * p3->core[want - 1].wing_max;
+        printf("core levels: core %d: FFT %d, worst pixel %.3f of the bound\n", want, last_fft, worst / bound);
+        ck_assert_msg(worst <= bound, "core %d: %g beyond the bound %g", want, worst, bound);
+        /* the core box plus that core's wing */
+        wf_stamp core = stamp_new(box.x0, box.y0, box.nx, box.ny), sum = stamp_new(b.x0, b.y0, b.nx, b.ny);
+        ck_assert(wf_profile_draw_galaxy_core(&three.work, &g, p3, x, y, &core) == WF_OK);
+        for (int j = 0; j < box.ny; j++)
+            memcpy(sum.pix + (size_t)(box.y0 - b.y0 + j) * b.nx + (box.x0 - b.x0), core.pix + (size_t)j * box.nx,
+                   sizeof(double) * box.nx);
+        ck_assert(wf_profile_add_wing(p3, taken, g.flux, x, y, &sum) == WF_OK);
+        double d = 0.0;
+        for (int k = 0; k < b.nx * b.ny; k++)
+            if (c.pix[k] > 0.0 && sum.pix[k] > 0.0) d = fmax(d, fabs(sum.pix[k] - c.pix[k]));
+        ck_assert_msg(d <= core.clipped + 1e-12 * g.flux, "core %d: core + wing differs by %g", want, d);
+        free(core.pix);
+        free(sum.pix);
+        free(c.pix);
+    }
+    ck_assert_msg(last_fft < first_fft, "the smallest core's box %d is not smaller than the largest's %d",
+                  last_fft, first_fft);
+    free(ref.pix);
+    ctx_close(&whole);
+    ctx_close(&one);
+    ctx_close(&three);
     free(psfpix);
 }
 END_TEST
@@ -1949,6 +2052,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_sheared_ellipticity);
     tcase_add_test(ind, test_pieces_identical);
     tcase_add_test(ind, test_core_wing);
+    tcase_add_test(ind, test_core_levels);
     tcase_add_test(ind, test_psf_table_interpolation);
     tcase_add_test(ind, test_psf_any_sampling);
     tcase_add_test(ind, test_knot_lattice);

@@ -745,8 +745,8 @@ static wf_status scene_inputs(const acc_run *run, int n, scene_in *in)
 
 /* Noise-free rates (e-/pixel/s) of the region as the renderer hands them to the firmware. */
 static wf_status scene_render(const acc_run *run, const scene_in *in, int bin, int over, int size,
-                              double ff, int sky, double tol, double core, float *rate, double *cpu,
-                              char *notes, size_t cap)
+                              double ff, int sky, double tol, double core, int levels, float *rate,
+                              double *cpu, char *notes, size_t cap)
 {
     wf_scene_setup ss;
     wf_scene_setup_default(&ss);
@@ -762,6 +762,7 @@ static wf_status scene_render(const acc_run *run, const scene_in *in, int bin, i
     ss.sky_on = sky;
     ss.noise_tolerance = tol;
     ss.core_radius = core;
+    if (levels > 0) ss.core_levels = levels;
     ss.exptime = in->cfg.ro.exptime;
     ss.threads = 1;
     double t0 = cpu_now();
@@ -790,6 +791,7 @@ typedef struct render_setting {
     double ff;
     double tol, core; /* scene.noise_tolerance, psf.core_radius (0, 0: every object exact) */
     int sky;          /* 1: rendered on the sky (whose noise tol refers to), then taken off */
+    int levels;       /* psf.core_levels (0: the scene's default) */
 } render_setting;
 
 static wf_status render_knob(acc_run *run, const scene_in *in, const char *tcase, const char *knob,
@@ -808,7 +810,7 @@ static wf_status render_knob(acc_run *run, const scene_in *in, const char *tcase
         row_init(&rows[k], "scene", tcase, knob, values[k]);
         rows[k].reference = k == ref;
         st = scene_render(run, in, set[k].bin, set[k].over, set[k].size, set[k].ff, set[k].sky, set[k].tol,
-                          set[k].core, rate + (size_t)k * np, &rows[k].cpu_seconds, rows[k].notes,
+                          set[k].core, set[k].levels, rate + (size_t)k * np, &rows[k].cpu_seconds, rows[k].notes,
                           sizeof rows[k].notes);
         if (!st && set[k].sky) { /* the same sky alone, taken off */
             scene_in empty = *in;
@@ -817,8 +819,8 @@ static wf_status render_knob(acc_run *run, const scene_in *in, const char *tcase
             double c;
             char nn[8];
             if (!sky) st = wf_error(WF_ERR_NOMEM, "accuracy: out of memory");
-            else st = scene_render(run, &empty, set[k].bin, set[k].over, set[k].size, set[k].ff, 1, 0.0, 0.0, sky,
-                                   &c, nn, sizeof nn);
+            else st = scene_render(run, &empty, set[k].bin, set[k].over, set[k].size, set[k].ff, 1, 0.0, 0.0, 0,
+                                   sky, &c, nn, sizeof nn);
             for (size_t i = 0; i < np && !st; i++) rate[(size_t)k * np + i] -= sky[i];
             free(sky);
         }
@@ -1007,37 +1009,44 @@ static wf_status sweep_scene(acc_run *run)
     char tcase[16];
     snprintf(tcase, sizeof tcase, "region%d", n);
     {
-        render_setting s[4] = {{8, 4, 256, 0.995, 0.0, 0.0, 0}, {4, 4, 256, 0.995, 0.0, 0.0, 0}, {2, 4, 256, 0.995, 0.0, 0.0, 0}, {1, 4, 256, 0.995, 0.0, 0.0, 0}};
+        render_setting s[4] = {{8, 4, 256, 0.995, 0.0, 0.0, 0, 0}, {4, 4, 256, 0.995, 0.0, 0.0, 0, 0}, {2, 4, 256, 0.995, 0.0, 0.0, 0, 0}, {1, 4, 256, 0.995, 0.0, 0.0, 0, 0}};
         const char *v[4] = {"8", "4", "2", "1"};
         int k = q ? 2 : 4;
         if ((st = render_knob(run, &in, tcase, "pupil_bin", s, v, k, k - 1))) goto out;
     }
     if (!q) { /* at the default 7.04" extent: psf.oversample alone keeps 256 samples */
-        render_setting s[3] = {{8, 2, 128, 0.995, 0.0, 0.0, 0}, {8, 4, 256, 0.995, 0.0, 0.0, 0}, {8, 8, 512, 0.995, 0.0, 0.0, 0}};
+        render_setting s[3] = {{8, 2, 128, 0.995, 0.0, 0.0, 0, 0}, {8, 4, 256, 0.995, 0.0, 0.0, 0, 0}, {8, 8, 512, 0.995, 0.0, 0.0, 0, 0}};
         const char *v[3] = {"2", "4", "8"};
         if ((st = render_knob(run, &in, tcase, "oversample", s, v, 3, 2))) goto out;
     }
     if (!q) {
-        render_setting s[3] = {{8, 4, 128, 0.995, 0.0, 0.0, 0}, {8, 4, 256, 0.995, 0.0, 0.0, 0}, {8, 4, 512, 0.995, 0.0, 0.0, 0}};
+        render_setting s[3] = {{8, 4, 128, 0.995, 0.0, 0.0, 0, 0}, {8, 4, 256, 0.995, 0.0, 0.0, 0, 0}, {8, 4, 512, 0.995, 0.0, 0.0, 0, 0}};
         const char *v[3] = {"128", "256", "512"};
         if ((st = render_knob(run, &in, tcase, "psf_size", s, v, 3, 2))) goto out;
     }
     if (!q) {
-        render_setting s[4] = {{8, 4, 256, 0.99, 0.0, 0.0, 0}, {8, 4, 256, 0.995, 0.0, 0.0, 0}, {8, 4, 256, 0.999, 0.0, 0.0, 0}, {8, 4, 256, 0.9999, 0.0, 0.0, 0}};
+        render_setting s[4] = {{8, 4, 256, 0.99, 0.0, 0.0, 0, 0}, {8, 4, 256, 0.995, 0.0, 0.0, 0, 0}, {8, 4, 256, 0.999, 0.0, 0.0, 0, 0}, {8, 4, 256, 0.9999, 0.0, 0.0, 0, 0}};
         const char *v[4] = {"0.99", "0.995", "0.999", "0.9999"};
         if ((st = render_knob(run, &in, tcase, "flux_fraction", s, v, 4, 3))) goto out;
     }
     { /* per-object knobs from the sky noise (sim/scene.h), with the default split PSF */
-        render_setting s[4] = {{8, 4, 256, 0.995, 3.0, 2.0, 1}, {8, 4, 256, 0.995, 1.0, 2.0, 1},
-                               {8, 4, 256, 0.995, 0.3, 2.0, 1}, {8, 4, 256, 0.995, 0.0, 2.0, 1}};
+        render_setting s[4] = {{8, 4, 256, 0.995, 3.0, 2.0, 1, 0}, {8, 4, 256, 0.995, 1.0, 2.0, 1, 0},
+                               {8, 4, 256, 0.995, 0.3, 2.0, 1, 0}, {8, 4, 256, 0.995, 0.0, 2.0, 1, 0}};
         const char *v[4] = {"3", "1", "0.3", "0"};
         if ((st = render_knob(run, &in, tcase, "noise_tolerance", s, v, 4, 3))) goto out;
     }
-    if (!q) { /* the core radius at the default tolerance */
-        render_setting s[4] = {{8, 4, 256, 0.995, 1.0, 1.5, 1}, {8, 4, 256, 0.995, 1.0, 2.0, 1},
-                               {8, 4, 256, 0.995, 1.0, 3.0, 1}, {8, 4, 256, 0.995, 0.0, 2.0, 1}};
+    if (!q) { /* the core radius at the default tolerance, one core */
+        render_setting s[4] = {{8, 4, 256, 0.995, 1.0, 1.5, 1, 1}, {8, 4, 256, 0.995, 1.0, 2.0, 1, 1},
+                               {8, 4, 256, 0.995, 1.0, 3.0, 1, 1}, {8, 4, 256, 0.995, 0.0, 2.0, 1, 1}};
         const char *v[4] = {"1.5", "2", "3", "exact"};
         if ((st = render_knob(run, &in, tcase, "core_radius", s, v, 4, 3))) goto out;
+    }
+    if (!q) { /* the core levels (radii 2", 1", 0.5", 0.25") at the default tolerance */
+        render_setting s[5] = {{8, 4, 256, 0.995, 1.0, 2.0, 1, 1}, {8, 4, 256, 0.995, 1.0, 2.0, 1, 2},
+                               {8, 4, 256, 0.995, 1.0, 2.0, 1, 3}, {8, 4, 256, 0.995, 1.0, 2.0, 1, 4},
+                               {8, 4, 256, 0.995, 0.0, 2.0, 1, 1}};
+        const char *v[5] = {"1", "2", "3", "4", "exact"};
+        if ((st = render_knob(run, &in, tcase, "core_levels", s, v, 5, 4))) goto out;
     }
     { /* the readout modes on the default rendering, sky included */
         float *truth = malloc(sizeof *truth * (size_t)n * n);
@@ -1047,7 +1056,7 @@ static wf_status sweep_scene(acc_run *run)
             st = wf_error(WF_ERR_NOMEM, "accuracy: cannot hold a %dx%d rendering", n, n);
             goto out;
         }
-        st = scene_render(run, &in, 8, 4, 256, 0.995, 1, 1.0, 2.0, truth, &cpu, notes, sizeof notes);
+        st = scene_render(run, &in, 8, 4, 256, 0.995, 1, 1.0, 2.0, 0, truth, &cpu, notes, sizeof notes);
         if (!st) st = sampling_knob(run, &in, truth, 1);
         if (!st && !q) st = sampling_knob(run, &in, truth, 0);
         free(truth);

@@ -232,6 +232,10 @@ static const key_desc keys[] = {
      .doc = "Objects are drawn as object x PSF core (the PSF within this radius, tapered from 2/3 of it) in a "
             "Fourier box sized by the core, plus flux x the PSF's wing beyond; 0: the whole PSF in every box "
             "(exact, slower). Errors and costs: docs/ACCURACY.md."},
+    {.name = "psf.core_levels", .type = KT_INT, .unit = "", .def = "3", MIN(1), MAX(4), FIELD(psf_core_levels),
+     .doc = "Cores of radius psf.core_radius halved at each level (3: 2\", 1\", 0.5\"); each object takes the "
+            "smallest whose wing error its sky noise allows (scene.noise_tolerance), so faint galaxies get small "
+            "Fourier boxes. Each level costs ~3 MB and ~20 ms once."},
     {.name = "psf.oversample", .type = KT_INT, .unit = "", .def = "4", MIN(2), MAX(8),
      FIELD(psf_oversample), .doc = "PSF image sampling: 0.11 / oversample arcsec."},
     {.name = "scene.sky_rate", .type = KT_DOUBLE, .unit = "e-/pixel/s", MIN(0),

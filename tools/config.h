@@ -42,6 +42,7 @@ typedef struct wf_config {
     double psf_bright_mag;         /* psf.bright_mag [15] */
     double flux_fraction;          /* scene.flux_fraction [0.995] */
     double psf_core_radius;        /* psf.core_radius [2] */
+    int psf_core_levels;           /* psf.core_levels [3] */
     double noise_tolerance;        /* scene.noise_tolerance [1] */
     int sky_on;                    /* scene.sky [true] */
     double stray_light;            /* scene.stray_light [0.1] */

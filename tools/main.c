@@ -246,6 +246,7 @@ static int cmd_stamp(cli *c)
     ss.bright_mag = cfg->psf_bright_mag;
     ss.flux_fraction = cfg->flux_fraction;
     ss.core_radius = cfg->psf_core_radius;
+    ss.core_levels = cfg->psf_core_levels;
     ss.sky_on = 0;
     if (!st) st = wf_scene_create(&ss, in.have_gal && in.gal.n ? &in.gal : NULL, in.have_stars && in.stars.n ? &in.stars : NULL, &scene);
     if (!st && wf_scene_object_count(scene) == 0)
@@ -278,6 +279,7 @@ static int cmd_stamp(cli *c)
         fits_write_key_lng(f, "PSFOVER", cfg->psf_oversample, "PSF image oversampling", &status);
         fits_write_key_dbl(f, "FLUXFRAC", cfg->flux_fraction, 6, "stamp holds at least this", &status);
         fits_write_key_dbl(f, "CORERAD", cfg->psf_core_radius, 6, "[arcsec] PSF core radius (0: no split)", &status);
+        fits_write_key_lng(f, "CORELEV", cfg->psf_core_levels, "PSF cores, radius halved at each", &status);
         fits_write_key_str(f, "BUNIT", "electron/s", "", &status);
         long first[2] = {1, 1};
         fits_write_pix(f, TDOUBLE, first, (long long)nx * ny, pix, &status);

@@ -234,6 +234,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         ss.bright_mag = cfg->psf_bright_mag;
         ss.flux_fraction = cfg->flux_fraction;
         ss.core_radius = cfg->psf_core_radius;
+        ss.core_levels = cfg->psf_core_levels;
         ss.noise_tolerance = cfg->noise_tolerance;
         ss.exptime = cfg->ro.mode == WF_MODE_SINGLE ? cfg->ro.exptime : wf_clock_exposure_time(pj->clock);
         ss.sky_on = cfg->sky_on;
