@@ -236,8 +236,7 @@ static wf_status halo_rows(wf_renderer *r, size_t i, int ya, int yb, int xa, int
     for (int y = ya; y < yb; y++) {
         double *d = buf + (size_t)(y - ya) * w;
         if ((st = r->cfg.halo(r->draw_ctx, o, y, xa, xb, d))) return st;
-        for (size_t x = 0; x < w; x++)
-            if (d[x] < 0.0) d[x] = 0.0;
+        for (size_t x = 0; x < w; x++) d[x] = d[x] < 0.0 ? 0.0 : d[x]; /* a store every pixel: vectorised */
     }
     *out = buf;
     return WF_OK;
