@@ -9,6 +9,8 @@
  * Independent of GalSim:
  *  - the de Vaucouleurs Fourier table against brute-force quadrature and its series;
  *  - knots: radial distribution (Kolmogorov-Smirnov), uniform angles, reproducibility;
+ *  - stamp sizes: the radius search against a bisection of the closed-form enclosed light,
+ *    to ~1e-10 of the radius;
  *  - flux: sums against exact pixel integrals of round profiles (computed here by a 1-D
  *    angular quadrature of the enclosed-flux function, not by the code under test);
  *  - centring, sheared and rotated ellipticity from unweighted moments;
@@ -808,6 +810,109 @@ START_TEST(test_knots_reproducible)
     ck_assert(memcmp(s1.pix, s2.pix, sizeof(double) * 96 * 96) == 0);
     free(s1.pix);
     free(s2.pix);
+    ctx_close(&c);
+}
+END_TEST
+
+/* ------------------------------------------------------------------------ stamp sizes */
+
+/* Light of a round galaxy outside radius r, from the closed-form enclosed fractions. */
+static double light_outside(double bf, double hb, double hd, double r)
+{
+    double eb = 1.0, ed = 1.0;
+    if (bf > 0.0) ck_assert(wf_profile_enclosed(4, hb, r, &eb) == WF_OK);
+    if (bf < 1.0) ck_assert(wf_profile_enclosed(1, hd, r, &ed) == WF_OK);
+    return bf * (1.0 - eb) + (1.0 - bf) * (1.0 - ed);
+}
+
+/* The smallest radius leaving at most eps outside, by plain bisection in r to the last
+ * bits, and no smaller than the search's floor: 1e-9 of the larger scale length. */
+static double radius_by_bisection(double bf, double hb, double hd, double eps)
+{
+    double rmin = 1e-9 * fmax(bf > 0.0 ? hb : 0.0, bf < 1.0 ? hd / wf_sersic4_table()->b1 : 0.0);
+    if (light_outside(bf, hb, hd, rmin) <= eps) return rmin;
+    double lo = rmin, hi = 2.0 * rmin;
+    while (light_outside(bf, hb, hd, hi) > eps) hi *= 2.0;
+    for (int it = 0; it < 200 && hi - lo > 1e-16 * hi; it++) {
+        double mid = 0.5 * (lo + hi);
+        if (light_outside(bf, hb, hd, mid) <= eps) hi = mid;
+        else lo = mid;
+    }
+    return hi;
+}
+
+/* Without a PSF a round galaxy's stamp half-size is ceil(r / p - 1e-9) for the radius r
+ * the search returns: never below the root (the smallest radius leaving at most eps =
+ * 1 - flux_fraction of the light out), at most 1e-9 of it above (the bisection's last step
+ * is 4.7e-10). Each case is scaled twice, putting the root (found here by bisecting
+ * wf_profile_enclosed) just above a pixel edge n p, where a radius more than ~1e-9 p below
+ * the root gives n instead of n + 1, and 3e-9 of it below the edge, where a radius more
+ * than ~3e-9 above the root gives n + 1 instead of n (both looser at eps 1e-12, where
+ * 1 - enclosed loses digits). Pure disk and bulge, mixtures, knots (counted with the
+ * disk: placed at the centre, so that only their light matters), eps from 1e-12 to 0.1,
+ * and eps = 1 (the search's floor). */
+START_TEST(test_radius_search)
+{
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, NULL);
+    const struct {
+        double bf, hb, hd, ff;
+        int knots;
+    } cases[] = {
+        {0.0, 0.0, 0.4, 0.995, 0},      /* pure disk */
+        {1.0, 0.3, 0.0, 0.995, 0},      /* pure bulge */
+        {0.3, 0.2, 0.5, 0.995, 0},      {0.8, 0.6, 0.3, 0.995, 0},
+        {1e-3, 0.05, 0.6, 0.995, 0},    /* a trace of bulge */
+        {0.4, 0.25, 0.45, 0.995, 1},    /* knots: a quarter of the disk's light */
+        {0.0, 0.0, 0.7, 0.9, 0},        {1.0, 0.5, 0.0, 0.9, 0},
+        {0.5, 0.3, 0.3, 1 - 1e-6, 0},   {1.0, 0.1, 0.0, 1 - 1e-6, 0},
+        {0.2, 0.004, 0.5, 1 - 1e-12, 0}, {0.0, 0.0, 0.3, 1 - 1e-12, 0},
+        {0.6, 0.2, 0.4, 1e-300, 0},     /* eps = 1: the floor already leaves it out */
+    };
+    const int ncases = (int)(sizeof cases / sizeof *cases);
+    double knot_xy[2 * 10];
+    for (int j = 0; j < 10; j++) {
+        knot_xy[2 * j] = 0.002 * cos(j);
+        knot_xy[2 * j + 1] = 0.002 * sin(j);
+    }
+    for (int k = 0; k < ncases; k++)
+        for (int above = 0; above < 2; above++) {
+            const double bf = cases[k].bf, eps = 1.0 - cases[k].ff;
+            ck_assert(wf_profile_work_tune(&c.work, cases[k].ff, acc.folding_threshold,
+                                           acc.kvalue_accuracy, acc.wing_tolerance,
+                                           acc.knot_accuracy) == WF_OK);
+            /* this bisection's own error: 1 - enclosed loses ~1e-16 of the flux */
+            double err = 1e-13 + 1e-15 / eps;
+            double r0 = radius_by_bisection(bf, cases[k].hb, cases[k].hd, eps);
+            double n = fmax(2.0, round(r0 / P));
+            double target = above ? n + 2e-9 + 3.0 * n * err : n - 3.0 * n * (1e-9 + err);
+            double scale = eps < 1.0 ? target * P / r0 : 1.0;
+            double hb = cases[k].hb * scale, hd = cases[k].hd * scale;
+            double r = radius_by_bisection(bf, hb, hd, eps);
+            int lower = (int)ceil(r * (1.0 - err) / P - 1e-9);
+            int upper = (int)ceil(r * (1.0 + 1e-9 + err) / P - 1e-9);
+            ck_assert_msg(lower == upper && (eps >= 1.0 || lower == (int)n + above),
+                          "case %d: the case does not pin the radius (%d, %d)", k, lower, upper);
+            wf_galaxy g = galaxy(100.0, bf, hd, hb, 0, 0);
+            if (cases[k].knots) {
+                g.n_knots = 10;
+                g.knot_frac = 0.25;
+                g.knot_xy = knot_xy;
+            }
+            wf_stamp s;
+            double frac;
+            ck_assert(wf_profile_galaxy_bounds(&c.work, &g, NULL, 50.0, 60.0, &s, &frac) == WF_OK);
+            int h = (s.nx - 1) / 2;
+            ck_assert(s.nx == s.ny && s.x0 == 50 - h && s.y0 == 60 - h && frac == cases[k].ff);
+            ck_assert_msg(h == lower, "case %d (bulge %g, hlr %.6f, %.6f, eps %g): half-size %d, "
+                          "the radius %.12f\" gives %d", k, bf, hb, hd, eps, h, r, lower);
+            ck_assert_msg(light_outside(bf, hb, hd, h * P) <= eps, "case %d: %.3g out of %d pixels",
+                          k, light_outside(bf, hb, hd, h * P), h);
+        }
+    printf("radius search: %d cases, each with the radius just above and just below a pixel "
+           "edge, match the bisection\n", ncases);
     ctx_close(&c);
 }
 END_TEST
@@ -2046,6 +2151,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_sersic_transform);
     tcase_add_test(ind, test_knots_follow_disk);
     tcase_add_test(ind, test_knots_reproducible);
+    tcase_add_test(ind, test_radius_search);
     tcase_add_test(ind, test_flux_exact_pixels);
     tcase_add_test(ind, test_flux_with_psf);
     tcase_add_test(ind, test_centred_symmetric);
