@@ -61,8 +61,8 @@ typedef struct wf_profile_accuracy {
                                  WF_PROFILE_MAX_CORES; an object takes the smallest its
                                  wing tolerance allows [1] */
     double wing_tolerance;    /* with a split PSF, extended objects whose wing error bound
-                                 2 flux wing_max stays below this (flux per pixel) take the
-                                 split [0: none] */
+                                 2 flux wing_max (that core's) stays below this (flux per
+                                 pixel) take the smallest such core [0: none] */
     double knot_accuracy;     /* the knot lattice's aliasing, e^-E: a pixel moves by ~10 e^-E
                                  of the knots' flux at most [e^-20 = 2.1e-9] */
 } wf_profile_accuracy;

@@ -355,6 +355,13 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         if (!(acc->core_radius < edge))
             return wf_error(WF_ERR_RANGE, "profile: core_radius %g arcsec reaches the PSF image's edge "
                             "(%g arcsec): there would be no wing", acc->core_radius, edge);
+        /* a core under two pixels is never taken (its wing holds most of the PSF's peak)
+         * and its transform reaches far past the table's band */
+        double smallest = ldexp(acc->core_radius, 1 - ncore);
+        if (!(smallest >= 2.0 * acc->pixel_scale))
+            return wf_error(WF_ERR_RANGE, "profile: core_radius %g arcsec with %d core_levels makes a "
+                            "%g arcsec core, under two %g arcsec pixels; use fewer levels",
+                            acc->core_radius, ncore, smallest, acc->pixel_scale);
         /* the wing table's period must hold it without overlap */
         if (g.lw < g.np)
             return wf_error(WF_ERR_RANGE, "profile: a %d-sample PSF image (%g arcsec) is wider than "

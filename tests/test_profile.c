@@ -1601,6 +1601,21 @@ START_TEST(test_core_levels)
                       co->flux);
         if (l) ck_assert(co->flux < p3->core[l - 1].flux && co->wing_max > p3->core[l - 1].wing_max);
     }
+    { /* a ladder reaching under two pixels is refused, with a message */
+        wf_profile_accuracy bad = acc;
+        bad.core_radius = 0.8;
+        size_t keep, scratch;
+        ck_assert(wf_profile_psf_need(&img, &bad, &keep, &scratch) == WF_OK);
+        void *mem = malloc(keep + scratch + 4096);
+        wf_arena ar;
+        wf_arena_init(&ar, mem, keep + scratch + 4096, "bad ladder");
+        wf_profile_psf bp;
+        ck_assert(wf_profile_psf_init(&bp, &img, &bad, &ar) == WF_ERR_RANGE);
+        ck_assert(strstr(wf_error_message(), "core_levels") != NULL);
+        bad.core_levels = 2; /* 0.8", 0.4": allowed */
+        ck_assert(wf_profile_psf_init(&bp, &img, &bad, &ar) == WF_OK && bp.ncore == 2);
+        free(mem);
+    }
     wf_stamp junk = stamp_new(0, 0, 3, 3);
     ck_assert(wf_profile_add_wing(p3, 0, 1.0, 1.0, 1.0, &junk) != WF_OK);
     ck_assert(wf_profile_add_wing(p3, 4, 1.0, 1.0, 1.0, &junk) != WF_OK);
