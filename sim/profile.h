@@ -104,8 +104,6 @@ typedef struct wf_profile_core {
     double radius;             /* arcsec */
     float *re, *im;            /* the core's table, laid out as the whole one */
     double *env;               /* its envelope, as env */
-    double *ee;                /* ee[i]: the core's light within (i + 1) ee_dr, a fraction of
-                                  the image's flux */
     double flux;               /* the core's share of the image's flux */
     double wing_max;           /* largest |wing| pixel value, per unit flux */
     float *wing;               /* wing_os^2 phase planes, plane (b, a) at (b wing_os + a)

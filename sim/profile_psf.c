@@ -144,7 +144,6 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
         *bytes += (size_t)acc->core_levels *
                   (2 * wf_arena_cost(side * side * sizeof(float)) +
                    wf_arena_cost(((size_t)kr + 2) * sizeof(double)) +
-                   wf_arena_cost(ee_count(img) * sizeof(double)) +
                    wf_arena_cost((size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np *
                                  sizeof(float)));
         /* the tapered image while the core is transformed, the wing's FFT while the whole
@@ -377,9 +376,7 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
     for (int l = 0; l < ncore; l++) {
         wf_profile_core *co = &psf->core[l];
         co->radius = ldexp(acc->core_radius, -l);
-        if ((st = wf_arena_calloc(arena, nee, sizeof(double), "PSF core encircled energy",
-                                  (void **)&co->ee)) ||
-            (st = wf_arena_calloc(arena, (size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np,
+        if ((st = wf_arena_calloc(arena, (size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np,
                                   sizeof(float), "PSF wing", (void **)&co->wing)) ||
             (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table",
                                   (void **)&co->re)) ||
@@ -411,9 +408,8 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
             for (int j = 0; j < img->n; j++)
                 for (int i = 0; i < img->n; i++) {
                     double r = hypot(i - c, j - c) * img->scale_arcsec;
-                    size_t at = (size_t)j * img->n + i, bin = (size_t)(r / dr);
+                    size_t at = (size_t)j * img->n + i;
                     tapered[at] = img->pix[at] * core_taper(r, co->radius);
-                    co->ee[bin < nee ? bin : nee - 1] += tapered[at];
                     co->flux += tapered[at];
                 }
             src.pix = tapered;
@@ -442,15 +438,7 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         run += ee[bin];
         ee[bin] = run / sum;
     }
-    for (int l = 0; l < ncore; l++) {
-        wf_profile_core *co = &psf->core[l];
-        run = 0.0;
-        for (size_t bin = 0; bin < nee; bin++) {
-            run += co->ee[bin];
-            co->ee[bin] = run / sum;
-        }
-        co->flux /= sum;
-    }
+    for (int l = 0; l < ncore; l++) psf->core[l].flux /= sum;
 
     for (int l = 0; l < ncore; l++) {
         wf_profile_core *co = &psf->core[l];

@@ -1427,6 +1427,28 @@ static double *halo_psf(int n, double s1, double s2, wf_psf_image *img)
     return pix;
 }
 
+/* Piece by piece, as the renderer keeps a split galaxy: its core box (box, within the
+ * stamp bounds b) plus core `core`'s wing over the stamp must give the whole split draw
+ * `whole`, equal wherever nothing was clipped: the only difference is the core's negative
+ * ringing, zeroed before the wing is added here and after it in the whole draw. */
+static void core_plus_wing(wf_profile_work *work, const wf_profile_psf *psf, const wf_galaxy *g, double x,
+                           double y, const wf_stamp *b, const wf_stamp *box, int core, const wf_stamp *whole)
+{
+    wf_stamp cs = stamp_new(box->x0, box->y0, box->nx, box->ny), sum = stamp_new(b->x0, b->y0, b->nx, b->ny);
+    ck_assert(wf_profile_draw_galaxy_core(work, g, psf, x, y, &cs) == WF_OK);
+    for (int j = 0; j < box->ny; j++)
+        memcpy(sum.pix + (size_t)(box->y0 - b->y0 + j) * b->nx + (box->x0 - b->x0), cs.pix + (size_t)j * box->nx,
+               sizeof(double) * box->nx);
+    ck_assert(wf_profile_add_wing(psf, core, g->flux, x, y, &sum) == WF_OK);
+    double d = 0.0;
+    for (int k = 0; k < b->nx * b->ny; k++)
+        if (whole->pix[k] > 0.0 && sum.pix[k] > 0.0) d = fmax(d, fabs(sum.pix[k] - whole->pix[k]));
+    ck_assert_msg(d <= cs.clipped + 1e-12 * g->flux, "core %d, hlr %g: core + wing differs by %g (clipped %g)", core,
+                  g->hlr_disk, d, cs.clipped);
+    free(cs.pix);
+    free(sum.pix);
+}
+
 /* Core and wing (sim/profile.h): the wing table holds exactly the light the core lacks; an
  * object whose wing error bound is not tolerated is drawn bit for bit as without the split;
  * one that takes it keeps its flux, moves no pixel by more than the bound 2 flux wing_max
@@ -1509,21 +1531,7 @@ START_TEST(test_core_wing)
             ck_assert_msg(taken && box.x0 >= b.x0 && box.y0 >= b.y0 && box.x0 + box.nx <= b.x0 + b.nx &&
                               box.y0 + box.ny <= b.y0 + b.ny && box.nx <= c.fft && box.ny <= c.fft,
                           "hlr %g: box %dx%d at (%d, %d)", hlr[h], box.nx, box.ny, box.x0, box.y0);
-            wf_stamp core = stamp_new(box.x0, box.y0, box.nx, box.ny), sum = stamp_new(b.x0, b.y0, b.nx, b.ny);
-            ck_assert(wf_profile_draw_galaxy_core(&split.work, &g, &split.psf, x, y, &core) == WF_OK);
-            for (int j = 0; j < box.ny; j++)
-                memcpy(sum.pix + (size_t)(box.y0 - b.y0 + j) * b.nx + (box.x0 - b.x0), core.pix + (size_t)j * box.nx,
-                       sizeof(double) * box.nx);
-            ck_assert(wf_profile_add_wing(&split.psf, taken, g.flux, x, y, &sum) == WF_OK);
-            double d = 0.0;
-            for (int k = 0; k < b.nx * b.ny; k++)
-                if (c.pix[k] > 0.0 && sum.pix[k] > 0.0) d = fmax(d, fabs(sum.pix[k] - c.pix[k]));
-            /* the only difference: the core's negative ringing, zeroed before the wing is added
-             * here and after it in the whole draw */
-            ck_assert_msg(d <= core.clipped + 1e-12 * g.flux, "hlr %g: core + wing differs by %g (clipped %g)",
-                          hlr[h], d, core.clipped);
-            free(core.pix);
-            free(sum.pix);
+            core_plus_wing(&split.work, &split.psf, &g, x, y, &b, &box, taken, &c);
             /* an untolerated object: the box is the stamp */
             ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
             ck_assert(wf_profile_galaxy_core(&split.work, &g, &split.psf, x, y, &bb, &box, &taken) == WF_OK);
@@ -1658,18 +1666,7 @@ START_TEST(test_core_levels)
         printf("core levels: core %d: FFT %d, worst pixel %.3f of the bound\n", want, last_fft, worst / bound);
         ck_assert_msg(worst <= bound, "core %d: %g beyond the bound %g", want, worst, bound);
         /* the core box plus that core's wing */
-        wf_stamp core = stamp_new(box.x0, box.y0, box.nx, box.ny), sum = stamp_new(b.x0, b.y0, b.nx, b.ny);
-        ck_assert(wf_profile_draw_galaxy_core(&three.work, &g, p3, x, y, &core) == WF_OK);
-        for (int j = 0; j < box.ny; j++)
-            memcpy(sum.pix + (size_t)(box.y0 - b.y0 + j) * b.nx + (box.x0 - b.x0), core.pix + (size_t)j * box.nx,
-                   sizeof(double) * box.nx);
-        ck_assert(wf_profile_add_wing(p3, taken, g.flux, x, y, &sum) == WF_OK);
-        double d = 0.0;
-        for (int k = 0; k < b.nx * b.ny; k++)
-            if (c.pix[k] > 0.0 && sum.pix[k] > 0.0) d = fmax(d, fabs(sum.pix[k] - c.pix[k]));
-        ck_assert_msg(d <= core.clipped + 1e-12 * g.flux, "core %d: core + wing differs by %g", want, d);
-        free(core.pix);
-        free(sum.pix);
+        core_plus_wing(&three.work, p3, &g, x, y, &b, &box, taken, &c);
         free(c.pix);
     }
     ck_assert_msg(last_fft < first_fft, "the smallest core's box %d is not smaller than the largest's %d",
