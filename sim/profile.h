@@ -120,6 +120,8 @@ typedef struct wf_profile_psf {
     int kr;                    /* the table holds |kx|, |ky| <= kr steps */
     float *re, *im;            /* (2 kr + 1)^2, row (ky) major, k = 0 at [kr][kr] */
     double kmax;               /* rad/arcsec beyond which |PSF(k) pixel(k)| < 1e-7 flux */
+    double pixel_max;          /* bound on any pixel of the image per unit flux, for any
+                                  position, whole or through any core: sum |table| / N^2 */
     int nee;                   /* encircled energy of the image, for stamp sizes: */
     double ee_dr;              /* radius step, arcsec */
     double *ee;                /* ee[i]: fraction of the image's flux within (i + 1) ee_dr */

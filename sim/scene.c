@@ -32,6 +32,7 @@ typedef struct object {
     double ra, dec, mag, flux;
     wf_galaxy g;      /* galaxies: pixel-frame shape */
     int wide;         /* bright point source: the wide PSF */
+    int smooth_knots; /* its knots drawn as the smooth disk (noise_tolerance; g.n_knots 0) */
     double fold, kval, wing_tol, knot_acc; /* its folding threshold, Fourier cut, wing
                                             * tolerance and knot accuracy (noise_tolerance) */
 } object;
@@ -572,7 +573,10 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
      * the fine-grid samples per box pixel out to the PSF's band (4.5 at Y106, 13 at R062); the
      * split PSF's wing moves none by more than 2 flux wing_max; the knot lattice's aliasing
      * none by more than WF_SCENE_KNOT_BOUND knot_accuracy x the knots' flux (measured <= 0.13
-     * in tests/test_profile.c). Each may be as large as
+     * in tests/test_profile.c); knots drawn as their expectation, the smooth disk, none by
+     * more than the knots' flux x pixel_max (sim/profile.h: both images are non-negative and
+     * neither exceeds it; measured <= 0.04 of that, ~0.1 with the box that changes with them,
+     * over GalSim's scene). Each may be as large as
      * noise_tolerance x one pixel's sky noise over the exposure, in e-. With no sky there is
      * no noise to hide in. */
     if (!(setup->noise_tolerance >= 0.0 && setup->noise_tolerance < INFINITY)) {
@@ -594,7 +598,10 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
         o->wing_tol = tol_rate; /* e-/s per pixel, the unit of the stamps */
         o->knot_acc = s->acc.knot_accuracy;
         const double knots = o->kind == OBJ_GALAXY && o->g.n_knots > 0 ? o->flux * (1.0 - o->g.bulge_frac) * o->g.knot_frac : 0.0;
-        if (tol_rate > 0.0 && knots > 0.0)
+        if (tol_rate > 0.0 && knots > 0.0 && knots * s->ppsf.pixel_max <= tol_rate) {
+            o->g.n_knots = 0;
+            o->smooth_knots = 1;
+        } else if (tol_rate > 0.0 && knots > 0.0)
             o->knot_acc = fmin(WF_SCENE_KNOT_MAX, fmax(o->knot_acc, tol_rate / (WF_SCENE_KNOT_BOUND * knots)));
         if (tol_rate > 0.0 && o->flux > 0.0) {
             o->fold = fmin(WF_SCENE_FOLD_MAX, fmax(o->fold, tol_rate / o->flux));
@@ -647,7 +654,8 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
                                              box.x0, box.y0, box.nx, box.ny};
         if (rel != 0.0) s->time_variable = 1;
         if (b.x0 < setup->ncols && b.x0 + b.nx > 0 && b.y0 < setup->nrows && b.y0 + b.ny > 0) {
-            if (o->kind == OBJ_GALAXY) s->stats.galaxies++, s->stats.split += pl->split > 0;
+            if (o->kind == OBJ_GALAXY)
+                s->stats.galaxies++, s->stats.split += pl->split > 0, s->stats.knots_smooth += o->smooth_knots;
             else if (o->kind == OBJ_STAR) s->stats.stars++;
             else s->stats.sne++;
         }

@@ -49,8 +49,9 @@ typedef struct wf_scene_setup {
                              * the sky noise of one pixel over exptime: folding (in [the
                              * profile default, WF_SCENE_FOLD_MAX]), the Fourier cut (up to
                              * WF_SCENE_KVALUE_MAX), the knot lattice's accuracy (up to
-                             * WF_SCENE_KNOT_MAX) and the split PSF's wing; 0: the same knobs
-                             * for all [1] */
+                             * WF_SCENE_KNOT_MAX), knots drawn as the smooth disk (when the
+                             * knots' flux x the PSF's pixel_max is below it) and the split
+                             * PSF's wing; 0: the same knobs for all [1] */
     double exptime;         /* s, for noise_tolerance [300] */
     size_t pool_bytes;      /* stamp pool per renderer (float stamps) [24 MiB] */
     int threads;            /* renderers to prepare [1] */
@@ -78,6 +79,8 @@ typedef struct wf_scene_stats {
     double psf_lambda_nm;
     double psf_image_sum;      /* the PSF image's share of the light before normalising */
     long bright;               /* point sources drawn with the wide PSF */
+    long knots_smooth;         /* galaxies whose knots are drawn as the smooth disk
+                                  (noise_tolerance) */
     double wide_psf_seconds;   /* building it (0: not built) */
     double build_seconds;
 } wf_scene_stats;

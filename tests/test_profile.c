@@ -1850,6 +1850,71 @@ START_TEST(test_knot_accuracy)
 }
 END_TEST
 
+/* psf->pixel_max bounds every pixel of a unit point source wherever it sits, and is close to
+ * the brightest one (Y106: 0.6% above; a Gaussian's transform is real and positive, so
+ * there it is the centred pixel). Hence a galaxy's knots drawn as the smooth disk (what a
+ * scene does when the knots' flux x pixel_max is below its noise tolerance) move no pixel by
+ * more than the knots' flux x pixel_max: both images are non-negative and neither exceeds
+ * it; and keep the flux. */
+START_TEST(test_knots_smooth_bound)
+{
+    wf_psf_image img;
+    double *native = NULL;
+    double *psfpix = reference_psf(&img, &native);
+    const char *which = "GalSim Y106";
+    if (!psfpix) {
+        psfpix = gaussian_psf(128, 0.07, &img);
+        which = "Gaussian 0.07\"";
+    }
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    const double pmax = c.psf.pixel_max;
+    double brightest = 0.0;
+    for (int b = 0; b <= 16; b++)
+        for (int a = 0; a <= 16; a++) {
+            double x = 100.0 + (a - 8) / 16.0, y = 120.0 + (b - 8) / 16.0;
+            wf_stamp bd;
+            ck_assert(wf_profile_point_bounds(&c.work, &c.psf, x, y, &bd, NULL) == WF_OK);
+            wf_stamp s = stamp_new(bd.x0, bd.y0, bd.nx, bd.ny);
+            ck_assert_msg(wf_profile_draw_point(&c.work, &c.psf, 1.0, x, y, &s) == WF_OK, "%s", wf_error_message());
+            for (int k = 0; k < s.nx * s.ny; k++) brightest = fmax(brightest, s.pix[k]);
+            free(s.pix);
+        }
+    printf("knots smooth (%s): pixel_max %.5f, brightest pixel of a point source on a 1/16-pixel grid %.5f\n",
+           which, pmax, brightest);
+    ck_assert_msg(brightest <= pmax * (1.0 + 1e-9), "a pixel of %g above the bound %g", brightest, pmax);
+    ck_assert_msg(brightest >= 0.98 * pmax, "the bound %g is loose against %g", pmax, brightest);
+    const double hlr[] = {0.05, 0.15, 0.4};
+    for (int h = 0; h < 3; h++) {
+        wf_galaxy g = galaxy(1000.0, 0.2, hlr[h], 0.5 * hlr[h], 0.3, -0.1);
+        g.n_knots = 100;
+        g.knot_frac = WF_PROFILE_MAX_KNOT_FRAC;
+        g.knot_seed = 11;
+        const double fk = g.flux * (1 - g.bulge_frac) * g.knot_frac, x = 200.3, y = 150.8;
+        wf_stamp b;
+        ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, x, y, &b, NULL) == WF_OK);
+        wf_stamp kn = stamp_new(b.x0, b.y0, b.nx, b.ny), sm = stamp_new(b.x0, b.y0, b.nx, b.ny);
+        ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, x, y, &kn) == WF_OK);
+        g.n_knots = 0;
+        ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, x, y, &sm) == WF_OK);
+        double worst = 0.0;
+        for (int k = 0; k < b.nx * b.ny; k++) worst = fmax(worst, fabs(kn.pix[k] - sm.pix[k]));
+        printf("knots smooth (%s), hlr %.2f\": worst pixel %.3f of knots x pixel_max, flux %.6f vs %.6f\n", which,
+               hlr[h], worst / (fk * pmax), sm.sum, kn.sum);
+        ck_assert_msg(worst <= fk * pmax, "hlr %g: %g of the bound", hlr[h], worst / (fk * pmax));
+        ck_assert_msg(worst > 0.01 * fk * pmax, "hlr %g: the knots made no difference", hlr[h]);
+        ck_assert_msg(fabs(sm.sum - kn.sum) <= 2e-3 * g.flux, "hlr %g: flux %g vs %g", hlr[h], sm.sum, kn.sum);
+        free(kn.pix);
+        free(sm.pix);
+    }
+    ctx_close(&c);
+    free(psfpix);
+    free(native);
+}
+END_TEST
+
 START_TEST(test_simd_identical)
 {
     wf_psf_image img;
@@ -2175,6 +2240,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_psf_any_sampling);
     tcase_add_test(ind, test_knot_lattice);
     tcase_add_test(ind, test_knot_accuracy);
+    tcase_add_test(ind, test_knots_smooth_bound);
     tcase_add_test(ind, test_simd_identical);
     suite_add_tcase(s, ind);
     TCase *stiff = tcase_create("stiff");

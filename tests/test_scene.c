@@ -10,6 +10,7 @@
 
 #include "sim/bandpass.h"
 #include "sim/catalog.h"
+#include "sim/profile.h"
 #include "sim/psf.h"
 #include "sim/pupil.h"
 #include "sim/scene.h"
@@ -20,7 +21,7 @@
 #define H 256
 
 /* Writes a CSV catalog of stars or galaxies at given pixel positions of the setup's SCA. */
-static void write_catalog(const char *path, const wf_scene_setup *ss, int galaxies, int n,
+static void write_catalog(const char *path, const wf_scene_setup *ss, int galaxies, double knot_frac, int n,
                           const double *x, const double *y, const double *mag)
 {
     wf_focal_plane fp;
@@ -36,7 +37,7 @@ static void write_catalog(const char *path, const wf_scene_setup *ss, int galaxi
         double ra, dec;
         ck_assert_int_eq(wf_wcs_pix2world(&w, x[i], y[i], &ra, &dec), WF_OK);
         if (galaxies)
-            fprintf(f, "%d,%.12f,%.12f,0.5,%.4f,0.3,0.15,0.3,0.0,0.2,-0.1,0\n", i + 1, ra, dec, mag[i]);
+            fprintf(f, "%d,%.12f,%.12f,0.5,%.4f,0.3,0.15,0.3,%.3f,0.2,-0.1,0\n", i + 1, ra, dec, mag[i], knot_frac);
         else
             fprintf(f, "%d,%.12f,%.12f,%.4f\n", i + 1, ra, dec, mag[i]);
     }
@@ -69,7 +70,7 @@ START_TEST(star_fluxes_and_positions)
     const double x[3] = {60.3, 180.75, 128.0}, y[3] = {70.6, 100.2, 200.45}, mag[3] = {18, 19, 20};
     char path[4200];
     snprintf(path, sizeof path, "%s/stars.csv", wf_test_tmpdir());
-    write_catalog(path, &ss, 0, 3, x, y, mag);
+    write_catalog(path, &ss, 0, 0.0, 3, x, y, mag);
     wf_catalog stars;
     ck_assert_int_eq(wf_catalog_read_stars(path, &stars), WF_OK);
     wf_scene *scene;
@@ -108,7 +109,7 @@ START_TEST(galaxies_edges_and_extremes)
     const double mag[5] = {20, 20, 19, 20, 35};
     char path[4200];
     snprintf(path, sizeof path, "%s/gal.csv", wf_test_tmpdir());
-    write_catalog(path, &ss, 1, 5, x, y, mag);
+    write_catalog(path, &ss, 1, 0.0, 5, x, y, mag);
     wf_catalog gal;
     ck_assert_msg(wf_catalog_read_galaxies(path, &gal) == WF_OK, "%s", wf_error_message());
     wf_scene *scene;
@@ -153,30 +154,32 @@ START_TEST(galaxies_edges_and_extremes)
 END_TEST
 
 /* scene.noise_tolerance (sim/scene.h): per object, folding, the Fourier cut, the knot
- * lattice and the split PSF's wing are loosened only as far as their error bounds stay below
- * tau x one pixel's sky noise over the exposure. Against the same scene with tau = 0: no
- * pixel of any object moves by more than the four bounds together (4 tau sigma); faint
- * objects do change (cheaper boxes),
- * bright ones keep their bits; tau = 0 with a split PSF is the unsplit scene bit for bit. */
+ * lattice and the split PSF's wing are loosened, and knots drawn as the smooth disk, only as
+ * far as their error bounds stay below tau x one pixel's sky noise over the exposure.
+ * Against the same scene with tau = 0 (galaxies with the disk's largest knot share): no
+ * pixel of any object moves by more than the five bounds together (5 tau sigma), compared
+ * over both stamps (a smooth disk's stamp may differ from the knots'); faint objects do
+ * change (cheaper boxes, smooth knots), a bright one barely (its knot lattice alone loosens);
+ * tau = 0 with a split PSF is the unsplit scene bit for bit. */
 START_TEST(noise_tolerance_bounds)
 {
-    enum { N = 9 };
+    enum { N = 12 };
     double x[N], y[N], mag[N];
     for (int i = 0; i < N; i++) {
-        x[i] = 40.3 + 20.0 * i;
-        y[i] = 60.7 + 15.0 * i;
-        mag[i] = 18.0 + i; /* 18 .. 26 */
+        x[i] = 40.3 + 17.0 * i;
+        y[i] = 60.7 + 13.0 * i;
+        mag[i] = 18.0 + i; /* 18 .. 29 */
     }
     wf_scene_setup ss;
     setup_small(&ss);
     char path[4200];
     snprintf(path, sizeof path, "%s/tol.csv", wf_test_tmpdir());
-    write_catalog(path, &ss, 1, N, x, y, mag);
+    write_catalog(path, &ss, 1, WF_PROFILE_MAX_KNOT_FRAC, N, x, y, mag);
     wf_catalog gal;
     ck_assert_msg(wf_catalog_read_galaxies(path, &gal) == WF_OK, "%s", wf_error_message());
     const double tau = 1.0;
     double *pix[3][N];
-    int nx[3][N], ny[3][N];
+    int x0[3][N], y0[3][N], nx[3][N], ny[3][N];
     double sigma = 0.0;
     for (int m = 0; m < 3; m++) {
         setup_small(&ss);
@@ -189,28 +192,49 @@ START_TEST(noise_tolerance_bounds)
         wf_scene_stats st;
         wf_scene_get_stats(scene, &st);
         sigma = sqrt(st.sky_min * ss.exptime) / ss.exptime; /* e-/s, the stamps' unit */
-        printf("noise tolerance: mode %d: %ld of %ld galaxies drawn with the split PSF\n", m, st.split, st.galaxies);
-        if (m == 1) ck_assert_msg(st.split >= 2, "only %ld galaxies took the split", st.split);
-        else ck_assert_int_eq(st.split, 0);
+        printf("noise tolerance: mode %d: of %ld galaxies, %ld drawn with the split PSF, %ld with smooth knots\n", m,
+               st.galaxies, st.split, st.knots_smooth);
+        if (m == 1) {
+            ck_assert_msg(st.split >= 2, "only %ld galaxies took the split", st.split);
+            ck_assert_msg(st.knots_smooth >= 2 && st.knots_smooth < N, "%ld galaxies took smooth knots",
+                          st.knots_smooth);
+        } else {
+            ck_assert_int_eq(st.split, 0);
+            ck_assert_int_eq(st.knots_smooth, 0);
+        }
         for (int k = 0; k < N; k++) {
             wf_scene_object info;
-            int x0, y0;
-            ck_assert_int_eq(wf_scene_draw_object(scene, (size_t)k, &info, &x0, &y0, &nx[m][k], &ny[m][k], &pix[m][k]),
+            ck_assert_int_eq(wf_scene_draw_object(scene, (size_t)k, &info, &x0[m][k], &y0[m][k], &nx[m][k], &ny[m][k],
+                                                  &pix[m][k]),
                              WF_OK);
         }
         wf_scene_destroy(scene);
     }
     int changed = 0;
     for (int k = 0; k < N; k++) {
-        ck_assert(nx[0][k] == nx[1][k] && ny[0][k] == ny[1][k] && nx[0][k] == nx[2][k]);
+        ck_assert(nx[0][k] == nx[2][k] && ny[0][k] == ny[2][k]);
         size_t np = (size_t)nx[0][k] * ny[0][k];
         ck_assert_msg(!memcmp(pix[0][k], pix[2][k], np * sizeof(double)), "object %d: tau 0 is not the unsplit scene", k);
+        /* over the union of the two stamps, zero outside each */
+        int ux0 = x0[0][k] < x0[1][k] ? x0[0][k] : x0[1][k], uy0 = y0[0][k] < y0[1][k] ? y0[0][k] : y0[1][k];
+        int ux1 = x0[0][k] + nx[0][k] > x0[1][k] + nx[1][k] ? x0[0][k] + nx[0][k] : x0[1][k] + nx[1][k];
+        int uy1 = y0[0][k] + ny[0][k] > y0[1][k] + ny[1][k] ? y0[0][k] + ny[0][k] : y0[1][k] + ny[1][k];
         double worst = 0.0;
-        for (size_t i = 0; i < np; i++) worst = fmax(worst, fabs(pix[1][k][i] - pix[0][k][i]));
+        for (int yy = uy0; yy < uy1; yy++)
+            for (int xx = ux0; xx < ux1; xx++) {
+                double v[2];
+                for (int m = 0; m < 2; m++) {
+                    int in = xx >= x0[m][k] && xx < x0[m][k] + nx[m][k] && yy >= y0[m][k] && yy < y0[m][k] + ny[m][k];
+                    v[m] = in ? pix[m][k][(size_t)(yy - y0[m][k]) * nx[m][k] + (xx - x0[m][k])] : 0.0;
+                }
+                worst = fmax(worst, fabs(v[1] - v[0]));
+            }
         printf("noise tolerance: object %d: worst pixel moved by %.3g sky sigma\n", k, worst / sigma);
-        ck_assert_msg(worst <= 4.0 * tau * sigma, "object %d: %g sigma", k, worst / sigma);
+        ck_assert_msg(worst <= 5.0 * tau * sigma, "object %d: %g sigma", k, worst / sigma);
         if (worst > 0.0) changed++;
-        if (k == 0) ck_assert_msg(worst == 0.0, "the magnitude-18 galaxy changed");
+        /* magnitude 18: too bright for any knob but the knot lattice's accuracy, whose
+         * measured error is ~1/100 of its bound */
+        if (k == 0) ck_assert_msg(worst <= 0.01 * tau * sigma, "the magnitude-18 galaxy moved by %g sigma", worst / sigma);
         for (int m = 0; m < 3; m++) free(pix[m][k]);
     }
     ck_assert_msg(changed >= 3, "only %d faint objects took the looser knobs", changed);
@@ -226,7 +250,7 @@ START_TEST(bright_star_within_budget)
     const double x[1] = {128.2}, y[1] = {127.7}, mag[1] = {8};
     char path[4200];
     snprintf(path, sizeof path, "%s/bright.csv", wf_test_tmpdir());
-    write_catalog(path, &ss, 0, 1, x, y, mag);
+    write_catalog(path, &ss, 0, 0.0, 1, x, y, mag);
     wf_catalog stars;
     ck_assert_int_eq(wf_catalog_read_stars(path, &stars), WF_OK);
     wf_scene *scene;
@@ -289,7 +313,7 @@ START_TEST(psf_modes_chromatic_jitter_diffusion)
     setup_small(&ss);
     ss.flux_fraction = 0.9999;
     snprintf(path, sizeof path, "%s/one.csv", wf_test_tmpdir());
-    write_catalog(path, &ss, 0, 1, x, y, mag);
+    write_catalog(path, &ss, 0, 0.0, 1, x, y, mag);
     wf_catalog stars;
     ck_assert_int_eq(wf_catalog_read_stars(path, &stars), WF_OK);
     wf_bandpass bp;
@@ -349,7 +373,7 @@ START_TEST(bright_star_wide_psf)
     wf_scene_setup ss;
     setup_small(&ss);
     snprintf(path, sizeof path, "%s/bright10.csv", wf_test_tmpdir());
-    write_catalog(path, &ss, 0, 1, x, y, mag);
+    write_catalog(path, &ss, 0, 0.0, 1, x, y, mag);
     wf_catalog stars;
     ck_assert_int_eq(wf_catalog_read_stars(path, &stars), WF_OK);
     wf_bandpass bp;
