@@ -214,20 +214,20 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
 /* A halo object's rows, one at a time: its box's pixels plus its halo over columns [xa, xb)
  * into one row buffer (footprints are at most max_fft pixels wide); negatives are for the
  * caller to drop. */
-/* acc[x] += max(d[x], 0), x < n: four at a time (a mask, no branch: about half the far
+/* acc[x] += max(d[x], 0), x < n: two at a time (a mask, no branch: about half the far
  * pixels of a faint object are slightly negative), the same bits as the scalar tail. */
 static void add_clipped(double *restrict acc, const double *restrict d, int n)
 {
     int x = 0;
 #if defined(__GNUC__)
-    typedef double vd4 __attribute__((vector_size(32)));
-    typedef long long vl4 __attribute__((vector_size(32)));
-    const vd4 zero = {0.0, 0.0, 0.0, 0.0};
-    for (; x + 4 <= n; x += 4) {
-        vd4 v, a;
+    typedef double vd2 __attribute__((vector_size(16)));
+    typedef long long vl2 __attribute__((vector_size(16)));
+    const vd2 zero = {0.0, 0.0};
+    for (; x + 2 <= n; x += 2) {
+        vd2 v, a;
         memcpy(&v, d + x, sizeof v);
         memcpy(&a, acc + x, sizeof a);
-        a += (vd4)((vl4)v & ~(vl4)(v < zero));
+        a += (vd2)((vl2)v & ~(vl2)(v < zero));
         memcpy(acc + x, &a, sizeof a);
     }
 #endif
