@@ -1,6 +1,7 @@
 #include "sim/fitsout.h"
 
 #include <errno.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -10,6 +11,7 @@
 #define CHECKSUM_ZERO "0000000000000000"
 #define CHECKSUM_COMMENT "HDU checksum"
 #define DATASUM_COMMENT "data unit checksum"
+#define FITS_BLOCK 2880LL
 
 wf_status wf_fits_error(int status, const char *path, const char *doing)
 {
@@ -42,22 +44,62 @@ wf_status wf_fits_reserve_checksum(fitsfile *f, const char *path)
     return wf_fits_error(status, path, "reserving CHECKSUM/DATASUM");
 }
 
+/* sum += the FITS checksum (32-bit one's complement, big-endian words) of the header bytes
+ * [head, data) of the file at path, as cfitsio has flushed them. */
+static wf_status header_sum(const char *path, LONGLONG head, LONGLONG data, unsigned long *sum)
+{
+    FILE *in = fopen(path, "rb");
+    if (!in) return wf_error(WF_ERR_IO, "%s: reopening for the header checksum: %s", path, strerror(errno));
+    unsigned char block[FITS_BLOCK];
+    uint64_t hi = *sum >> 16, lo = *sum & 0xffff;
+    wf_status st = WF_OK;
+    if (fseeko(in, (off_t)head, SEEK_SET) != 0) st = wf_error(WF_ERR_IO, "%s: seeking to a header: %s", path, strerror(errno));
+    for (LONGLONG at = head; !st && at < data; at += FITS_BLOCK) {
+        if (fread(block, 1, sizeof block, in) != sizeof block) {
+            st = wf_error(WF_ERR_IO, "%s: reading a header back for its checksum", path);
+            break;
+        }
+        for (size_t i = 0; i < sizeof block; i += 4) {
+            hi += (uint64_t)block[i] << 8 | block[i + 1];
+            lo += (uint64_t)block[i + 2] << 8 | block[i + 3];
+        }
+    }
+    fclose(in);
+    while ((hi >> 16) | (lo >> 16)) { /* carries fold back in, each half into the other */
+        uint64_t ch = hi >> 16, cl = lo >> 16;
+        hi = (hi & 0xffff) + cl;
+        lo = (lo & 0xffff) + ch;
+    }
+    *sum = (unsigned long)(hi << 16 | lo);
+    return st;
+}
+
 wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path)
 {
     int status = 0;
     /* fits_write_chksum does what only cfitsio internals can (close the header, write the
-     * data fill) and gets DATASUM right; then the dated comments are replaced and CHECKSUM
-     * recomputed over the header as it finally stands. */
+     * data fill) and gets DATASUM right, reading the data once; then the dated comments are
+     * replaced and CHECKSUM recomputed over the header as it finally stands plus DATASUM
+     * (fits_get_chksum would read the data a second time). */
     fits_write_chksum(f, &status);
     fits_modify_comment(f, "DATASUM", DATASUM_COMMENT, &status);
     fits_modify_comment(f, "CHECKSUM", CHECKSUM_COMMENT, &status);
     fits_modify_key_str(f, "CHECKSUM", CHECKSUM_ZERO, "&", &status);
-    unsigned long datasum = 0, hdusum = 0;
-    fits_get_chksum(f, &datasum, &hdusum, &status);
+    char value[FLEN_VALUE] = "";
+    fits_read_key_str(f, "DATASUM", value, NULL, &status);
+    LONGLONG head = 0, data = 0, end = 0;
+    fits_get_hduaddrll(f, &head, &data, &end, &status);
+    fits_flush_buffer(f, 0, &status);
+    if (status) return wf_fits_error(status, path, "writing DATASUM");
+    char *stop = NULL;
+    unsigned long sum = strtoul(value, &stop, 10);
+    if (stop == value || *stop) return wf_error(WF_ERR_INTERNAL, "%s: DATASUM '%s' is not a number", path, value);
+    wf_status st = header_sum(path, head, data, &sum);
+    if (st) return st;
     char ascii[17];
-    fits_encode_chksum(hdusum, 1, ascii);
+    fits_encode_chksum(sum, 1, ascii);
     fits_modify_key_str(f, "CHECKSUM", ascii, "&", &status);
-    return wf_fits_error(status, path, "writing CHECKSUM/DATASUM");
+    return wf_fits_error(status, path, "writing CHECKSUM");
 }
 
 wf_status wf_fits_checksum_all(fitsfile *f, const char *path)
@@ -77,8 +119,6 @@ wf_status wf_fits_checksum_all(fitsfile *f, const char *path)
     }
     return WF_OK;
 }
-
-#define FITS_BLOCK 2880LL
 
 static wf_status verify_open(fitsfile *f, const char *path, int expect)
 {
