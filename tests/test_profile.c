@@ -501,6 +501,19 @@ static double *reference_psf(wf_psf_image *img, double **native)
     return pix;
 }
 
+/* GalSim's Y106 PSF when the reference data are present, else a 0.07" Gaussian (the tests
+ * that use it hold for any PSF); *which names it. */
+static double *reference_or_gaussian(wf_psf_image *img, double **native, const char **which)
+{
+    double *pix = reference_psf(img, native);
+    *which = "GalSim Y106";
+    if (!pix) {
+        pix = gaussian_psf(128, 0.07, img);
+        *which = "Gaussian 0.07\"";
+    }
+    return pix;
+}
+
 /* ------------------------------------------------------------ de Vaucouleurs transform */
 
 /* Plain composite Gauss-Legendre over panels of a quarter oscillation of J0, no
@@ -1703,12 +1716,8 @@ START_TEST(test_knot_lattice)
 {
     wf_psf_image img;
     double *native = NULL;
-    double *psfpix = reference_psf(&img, &native);
-    const char *which = "GalSim Y106";
-    if (!psfpix) {
-        psfpix = gaussian_psf(128, 0.07, &img);
-        which = "Gaussian 0.07\"";
-    }
+    const char *which;
+    double *psfpix = reference_or_gaussian(&img, &native, &which);
     wf_profile_accuracy acc, small;
     wf_profile_accuracy_default(&acc);
     small = acc;
@@ -1860,12 +1869,8 @@ START_TEST(test_knots_smooth_bound)
 {
     wf_psf_image img;
     double *native = NULL;
-    double *psfpix = reference_psf(&img, &native);
-    const char *which = "GalSim Y106";
-    if (!psfpix) {
-        psfpix = gaussian_psf(128, 0.07, &img);
-        which = "Gaussian 0.07\"";
-    }
+    const char *which;
+    double *psfpix = reference_or_gaussian(&img, &native, &which);
     wf_profile_accuracy acc;
     wf_profile_accuracy_default(&acc);
     ctx c;
