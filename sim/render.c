@@ -211,9 +211,6 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
     return WF_OK;
 }
 
-/* A halo object's rows, one at a time: its box's pixels plus its halo over columns [xa, xb)
- * into one row buffer (footprints are at most max_fft pixels wide); negatives are for the
- * caller to drop. */
 /* acc[x] += max(d[x], 0), x < n: two at a time (a mask, no branch: about half the far
  * pixels of a faint object are slightly negative), the same bits as the scalar tail. */
 static void add_clipped(double *restrict acc, const double *restrict d, int n)
@@ -234,6 +231,9 @@ static void add_clipped(double *restrict acc, const double *restrict d, int n)
     for (; x < n; x++) acc[x] += d[x] < 0.0 ? 0.0 : d[x];
 }
 
+/* A halo object's rows, one at a time: its box's pixels plus its halo over columns [xa, xb)
+ * into one row buffer (footprints are at most max_fft pixels wide); negatives are for the
+ * caller to drop. */
 typedef struct halo_view {
     size_t i;
     int xa, xb, ba, bb, ca, cb; /* footprint columns; box rows and columns within them */
