@@ -90,7 +90,7 @@ wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path)
     LONGLONG head = 0, data = 0, end = 0;
     fits_get_hduaddrll(f, &head, &data, &end, &status);
     fits_flush_buffer(f, 0, &status);
-    if (status) return wf_fits_error(status, path, "writing DATASUM");
+    if (status) return wf_fits_error(status, path, "writing DATASUM and flushing the header");
     char *stop = NULL;
     unsigned long sum = strtoul(value, &stop, 10);
     if (stop == value || *stop) return wf_error(WF_ERR_INTERNAL, "%s: DATASUM '%s' is not a number", path, value);

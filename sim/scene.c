@@ -574,8 +574,9 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
      * split PSF's wing moves none by more than 2 flux wing_max; the knot lattice's aliasing
      * none by more than WF_SCENE_KNOT_BOUND knot_accuracy x the knots' flux (measured <= 0.13
      * in tests/test_profile.c); knots drawn as their expectation, the smooth disk, none by
-     * more than the knots' flux x pixel_max (sim/profile.h: both images are non-negative and
-     * neither exceeds it; measured <= 0.04 of that, ~0.1 with the box that changes with them,
+     * more than the knots' flux x pixel_max (sim/profile.h: both true images are non-negative
+     * and neither exceeds it, a strict bound for the exact images; a draw in a smaller box adds
+     * its own folding, which the folding knob bounds; measured <= 0.04 of that, ~0.1 with the box that changes with them,
      * over GalSim's scene). Each may be as large as
      * noise_tolerance x one pixel's sky noise over the exposure, in e-. With no sky there is
      * no noise to hide in. */
