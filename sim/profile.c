@@ -1612,25 +1612,26 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
     }
 }
 
-/* dst[k] += w00 r00[k] + w01 r01[k] + w10 r10[k] + w11 r11[k], k < n: four at a time in
- * vectors (the scalar operations in the same order, so the same bits), then the rest. */
+/* dst[k] += w00 r00[k] + w01 r01[k] + w10 r10[k] + w11 r11[k], k < n: two at a time in
+ * vectors (the scalar operations in the same order, so the same bits; two lanes, since wider
+ * ones go through the stack without AVX), then the rest. */
 static void wing_row(long n, double w00, double w01, double w10, double w11, const float *r00,
                      const float *r01, const float *r10, const float *r11, double *dst)
 {
     long k = 0;
 #if defined(__GNUC__)
-    typedef float wf4 __attribute__((vector_size(16)));
-    typedef double wd4 __attribute__((vector_size(32)));
-    for (; k + 4 <= n; k += 4) {
-        wf4 a, b, c, d;
-        wd4 o;
+    typedef float wf2 __attribute__((vector_size(8)));
+    typedef double wd2 __attribute__((vector_size(16)));
+    for (; k + 2 <= n; k += 2) {
+        wf2 a, b, c, d;
+        wd2 o;
         memcpy(&a, r00 + k, sizeof a);
         memcpy(&b, r01 + k, sizeof b);
         memcpy(&c, r10 + k, sizeof c);
         memcpy(&d, r11 + k, sizeof d);
         memcpy(&o, dst + k, sizeof o);
-        o += w00 * __builtin_convertvector(a, wd4) + w01 * __builtin_convertvector(b, wd4) +
-             w10 * __builtin_convertvector(c, wd4) + w11 * __builtin_convertvector(d, wd4);
+        o += w00 * __builtin_convertvector(a, wd2) + w01 * __builtin_convertvector(b, wd2) +
+             w10 * __builtin_convertvector(c, wd2) + w11 * __builtin_convertvector(d, wd2);
         memcpy(dst + k, &o, sizeof o);
     }
 #endif
