@@ -843,8 +843,9 @@ wf_status wf_scene_wcs_meta(const wf_scene *s, char *buf, size_t cap)
     size_t memsize = 0;
     if (fits_create_memfile(&f, &mem, &memsize, 0, realloc, &status))
         return wf_error(WF_ERR_INTERNAL, "scene: cannot open an in-memory FITS file");
-    long naxes[2] = {s->setup.ncols, s->setup.nrows};
-    fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+    /* a header without data: with NAXIS 4088 x 4088, closing the memory file would allocate
+     * and zero 67 MB for an image nobody reads (the NAXIS cards are skipped below anyway) */
+    fits_create_img(f, FLOAT_IMG, 0, NULL, &status);
     wf_status st = status ? WF_ERR_INTERNAL : wf_wcs_write_header(&s->wcs, f, "in-memory header");
     size_t len = 0;
     int nkeys = 0;
