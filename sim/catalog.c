@@ -1,4 +1,5 @@
 #include "sim/catalog.h"
+#include "sim/fitsdisk.h"
 
 #include <ctype.h>
 #include <errno.h>
@@ -957,7 +958,7 @@ wf_status wf_catalog_write_fits(const char *path, const wf_catalog *cat)
 #undef ADDCOL
     fitsfile *ff = NULL;
     int status = 0;
-    fits_create_file(&ff, tmp, &status);
+    wf_fitsdisk_create(&ff, tmp, &status); /* the name as given: no cfitsio filename syntax */
     fits_create_tbl(ff, BINARY_TBL, (LONGLONG)cat->n, ncol, ttype, tform, tunit,
                     gal ? "GALAXIES" : "STARS", &status);
     fits_write_key(ff, TSTRING, "WFKIND", gal ? "GALAXY" : "STAR", "wfisim catalog kind", &status);

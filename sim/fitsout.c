@@ -1,4 +1,7 @@
 #include "sim/fitsout.h"
+#include "sim/fitsdisk.h"
+
+#include <fitsio2.h>
 
 #include <errno.h>
 #include <stdint.h>
@@ -44,6 +47,47 @@ wf_status wf_fits_reserve_checksum(fitsfile *f, const char *path)
     return wf_fits_error(status, path, "reserving CHECKSUM/DATASUM");
 }
 
+/* Carries fold back in, each half into the other: the 32-bit one's complement sum. */
+static unsigned long fold(uint64_t hi, uint64_t lo)
+{
+    while ((hi >> 16) | (lo >> 16)) {
+        uint64_t ch = hi >> 16, cl = lo >> 16;
+        hi = (hi & 0xffff) + cl;
+        lo = (lo & 0xffff) + ch;
+    }
+    return (unsigned long)(hi << 16 | lo);
+}
+
+void wf_fits_datasum_add32(wf_fits_datasum *s, const void *values, size_t n, uint32_t flip)
+{
+    const unsigned char *p = values;
+    uint64_t hi = 0, lo = 0;
+    for (size_t i = 0; i < n; i++) {
+        uint32_t w;
+        memcpy(&w, p + 4 * i, 4);
+        w ^= flip;
+        hi += w >> 16;
+        lo += w & 0xffff;
+    }
+    s->hi += hi;
+    s->lo += lo;
+}
+
+void wf_fits_datasum_add16(wf_fits_datasum *s, const uint16_t *values, size_t n, uint64_t first,
+                           uint16_t flip)
+{
+    uint64_t even = 0, odd = 0;
+    size_t i = 0;
+    for (; i + 1 < n; i += 2) {
+        even += (uint16_t)(values[i] ^ flip);
+        odd += (uint16_t)(values[i + 1] ^ flip);
+    }
+    if (i < n) even += (uint16_t)(values[i] ^ flip);
+    /* element i of the run is element first + i of the data unit */
+    if (first & 1) { s->hi += odd; s->lo += even; }
+    else { s->hi += even; s->lo += odd; }
+}
+
 /* sum += the FITS checksum (32-bit one's complement, big-endian words) of the header bytes
  * [head, data) of the file at path, as cfitsio has flushed them. */
 static wf_status header_sum(const char *path, LONGLONG head, LONGLONG data, unsigned long *sum)
@@ -65,24 +109,29 @@ static wf_status header_sum(const char *path, LONGLONG head, LONGLONG data, unsi
         }
     }
     fclose(in);
-    while ((hi >> 16) | (lo >> 16)) { /* carries fold back in, each half into the other */
-        uint64_t ch = hi >> 16, cl = lo >> 16;
-        hi = (hi & 0xffff) + cl;
-        lo = (lo & 0xffff) + ch;
-    }
-    *sum = (unsigned long)(hi << 16 | lo);
+    *sum = fold(hi, lo);
     return st;
 }
 
-wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path)
+static wf_status checksum_hdu(fitsfile *f, const char *path, const wf_fits_datasum *known)
 {
     int status = 0;
-    /* fits_write_chksum does what only cfitsio internals can (close the header, write the
-     * data fill) and gets DATASUM right, reading the data once; then the dated comments are
-     * replaced and CHECKSUM recomputed over the header as it finally stands plus DATASUM
-     * (fits_get_chksum would read the data a second time). */
-    fits_write_chksum(f, &status);
-    fits_modify_comment(f, "DATASUM", DATASUM_COMMENT, &status);
+    if (known) {
+        /* what fits_write_chksum does before it reads the data: the header's end found
+         * again and the data fill written (cfitsio internals, fitsio2.h) */
+        ffrdef(f, &status);
+        ffpdfl(f, &status);
+        char v[24];
+        snprintf(v, sizeof v, "%lu", fold(known->hi, known->lo));
+        fits_modify_key_str(f, "DATASUM", v, DATASUM_COMMENT, &status);
+    } else {
+        /* fits_write_chksum does what only cfitsio internals can (close the header, write
+         * the data fill) and gets DATASUM right, reading the data once; then the dated
+         * comments are replaced and CHECKSUM recomputed over the header as it finally stands
+         * plus DATASUM (fits_get_chksum would read the data a second time). */
+        fits_write_chksum(f, &status);
+        fits_modify_comment(f, "DATASUM", DATASUM_COMMENT, &status);
+    }
     fits_modify_comment(f, "CHECKSUM", CHECKSUM_COMMENT, &status);
     fits_modify_key_str(f, "CHECKSUM", CHECKSUM_ZERO, "&", &status);
     char value[FLEN_VALUE] = "";
@@ -102,7 +151,18 @@ wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path)
     return wf_fits_error(status, path, "writing CHECKSUM");
 }
 
+wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path)
+{
+    return checksum_hdu(f, path, NULL);
+}
+
 wf_status wf_fits_checksum_all(fitsfile *f, const char *path)
+{
+    return wf_fits_checksum_all_known(f, path, NULL, 0);
+}
+
+wf_status wf_fits_checksum_all_known(fitsfile *f, const char *path, const wf_fits_datasum *sums,
+                                     int nsums)
 {
     int status = 0, nhdu = 0, current = 0;
     /* fits_get_num_hdus leaves out a just-created HDU that has no data written yet (an
@@ -114,7 +174,8 @@ wf_status wf_fits_checksum_all(fitsfile *f, const char *path)
     for (int i = 1; i <= nhdu; i++) {
         if (fits_movabs_hdu(f, i, NULL, &status))
             return wf_fits_error(status, path, "moving to an HDU for its checksum");
-        wf_status st = wf_fits_checksum_hdu(f, path);
+        const wf_fits_datasum *known = i <= nsums && sums[i - 1].valid ? &sums[i - 1] : NULL;
+        wf_status st = checksum_hdu(f, path, known);
         if (st) return st;
     }
     return WF_OK;
@@ -187,7 +248,7 @@ wf_status wf_fits_begin(const char *path, char *tmp, size_t tmp_size, fitsfile *
         return wf_error(WF_ERR_INPUT, "%s: path too long", path);
     unlink(tmp);
     int status = 0;
-    fits_create_diskfile(f, tmp, &status); /* the name as given: no cfitsio filename syntax */
+    wf_fitsdisk_create(f, tmp, &status); /* the name as given: no cfitsio filename syntax */
     return wf_fits_error(status, tmp, "creating the file");
 }
 

@@ -6,6 +6,8 @@
 #define WF_FITSOUT_H
 
 #include <fitsio.h>
+#include <stddef.h>
+#include <stdint.h>
 #include "hal/status.h"
 
 /* Records a message "<path>: <doing>: <cfitsio text> (<error stack>)", clears cfitsio's
@@ -22,6 +24,29 @@ wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path);
 
 /* The same for every HDU of the file; leaves the last HDU current. */
 wf_status wf_fits_checksum_all(fitsfile *f, const char *path);
+
+/* A data unit's FITS checksum summed while its words are written, in any order (the one's
+ * complement sum commutes), so that closing a product need not read its pixels back: for an
+ * SCA that read is 200 MB. Each word must be added exactly once; `valid` says the sum is
+ * whole (a writer that cannot keep it leaves it 0 and the data are read back). */
+typedef struct wf_fits_datasum {
+    uint64_t hi, lo; /* sums of the big-endian words' upper and lower 16 bits */
+    int valid;
+} wf_fits_datasum;
+
+/* n 32-bit values in host order (float bit patterns, or unsigned integers with flip =
+ * 0x80000000 for cfitsio's BZERO 2^31 storage), each stored as one word. */
+void wf_fits_datasum_add32(wf_fits_datasum *s, const void *values, size_t n, uint32_t flip);
+
+/* n 16-bit values in host order (flip 0x8000 for BZERO 32768), the first being element
+ * `first` of the data unit: an even element is a word's upper half, an odd one its lower. */
+void wf_fits_datasum_add16(wf_fits_datasum *s, const uint16_t *values, size_t n, uint64_t first,
+                           uint16_t flip);
+
+/* As wf_fits_checksum_all, with the DATASUM of HDU i (1-based) taken from sums[i - 1] when
+ * i <= nsums and that sum is valid, and read from the file otherwise. */
+wf_status wf_fits_checksum_all_known(fitsfile *f, const char *path, const wf_fits_datasum *sums,
+                                     int nsums);
 
 /* Proves the FITS file at path is whole, as the resume of `wfisim survey run` and the plan
  * reader rely on: every section (HDU) has a CHECKSUM and DATASUM that verify, and the sections

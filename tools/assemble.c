@@ -12,6 +12,7 @@
 
 #include "hal/clock.h"
 #include "hal/packet.h"
+#include "sim/fitsdisk.h"
 #include "sim/fitsout.h"
 #include "tools/rampfit.h"
 
@@ -69,6 +70,9 @@ typedef struct exposure {
     float *sci, *err;
     uint32_t *dq;
     size_t out_cap;
+    /* DATASUM of the image HDUs (index hdu - 1), summed as their rows are written: every row
+     * is written once, so the product is closed without reading the pixels back */
+    wf_fits_datasum sum[5];
 } exposure;
 
 enum { HDU_PRIMARY = 1, HDU_SCI, HDU_ERR, HDU_DQ, HDU_RESULTANTS };
@@ -632,11 +636,11 @@ static wf_status exposure_open(assembler *a, const void *payload, exposure **out
         goto bad;
     }
     snprintf(e->tmp, sizeof e->tmp, "%s.tmp", e->path);
-    /* A .tmp is only ever a leftover of an interrupted run: replace it. fits_create_diskfile
+    /* A .tmp is only ever a leftover of an interrupted run: replace it. wf_fitsdisk_create
      * takes the name literally (no cfitsio "[ext]" or "!" syntax from a user's directory). */
     remove(e->tmp);
     int status = 0;
-    if (fits_create_diskfile(&e->f, e->tmp, &status)) {
+    if (wf_fitsdisk_create(&e->f, e->tmp, &status)) {
         e->f = NULL;
         st = fail_fits(a, e, status, "creating the FITS file");
         e->tmp[0] = '\0'; /* not ours: never remove what we could not create */
@@ -666,6 +670,7 @@ static wf_status exposure_open(assembler *a, const void *payload, exposure **out
         }
     }
     if ((st = reserve(a, e, "primary header"))) goto bad;
+    for (int hdu = HDU_SCI; hdu <= (m->ramp ? HDU_RESULTANTS : HDU_DQ); hdu++) e->sum[hdu - 1].valid = 1;
     if (create_image(e->f, FLOAT_IMG, 2, naxes, "SCI", "electron/s",
                      m->ramp ? "count rate from the ramp fit" : "count rate", m, &status)) {
         st = fail_fits(a, e, status, "creating SCI");
@@ -783,6 +788,8 @@ static wf_status write_rows(const assembler *a, exposure *e, int hdu, int type, 
     long first[2] = {1, (long)y0 + 1};
     fits_movabs_hdu(e->f, hdu, NULL, &status);
     fits_write_pix(e->f, type, first, (LONGLONG)n * e->m.ncols, data, &status);
+    /* TFLOAT is stored as its bit pattern, TUINT with BZERO 2^31 */
+    wf_fits_datasum_add32(&e->sum[hdu - 1], data, (size_t)n * (size_t)e->m.ncols, type == TUINT ? 0x80000000u : 0);
     if (status) {
         char doing[96];
         snprintf(doing, sizeof doing, "writing %s rows %" PRIu32 "-%" PRIu32, what, y0, y0 + n - 1);
@@ -866,6 +873,10 @@ static wf_status on_resultants(const assembler *a, exposure *e, const void *payl
     fits_movabs_hdu(e->f, HDU_RESULTANTS, NULL, &status);
     fits_write_subset(e->f, TUSHORT, fp, lp, (void *)(uintptr_t)cube, &status);
     if (status) return fail_fits(a, e, status, "writing RESULTANTS");
+    for (int r = 0; r < nres; r++) /* TUSHORT is stored with BZERO 32768 */
+        wf_fits_datasum_add16(&e->sum[HDU_RESULTANTS - 1], cube + (size_t)r * plane, plane,
+                              (uint64_t)e->m.ncols * ((uint64_t)h->first_row + (uint64_t)e->m.nrows * (uint64_t)r),
+                              0x8000);
     for (uint32_t y = h->first_row; y < h->first_row + h->row_count; y++) e->rows[y] |= ROW_DATA;
 
     if ((st = grow_out(a, e, plane))) return st;
@@ -1108,7 +1119,7 @@ static wf_status on_end(assembler *a, exposure *e, char *last_path, size_t last_
     wf_status st;
     if ((e->m.effects && has_word(e->m.effects, "cosmic")) || e->ncr)
         if ((st = write_cosmics(a, e))) return st;
-    if ((st = wf_fits_checksum_all(e->f, e->tmp))) {
+    if ((st = wf_fits_checksum_all_known(e->f, e->tmp, e->sum, (int)(sizeof e->sum / sizeof e->sum[0])))) {
         char why[900];
         snprintf(why, sizeof why, "%s", wf_error_message());
         return fail(a, st, "%s", why);

@@ -1,0 +1,303 @@
+#include "sim/fitsdisk.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <fitsio2.h>
+#include <pthread.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#define PREFIX "wfdisk://"
+#define NSLOTS 64
+#define BUF_BYTES ((size_t)1 << 20)
+
+/* One open file. cfitsio calls a handle's read/write/seek from the one thread that owns the
+ * fitsfile, so only taking and freeing a slot needs the lock. */
+typedef struct slot {
+    int used, fd, dirty;        /* dirty: buf holds bytes not yet written */
+    char *path;
+    long long pos;              /* cfitsio's position */
+    long long size;             /* the file as cfitsio sees it: on disk, buffered, holes */
+    long long disk;             /* bytes on disk (what fstat would say) */
+    unsigned char *buf;         /* write-back buffer, or a clean read cache */
+    long long buf_off;
+    size_t buf_len;
+    long long read_end;         /* where the last read stopped: the next one there is sequential */
+} slot;
+
+static slot slots[NSLOTS];
+static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+static pthread_once_t once = PTHREAD_ONCE_INIT;
+static int registered_status;
+
+static slot *slot_of(int handle)
+{
+    return handle >= 0 && handle < NSLOTS && slots[handle].used ? &slots[handle] : NULL;
+}
+
+static int pwrite_all(slot *s, const unsigned char *p, size_t n, long long off)
+{
+    while (n) {
+        ssize_t w = pwrite(s->fd, p, n, (off_t)off);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) return WRITE_ERROR; /* a full disk (ENOSPC) included */
+        p += w;
+        n -= (size_t)w;
+        off += w;
+    }
+    if (off > s->disk) s->disk = off;
+    return 0;
+}
+
+/* Reads [off, off + n) of the file as cfitsio sees it: bytes past the end on disk but
+ * inside the size are a hole not yet extended, so zeros. */
+static int pread_all(slot *s, unsigned char *p, size_t n, long long off)
+{
+    if (off + (long long)n > s->size) return READ_ERROR;
+    while (n && off < s->disk) {
+        ssize_t r = pread(s->fd, p, n, (off_t)off);
+        if (r < 0 && errno == EINTR) continue;
+        if (r < 0) return READ_ERROR;
+        if (r == 0) break;
+        p += r;
+        n -= (size_t)r;
+        off += r;
+    }
+    memset(p, 0, n);
+    return 0;
+}
+
+static int flush_buf(slot *s)
+{
+    int st = 0;
+    if (s->dirty && s->buf_len) st = pwrite_all(s, s->buf, s->buf_len, s->buf_off);
+    s->dirty = 0;
+    s->buf_len = 0;
+    return st;
+}
+
+/* Everything cfitsio wrote is on disk, holes included, so that another reader of the path
+ * (the header checksum, a verifier) sees the file cfitsio sees. */
+static int sync_disk(slot *s)
+{
+    int st = flush_buf(s);
+    if (!st && s->size > s->disk) {
+        if (ftruncate(s->fd, (off_t)s->size) != 0) return WRITE_ERROR;
+        s->disk = s->size;
+    }
+    return st;
+}
+
+static int all_zero(const unsigned char *p, size_t n)
+{
+    uint64_t acc = 0, w;
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8) {
+        memcpy(&w, p + i, 8);
+        acc |= w;
+        if (acc) return 0;
+    }
+    for (; i < n; i++) acc |= p[i];
+    return acc == 0;
+}
+
+static int d_init(void) { return 0; }
+static int d_shutdown(void) { return 0; }
+static int d_setoptions(int options) { (void)options; return 0; }
+static int d_getoptions(int *options) { *options = 0; return 0; }
+static int d_getversion(int *version) { *version = 1; return 0; }
+static int d_checkfile(char *urltype, char *infile, char *outfile)
+{
+    (void)urltype; (void)infile; (void)outfile;
+    return 0;
+}
+
+/* Only wf_fitsdisk_create makes these files; reopening goes through file://. */
+static int d_open(char *filename, int rwmode, int *handle)
+{
+    (void)filename; (void)rwmode; (void)handle;
+    return FILE_NOT_OPENED;
+}
+
+/* filename is the slot number wf_fitsdisk_create passed, so that no character of the real
+ * path reaches cfitsio's filename parser. */
+static int d_create(char *filename, int *handle)
+{
+    char *end = NULL;
+    long i = strtol(filename, &end, 10);
+    slot *s = end != filename && !*end ? slot_of((int)i) : NULL;
+    if (!s || s->fd >= 0) return FILE_NOT_CREATED;
+    s->fd = open(s->path, O_RDWR | O_CREAT | O_EXCL, 0666);
+    if (s->fd < 0) return FILE_NOT_CREATED;
+    *handle = (int)i;
+    return 0;
+}
+
+static int d_truncate(int handle, LONGLONG size)
+{
+    slot *s = slot_of(handle);
+    if (!s) return BAD_FILEPTR;
+    int st = flush_buf(s);
+    if (st) return st;
+    if (ftruncate(s->fd, (off_t)size) != 0) return WRITE_ERROR;
+    s->size = s->disk = size;
+    return 0;
+}
+
+static void slot_free(slot *s)
+{
+    pthread_mutex_lock(&lock);
+    free(s->buf);
+    free(s->path);
+    memset(s, 0, sizeof *s);
+    s->fd = -1;
+    pthread_mutex_unlock(&lock);
+}
+
+static int d_close(int handle)
+{
+    slot *s = slot_of(handle);
+    if (!s) return BAD_FILEPTR;
+    int st = sync_disk(s);
+    if (close(s->fd) != 0 && !st) st = FILE_NOT_CLOSED;
+    slot_free(s);
+    return st;
+}
+
+static int d_remove(char *filename)
+{
+    char *end = NULL;
+    long i = strtol(filename, &end, 10);
+    slot *s = end != filename && !*end ? slot_of((int)i) : NULL;
+    return s && unlink(s->path) == 0 ? 0 : FILE_NOT_OPENED;
+}
+
+static int d_size(int handle, LONGLONG *size)
+{
+    slot *s = slot_of(handle);
+    if (!s) return BAD_FILEPTR;
+    *size = s->size;
+    return 0;
+}
+
+static int d_flush(int handle)
+{
+    slot *s = slot_of(handle);
+    return s ? sync_disk(s) : BAD_FILEPTR;
+}
+
+static int d_seek(int handle, LONGLONG offset)
+{
+    slot *s = slot_of(handle);
+    if (!s) return BAD_FILEPTR;
+    s->pos = offset;
+    return 0;
+}
+
+static int d_read(int handle, void *buffer, long nbytes)
+{
+    slot *s = slot_of(handle);
+    if (!s) return BAD_FILEPTR;
+    size_t n = (size_t)nbytes;
+    int st = 0;
+    if (s->dirty && (st = flush_buf(s))) return st;
+    if (s->buf_len && s->pos >= s->buf_off && s->pos + (long long)n <= s->buf_off + (long long)s->buf_len) {
+        memcpy(buffer, s->buf + (s->pos - s->buf_off), n);
+    } else if (n >= BUF_BYTES || s->pos != s->read_end) {
+        /* a lone record (cfitsio loading one to change part of it) is read as it is: a
+         * megabyte around it would be thrown away by the write that follows */
+        s->buf_len = 0;
+        if ((st = pread_all(s, buffer, n, s->pos))) return st;
+    } else {
+        if (s->pos + (long long)n > s->size) return READ_ERROR;
+        long long len = s->size - s->pos;
+        size_t fill = len < (long long)BUF_BYTES ? (size_t)len : BUF_BYTES;
+        s->buf_len = 0;
+        if ((st = pread_all(s, s->buf, fill, s->pos))) return st;
+        s->buf_off = s->pos;
+        s->buf_len = fill;
+        memcpy(buffer, s->buf, n);
+    }
+    s->pos += (long long)n;
+    s->read_end = s->pos;
+    return 0;
+}
+
+static int d_write(int handle, void *buffer, long nbytes)
+{
+    slot *s = slot_of(handle);
+    if (!s) return BAD_FILEPTR;
+    const unsigned char *p = buffer;
+    size_t n = (size_t)nbytes;
+    int st = 0;
+    if (s->pos >= s->size && all_zero(p, n)) {
+        /* cfitsio's fill records at the end of the file: a hole reads back the same zeros */
+    } else if (s->dirty && s->pos == s->buf_off + (long long)s->buf_len && s->buf_len + n <= BUF_BYTES) {
+        memcpy(s->buf + s->buf_len, p, n);
+        s->buf_len += n;
+    } else {
+        if ((st = flush_buf(s))) return st; /* also drops a read cache the write may overlap */
+        if (n >= BUF_BYTES) {
+            if ((st = pwrite_all(s, p, n, s->pos))) return st;
+        } else {
+            memcpy(s->buf, p, n);
+            s->buf_off = s->pos;
+            s->buf_len = n;
+            s->dirty = 1;
+        }
+    }
+    s->pos += (long long)n;
+    if (s->pos > s->size) s->size = s->pos;
+    return 0;
+}
+
+static void register_driver(void)
+{
+    /* cfitsio registers its own drivers on first use; ours must come after, or the
+     * initialisation would start the table afresh */
+    fits_init_cfitsio();
+    for (int i = 0; i < NSLOTS; i++) slots[i].fd = -1;
+    registered_status = fits_register_driver(PREFIX, d_init, d_shutdown, d_setoptions, d_getoptions,
+                                             d_getversion, d_checkfile, d_open, d_create, d_truncate,
+                                             d_close, d_remove, d_size, d_flush, d_seek, d_read, d_write);
+}
+
+int wf_fitsdisk_create(fitsfile **f, const char *path, int *status)
+{
+    *f = NULL;
+    if (*status > 0) return *status;
+    pthread_once(&once, register_driver);
+    if (registered_status) return *status = registered_status;
+    int i;
+    unsigned char *buf = malloc(BUF_BYTES);
+    char *copy = strdup(path);
+    pthread_mutex_lock(&lock);
+    for (i = 0; i < NSLOTS && slots[i].used; i++) {}
+    if (i < NSLOTS && buf && copy) {
+        slots[i].used = 1;
+        slots[i].path = copy;
+        slots[i].buf = buf;
+    }
+    pthread_mutex_unlock(&lock);
+    if (i == NSLOTS || !buf || !copy) {
+        free(buf);
+        free(copy);
+        return *status = i == NSLOTS ? TOO_MANY_FILES : MEMORY_ALLOCATION;
+    }
+    char name[32];
+    snprintf(name, sizeof name, PREFIX "%d", i);
+    if (fits_create_file(f, name, status)) {
+        *f = NULL;
+        /* a file created before cfitsio failed is ours: leave nothing behind */
+        if (slots[i].fd >= 0) {
+            close(slots[i].fd);
+            unlink(slots[i].path);
+        }
+        slot_free(&slots[i]);
+    }
+    return *status;
+}

@@ -1,0 +1,18 @@
+/* wfisim's own cfitsio disk driver, for the files the project creates. cfitsio's file://
+ * driver goes through stdio with a 4 KiB buffer, and an SCA product is written out of order
+ * (every image HDU's header first, then the rows of SCI, ERR and DQ tile by tile): cfitsio
+ * then fills the gap before each later header with zero records, 200 MB of zeros for a
+ * single-frame SCA, overwritten by the pixels moments later. This driver writes through a
+ * 1 MiB write-back buffer and turns zero records appended at the end of the file into a
+ * hole (extended by ftruncate at flush and close), which reads back as the same zeros. The
+ * bytes of every file are those the file:// driver writes. */
+#ifndef WF_FITSDISK_H
+#define WF_FITSDISK_H
+
+#include <fitsio.h>
+
+/* As fits_create_diskfile: path is taken literally (no extended filename syntax), an
+ * existing file is an error, and the cfitsio status is returned and left in *status. */
+int wf_fitsdisk_create(fitsfile **f, const char *path, int *status);
+
+#endif

@@ -1,0 +1,193 @@
+/* wfisim's cfitsio disk driver and the data sums kept while writing: a product written out of
+ * order through them has the bytes cfitsio's own file:// driver and its own DATASUM give. */
+#include <fitsio.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "sim/fitsdisk.h"
+#include "sim/fitsout.h"
+#include "tests/testutil.h"
+
+enum { NX = 301, NY = 37, NR = 3, TILE = 5 }; /* odd sizes: 16-bit words straddle rows */
+
+typedef struct pixels {
+    float sci[NY][NX];
+    uint32_t dq[NY][NX];
+    uint16_t cube[NR][NY][NX];
+} pixels;
+
+static void fill(pixels *p)
+{
+    uint64_t x = 0x9e3779b97f4a7c15ull;
+    for (int y = 0; y < NY; y++)
+        for (int i = 0; i < NX; i++) {
+            x ^= x << 13; x ^= x >> 7; x ^= x << 17;
+            p->sci[y][i] = (float)((double)(x >> 11) / 9007199254740992.0 * 2e4 - 1e3);
+            p->dq[y][i] = (uint32_t)(x >> 32);
+            for (int r = 0; r < NR; r++) p->cube[r][y][i] = (uint16_t)(x >> (16 * r));
+        }
+    p->sci[3][4] = 0.0f;
+    p->dq[5][6] = 0x80000000u; /* stored as a zero word */
+}
+
+static void image(fitsfile *f, int bitpix, int naxis, const char *name, int *status)
+{
+    long naxes[3] = {NX, NY, NR};
+    fits_create_img(f, bitpix, naxis, naxes, status);
+    fits_write_key_str(f, "EXTNAME", name, NULL, status);
+    ck_assert_int_eq(wf_fits_reserve_checksum(f, "test"), WF_OK);
+}
+
+/* As the assembler writes an SCA: every header first, then tiles of rows out of order into
+ * each image, a table last; known: DATASUMs summed while writing instead of read back. */
+static void write_product(fitsfile *f, const char *path, const pixels *p, int known)
+{
+    int status = 0;
+    fits_create_img(f, BYTE_IMG, 0, NULL, &status);
+    ck_assert_int_eq(wf_fits_reserve_checksum(f, "test"), WF_OK);
+    image(f, FLOAT_IMG, 2, "SCI", &status);
+    image(f, ULONG_IMG, 2, "DQ", &status);
+    image(f, USHORT_IMG, 3, "CUBE", &status);
+    ck_assert_int_eq(status, 0);
+    wf_fits_datasum sum[5] = {{0}};
+    for (int h = 1; h < 4; h++) sum[h].valid = known;
+    const int order[] = {4, 0, 7, 2, 5, 1, 6, 3}; /* tiles of TILE rows, the last one short */
+    for (int t = 0; t < 8; t++) {
+        long y0 = (long)order[t] * TILE, n = y0 + TILE <= NY ? TILE : NY - y0;
+        long first[2] = {1, y0 + 1};
+        fits_movabs_hdu(f, 2, NULL, &status);
+        fits_write_pix(f, TFLOAT, first, n * NX, (void *)p->sci[y0], &status);
+        wf_fits_datasum_add32(&sum[1], p->sci[y0], (size_t)(n * NX), 0);
+        fits_movabs_hdu(f, 3, NULL, &status);
+        fits_write_pix(f, TUINT, first, n * NX, (void *)p->dq[y0], &status);
+        wf_fits_datasum_add32(&sum[2], p->dq[y0], (size_t)(n * NX), 0x80000000u);
+        fits_movabs_hdu(f, 4, NULL, &status);
+        for (int r = 0; r < NR; r++) {
+            long fp[3] = {1, y0 + 1, r + 1}, lp[3] = {NX, y0 + n, r + 1};
+            fits_write_subset(f, TUSHORT, fp, lp, (void *)p->cube[r][y0], &status);
+            wf_fits_datasum_add16(&sum[3], p->cube[r][y0], (size_t)(n * NX),
+                                  (uint64_t)NX * (uint64_t)(y0 + (long)NY * r), 0x8000);
+        }
+        ck_assert_int_eq(status, 0);
+    }
+    char *ttype[] = {"ID"}, *tform[] = {"J"};
+    fits_create_tbl(f, BINARY_TBL, 3, 1, ttype, tform, NULL, "TABLE", &status);
+    int ids[3] = {7, 8, 9};
+    fits_write_col(f, TINT, 1, 1, 1, 3, ids, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_int_eq(wf_fits_checksum_all_known(f, path, sum, 5), WF_OK);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+}
+
+START_TEST(test_same_bytes_as_file_driver)
+{
+    pixels *p = malloc(sizeof *p);
+    ck_assert_ptr_nonnull(p);
+    fill(p);
+    char a[4200], b[4200];
+    snprintf(a, sizeof a, "%s/file_driver.fits", wf_test_tmpdir());
+    snprintf(b, sizeof b, "%s/wfdisk.fits", wf_test_tmpdir());
+    fitsfile *f;
+    int status = 0;
+    ck_assert_int_eq(fits_create_diskfile(&f, a, &status), 0);
+    write_product(f, a, p, 0); /* cfitsio's driver, DATASUM read back by cfitsio */
+    ck_assert_int_eq(wf_fitsdisk_create(&f, b, &status), 0);
+    write_product(f, b, p, 1); /* ours, DATASUM summed while writing */
+    size_t la = 0, lb = 0;
+    char *da = wf_test_slurp(a, &la), *db = wf_test_slurp(b, &lb);
+    ck_assert_ptr_nonnull(da);
+    ck_assert_ptr_nonnull(db);
+    ck_assert_uint_gt(la, (size_t)NX * NY * 14);
+    ck_assert_uint_eq(la, lb);
+    ck_assert(memcmp(da, db, la) == 0);
+    ck_assert_int_eq(wf_fits_verify_checksums(b, 5), WF_OK);
+    free(da);
+    free(db);
+    free(p);
+}
+END_TEST
+
+/* The zero records cfitsio writes before a header placed after unwritten data become a
+ * hole: the file is as long as with zeros written, and reads back the same zeros. */
+START_TEST(test_gap_is_a_hole)
+{
+    char path[4200];
+    snprintf(path, sizeof path, "%s/holes.fits", wf_test_tmpdir());
+    fitsfile *f;
+    int status = 0;
+    ck_assert_int_eq(wf_fitsdisk_create(&f, path, &status), 0);
+    long naxes[2] = {2048, 2048}; /* 16 MiB of float */
+    fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+    fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+    fits_flush_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    struct stat sb;
+    ck_assert_int_eq(stat(path, &sb), 0);
+    ck_assert_int_ge((long long)sb.st_size, 2880LL * 2 + 2048LL * 2048 * 4);
+    ck_assert_int_lt((long long)sb.st_blocks * 512, (long long)sb.st_size / 4);
+    float v[4] = {1, 2, 3, 4};
+    fits_movabs_hdu(f, 1, NULL, &status);
+    fits_write_img(f, TFLOAT, 2048LL * 2048 - 3, 4, v, &status); /* the last pixels only */
+    float back[8];
+    int anynul = 0;
+    fits_read_img(f, TFLOAT, 2048LL * 2048 - 7, 8, NULL, back, &anynul, &status);
+    ck_assert_int_eq(status, 0);
+    for (int i = 0; i < 4; i++) ck_assert(back[i] == 0.0f && back[4 + i] == v[i]);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_int_eq(fits_open_diskfile(&f, path, READONLY, &status), 0);
+    fits_movabs_hdu(f, 2, NULL, &status);
+    fits_read_img(f, TFLOAT, 1000, 8, NULL, back, &anynul, &status);
+    ck_assert_int_eq(status, 0);
+    for (int i = 0; i < 8; i++) ck_assert(back[i] == 0.0f);
+    fits_close_file(f, &status);
+}
+END_TEST
+
+/* Names are taken literally; an existing file is never replaced; slots are reused. */
+START_TEST(test_names_and_slots)
+{
+    char path[4200];
+    snprintf(path, sizeof path, "%s/odd[1](x)!name.fits", wf_test_tmpdir());
+    fitsfile *f;
+    int status = 0;
+    for (int i = 0; i < 200; i++) { /* more than the driver's slots, one open at a time */
+        unlink(path);
+        ck_assert_int_eq(wf_fitsdisk_create(&f, path, &status), 0);
+        fits_create_img(f, BYTE_IMG, 0, NULL, &status);
+        fits_write_key_lng(f, "N", i, NULL, &status);
+        fits_close_file(f, &status);
+        ck_assert_int_eq(status, 0);
+    }
+    long n = -1;
+    ck_assert_int_eq(fits_open_diskfile(&f, path, READONLY, &status), 0);
+    fits_read_key_lng(f, "N", &n, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(n, 199);
+    ck_assert_int_ne(wf_fitsdisk_create(&f, path, &status), 0);
+    ck_assert_ptr_null(f);
+    status = 0;
+    fits_clear_errmsg();
+    ck_assert_int_eq(fits_open_diskfile(&f, path, READONLY, &status), 0);
+    fits_read_key_lng(f, "N", &n, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(n, 199);
+}
+END_TEST
+
+static Suite *suite(void)
+{
+    Suite *s = suite_create("fitsdisk");
+    TCase *tc = tcase_create("core");
+    tcase_add_test(tc, test_same_bytes_as_file_driver);
+    tcase_add_test(tc, test_gap_is_a_hole);
+    tcase_add_test(tc, test_names_and_slots);
+    suite_add_tcase(s, tc);
+    return s;
+}
+
+int main(void) { return wf_test_main(suite()); }
