@@ -39,12 +39,22 @@ static slot *slot_of(int handle)
     return handle >= 0 && handle < NSLOTS && slots[handle].used ? &slots[handle] : NULL;
 }
 
+/* cfitsio's error stack gets the system's reason: a write that fails at a later flush
+ * would otherwise be reported as whatever cfitsio was doing then (often a read). */
+static int sys_error(int code, const char *doing)
+{
+    char msg[FLEN_ERRMSG];
+    snprintf(msg, sizeof msg, "wfisim disk driver: %s: %s", doing, strerror(errno ? errno : EIO));
+    ffpmsg(msg);
+    return code;
+}
+
 static int pwrite_all(slot *s, const unsigned char *p, size_t n, long long off)
 {
     while (n) {
         ssize_t w = pwrite(s->fd, p, n, (off_t)off);
         if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) return WRITE_ERROR; /* a full disk (ENOSPC) included */
+        if (w <= 0) return sys_error(WRITE_ERROR, "write failed"); /* a full disk included */
         p += w;
         n -= (size_t)w;
         off += w;
@@ -61,7 +71,7 @@ static int pread_all(slot *s, unsigned char *p, size_t n, long long off)
     while (n && off < s->disk) {
         ssize_t r = pread(s->fd, p, n, (off_t)off);
         if (r < 0 && errno == EINTR) continue;
-        if (r < 0) return READ_ERROR;
+        if (r < 0) return sys_error(READ_ERROR, "read failed");
         if (r == 0) break;
         p += r;
         n -= (size_t)r;
@@ -86,7 +96,7 @@ static int sync_disk(slot *s)
 {
     int st = flush_buf(s);
     if (!st && s->size > s->disk) {
-        if (ftruncate(s->fd, (off_t)s->size) != 0) return WRITE_ERROR;
+        if (ftruncate(s->fd, (off_t)s->size) != 0) return sys_error(WRITE_ERROR, "extending the file failed");
         s->disk = s->size;
     }
     return st;
@@ -143,7 +153,7 @@ static int d_truncate(int handle, LONGLONG size)
     if (!s) return BAD_FILEPTR;
     int st = flush_buf(s);
     if (st) return st;
-    if (ftruncate(s->fd, (off_t)size) != 0) return WRITE_ERROR;
+    if (ftruncate(s->fd, (off_t)size) != 0) return sys_error(WRITE_ERROR, "truncating the file failed");
     s->size = s->disk = size;
     return 0;
 }
@@ -163,7 +173,7 @@ static int d_close(int handle)
     slot *s = slot_of(handle);
     if (!s) return BAD_FILEPTR;
     int st = sync_disk(s);
-    if (close(s->fd) != 0 && !st) st = FILE_NOT_CLOSED;
+    if (close(s->fd) != 0 && !st) st = sys_error(FILE_NOT_CLOSED, "close failed");
     slot_free(s);
     return st;
 }

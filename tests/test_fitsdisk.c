@@ -4,6 +4,8 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <signal.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -179,6 +181,33 @@ START_TEST(test_names_and_slots)
 }
 END_TEST
 
+/* A write the system refuses (here the file-size limit, as a full disk would) fails the
+ * cfitsio call or the close, with the system's reason on cfitsio's error stack. */
+START_TEST(test_write_failure_reported)
+{
+    char path[4200];
+    snprintf(path, sizeof path, "%s/limited.fits", wf_test_tmpdir());
+    signal(SIGXFSZ, SIG_IGN);
+    struct rlimit rl = {1 << 20, 1 << 20}; /* Check runs each test in its own process */
+    ck_assert_int_eq(setrlimit(RLIMIT_FSIZE, &rl), 0);
+    fitsfile *f;
+    int status = 0, close_status = 0;
+    ck_assert_int_eq(wf_fitsdisk_create(&f, path, &status), 0);
+    long naxes[2] = {1024, 1024};
+    fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+    static float row[1024 * 16];
+    for (int i = 0; i < 1024 * 16; i++) row[i] = (float)i;
+    for (long y = 0; y < 1024 && !status; y += 16) fits_write_img(f, TFLOAT, y * 1024 + 1, 1024 * 16, row, &status);
+    int write_status = status;
+    char msg[FLEN_ERRMSG], all[2048] = "";
+    while (fits_read_errmsg(msg)) strncat(all, msg, sizeof all - strlen(all) - 1);
+    fits_close_file(f, &close_status);
+    while (fits_read_errmsg(msg)) strncat(all, msg, sizeof all - strlen(all) - 1);
+    ck_assert_msg(write_status != 0 || close_status != 0, "a 4 MiB image written under a 1 MiB limit");
+    ck_assert_msg(strstr(all, "File too large") != NULL, "reason missing from: %s", all);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("fitsdisk");
@@ -186,6 +215,7 @@ static Suite *suite(void)
     tcase_add_test(tc, test_same_bytes_as_file_driver);
     tcase_add_test(tc, test_gap_is_a_hole);
     tcase_add_test(tc, test_names_and_slots);
+    tcase_add_test(tc, test_write_failure_reported);
     suite_add_tcase(s, tc);
     return s;
 }
