@@ -35,6 +35,12 @@ static void fill(pixels *p)
     p->dq[5][6] = 0x80000000u; /* stored as a zero word */
 }
 
+static const char *tmp_path(char *buf, size_t cap, const char *name)
+{
+    snprintf(buf, cap, "%s/%s", wf_test_tmpdir(), name);
+    return buf;
+}
+
 static void image(fitsfile *f, int bitpix, int naxis, const char *name, int *status)
 {
     long naxes[3] = {NX, NY, NR};
@@ -91,8 +97,8 @@ START_TEST(test_same_bytes_as_file_driver)
     ck_assert_ptr_nonnull(p);
     fill(p);
     char a[4200], b[4200];
-    snprintf(a, sizeof a, "%s/file_driver.fits", wf_test_tmpdir());
-    snprintf(b, sizeof b, "%s/wfdisk.fits", wf_test_tmpdir());
+    tmp_path(a, sizeof a, "file_driver.fits");
+    tmp_path(b, sizeof b, "wfdisk.fits");
     fitsfile *f;
     int status = 0;
     ck_assert_int_eq(fits_create_diskfile(&f, a, &status), 0);
@@ -118,7 +124,7 @@ END_TEST
 START_TEST(test_gap_is_a_hole)
 {
     char path[4200];
-    snprintf(path, sizeof path, "%s/holes.fits", wf_test_tmpdir());
+    tmp_path(path, sizeof path, "holes.fits");
     fitsfile *f;
     int status = 0;
     ck_assert_int_eq(wf_fitsdisk_create(&f, path, &status), 0);
@@ -154,7 +160,7 @@ END_TEST
 START_TEST(test_names_and_slots)
 {
     char path[4200];
-    snprintf(path, sizeof path, "%s/odd[1](x)!name.fits", wf_test_tmpdir());
+    tmp_path(path, sizeof path, "odd[1](x)!name.fits");
     fitsfile *f;
     int status = 0;
     for (int i = 0; i < 200; i++) { /* more than the driver's slots, one open at a time */
@@ -186,7 +192,7 @@ END_TEST
 START_TEST(test_write_failure_reported)
 {
     char path[4200];
-    snprintf(path, sizeof path, "%s/limited.fits", wf_test_tmpdir());
+    tmp_path(path, sizeof path, "limited.fits");
     signal(SIGXFSZ, SIG_IGN);
     struct rlimit rl = {1 << 20, 1 << 20}; /* Check runs each test in its own process */
     ck_assert_int_eq(setrlimit(RLIMIT_FSIZE, &rl), 0);
