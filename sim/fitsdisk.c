@@ -12,13 +12,17 @@
 #include <unistd.h>
 
 #define PREFIX "wfdisk://"
-#define NSLOTS 64
+#define NSLOTS 1024 /* files being created at once; a slot costs its buffer only when used */
 #define BUF_BYTES ((size_t)1 << 20)
 
 /* One open file. cfitsio calls a handle's read/write/seek from the one thread that owns the
  * fitsfile, so only taking and freeing a slot needs the lock. */
 typedef struct slot {
     int used, fd, dirty;        /* dirty: buf holds bytes not yet written */
+    int creating;               /* inside wf_fitsdisk_create: a close leaves the slot to it */
+    int created;                /* the file on disk is this slot's own */
+    int error;                  /* the first failed write: cfitsio ignores a flush's status,
+                                 * so every later call, the close included, returns it */
     char *path;
     long long pos;              /* cfitsio's position */
     long long size;             /* the file as cfitsio sees it: on disk, buffered, holes */
@@ -54,7 +58,8 @@ static int pwrite_all(slot *s, const unsigned char *p, size_t n, long long off)
     while (n) {
         ssize_t w = pwrite(s->fd, p, n, (off_t)off);
         if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) return sys_error(WRITE_ERROR, "write failed"); /* a full disk included */
+        if (w == 0) errno = EIO;
+        if (w <= 0) return s->error = sys_error(WRITE_ERROR, "write failed"); /* a full disk included */
         p += w;
         n -= (size_t)w;
         off += w;
@@ -83,6 +88,7 @@ static int pread_all(slot *s, unsigned char *p, size_t n, long long off)
 
 static int flush_buf(slot *s)
 {
+    if (s->error) return s->error;
     int st = 0;
     if (s->dirty && s->buf_len) st = pwrite_all(s, s->buf, s->buf_len, s->buf_off);
     s->dirty = 0;
@@ -96,7 +102,8 @@ static int sync_disk(slot *s)
 {
     int st = flush_buf(s);
     if (!st && s->size > s->disk) {
-        if (ftruncate(s->fd, (off_t)s->size) != 0) return sys_error(WRITE_ERROR, "extending the file failed");
+        if (ftruncate(s->fd, (off_t)s->size) != 0)
+            return s->error = sys_error(WRITE_ERROR, "extending the file failed");
         s->disk = s->size;
     }
     return st;
@@ -143,6 +150,7 @@ static int d_create(char *filename, int *handle)
     if (!s || s->fd >= 0) return FILE_NOT_CREATED;
     s->fd = open(s->path, O_RDWR | O_CREAT | O_EXCL, 0666);
     if (s->fd < 0) return FILE_NOT_CREATED;
+    s->created = 1;
     *handle = (int)i;
     return 0;
 }
@@ -153,8 +161,9 @@ static int d_truncate(int handle, LONGLONG size)
     if (!s) return BAD_FILEPTR;
     int st = flush_buf(s);
     if (st) return st;
-    if (ftruncate(s->fd, (off_t)size) != 0) return sys_error(WRITE_ERROR, "truncating the file failed");
+    if (ftruncate(s->fd, (off_t)size) != 0) return s->error = sys_error(WRITE_ERROR, "truncating the file failed");
     s->size = s->disk = size;
+    s->pos = size; /* as file:// does: cfitsio takes the end of the file for its position */
     return 0;
 }
 
@@ -174,16 +183,18 @@ static int d_close(int handle)
     if (!s) return BAD_FILEPTR;
     int st = sync_disk(s);
     if (close(s->fd) != 0 && !st) st = sys_error(FILE_NOT_CLOSED, "close failed");
-    slot_free(s);
+    s->fd = -1;
+    if (!s->creating) slot_free(s);
     return st;
 }
 
+/* fits_delete_file closes (freeing the slot) before it removes, so the slot number no
+ * longer names this file, and may name another thread's: refused. Products are removed by
+ * their path (wf_fits_finish). */
 static int d_remove(char *filename)
 {
-    char *end = NULL;
-    long i = strtol(filename, &end, 10);
-    slot *s = end != filename && !*end ? slot_of((int)i) : NULL;
-    return s && unlink(s->path) == 0 ? 0 : FILE_NOT_OPENED;
+    (void)filename;
+    return FILE_NOT_OPENED;
 }
 
 static int d_size(int handle, LONGLONG *size)
@@ -214,6 +225,7 @@ static int d_read(int handle, void *buffer, long nbytes)
     if (!s) return BAD_FILEPTR;
     size_t n = (size_t)nbytes;
     int st = 0;
+    if (s->error) return s->error;
     if (s->dirty && (st = flush_buf(s))) return st;
     if (s->buf_len && s->pos >= s->buf_off && s->pos + (long long)n <= s->buf_off + (long long)s->buf_len) {
         memcpy(buffer, s->buf + (s->pos - s->buf_off), n);
@@ -244,6 +256,7 @@ static int d_write(int handle, void *buffer, long nbytes)
     const unsigned char *p = buffer;
     size_t n = (size_t)nbytes;
     int st = 0;
+    if (s->error) return s->error;
     if (s->pos >= s->size && all_zero(p, n)) {
         /* cfitsio's fill records at the end of the file: a hole reads back the same zeros */
     } else if (s->dirty && s->pos == s->buf_off + (long long)s->buf_len && s->buf_len + n <= BUF_BYTES) {
@@ -289,6 +302,7 @@ int wf_fitsdisk_create(fitsfile **f, const char *path, int *status)
     for (i = 0; i < NSLOTS && slots[i].used; i++) {}
     if (i < NSLOTS && buf && copy) {
         slots[i].used = 1;
+        slots[i].creating = 1;
         slots[i].path = copy;
         slots[i].buf = buf;
     }
@@ -300,14 +314,14 @@ int wf_fitsdisk_create(fitsfile **f, const char *path, int *status)
     }
     char name[32];
     snprintf(name, sizeof name, PREFIX "%d", i);
+    /* the slot stays this call's until it returns, even if cfitsio closes it on a failure */
     if (fits_create_file(f, name, status)) {
         *f = NULL;
-        /* a file created before cfitsio failed is ours: leave nothing behind */
-        if (slots[i].fd >= 0) {
-            close(slots[i].fd);
-            unlink(slots[i].path);
-        }
+        if (slots[i].fd >= 0) close(slots[i].fd);
+        if (slots[i].created) unlink(slots[i].path); /* ours: leave nothing behind */
         slot_free(&slots[i]);
+    } else {
+        slots[i].creating = 0;
     }
     return *status;
 }

@@ -214,6 +214,32 @@ START_TEST(test_write_failure_reported)
 }
 END_TEST
 
+/* The same when the refused write is the buffer's, at the close: cfitsio ignores what a
+ * flush returns, so the driver must keep the failure and the close must report it. */
+START_TEST(test_failed_flush_fails_the_close)
+{
+    char path[4200];
+    tmp_path(path, sizeof path, "limited_flush.fits");
+    signal(SIGXFSZ, SIG_IGN);
+    struct rlimit rl = {256 << 10, 256 << 10}; /* less than the image, less than the buffer */
+    ck_assert_int_eq(setrlimit(RLIMIT_FSIZE, &rl), 0);
+    fitsfile *f;
+    int status = 0, close_status = 0;
+    ck_assert_int_eq(wf_fitsdisk_create(&f, path, &status), 0);
+    long naxes[2] = {256, 512}; /* 512 KiB of float */
+    fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+    static float pix[256 * 512];
+    for (int i = 0; i < 256 * 512; i++) pix[i] = (float)i + 1.0f;
+    fits_write_img(f, TFLOAT, 1, 256 * 512, pix, &status);
+    fits_flush_buffer(f, 0, &status); /* fails inside cfitsio, which drops the status */
+    char msg[FLEN_ERRMSG], all[2048] = "";
+    fits_close_file(f, &close_status);
+    while (fits_read_errmsg(msg)) strncat(all, msg, sizeof all - strlen(all) - 1);
+    ck_assert_msg(close_status != 0, "a 512 KiB image closed without error under a 256 KiB limit");
+    ck_assert_msg(strstr(all, "File too large") != NULL, "reason missing from: %s", all);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("fitsdisk");
@@ -222,6 +248,7 @@ static Suite *suite(void)
     tcase_add_test(tc, test_gap_is_a_hole);
     tcase_add_test(tc, test_names_and_slots);
     tcase_add_test(tc, test_write_failure_reported);
+    tcase_add_test(tc, test_failed_flush_fails_the_close);
     suite_add_tcase(s, tc);
     return s;
 }
