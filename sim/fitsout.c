@@ -151,18 +151,7 @@ static wf_status checksum_hdu(fitsfile *f, const char *path, const wf_fits_datas
     return wf_fits_error(status, path, "writing CHECKSUM");
 }
 
-wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path)
-{
-    return checksum_hdu(f, path, NULL);
-}
-
-wf_status wf_fits_checksum_all(fitsfile *f, const char *path)
-{
-    return wf_fits_checksum_all_known(f, path, NULL, 0);
-}
-
-wf_status wf_fits_checksum_all_known(fitsfile *f, const char *path, const wf_fits_datasum *sums,
-                                     int nsums)
+wf_status wf_fits_checksum_all(fitsfile *f, const char *path, const wf_fits_datasum *sums, int nsums)
 {
     int status = 0, nhdu = 0, current = 0;
     /* fits_get_num_hdus leaves out a just-created HDU that has no data written yet (an
@@ -255,7 +244,7 @@ wf_status wf_fits_begin(const char *path, char *tmp, size_t tmp_size, fitsfile *
 wf_status wf_fits_finish(fitsfile *f, const char *tmp, const char *path, wf_status st)
 {
     int status = 0;
-    if (!st) st = wf_fits_checksum_all(f, tmp);
+    if (!st) st = wf_fits_checksum_all(f, tmp, NULL, 0);
     fits_close_file(f, &status);
     if (!st) st = wf_fits_error(status, tmp, "closing");
     if (!st && rename(tmp, path) != 0)

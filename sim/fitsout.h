@@ -19,12 +19,6 @@ wf_status wf_fits_error(int status, const char *path, const char *doing);
  * header, which would shift every later HDU of a multi-gigabyte file. */
 wf_status wf_fits_reserve_checksum(fitsfile *f, const char *path);
 
-/* CHECKSUM and DATASUM of the current HDU with fixed comments (no time stamp). */
-wf_status wf_fits_checksum_hdu(fitsfile *f, const char *path);
-
-/* The same for every HDU of the file; leaves the last HDU current. */
-wf_status wf_fits_checksum_all(fitsfile *f, const char *path);
-
 /* A data unit's FITS checksum summed while its words are written, in any order (the one's
  * complement sum commutes), so that closing a product need not read its pixels back: for an
  * SCA that read is 200 MB. Each word must be added exactly once; `valid` says the sum is
@@ -43,10 +37,10 @@ void wf_fits_datasum_add32(wf_fits_datasum *s, const void *values, size_t n, uin
 void wf_fits_datasum_add16(wf_fits_datasum *s, const uint16_t *values, size_t n, uint64_t first,
                            uint16_t flip);
 
-/* As wf_fits_checksum_all, with the DATASUM of HDU i (1-based) taken from sums[i - 1] when
- * i <= nsums and that sum is valid, and read from the file otherwise. */
-wf_status wf_fits_checksum_all_known(fitsfile *f, const char *path, const wf_fits_datasum *sums,
-                                     int nsums);
+/* CHECKSUM and DATASUM of every HDU of the file, with fixed comments (no time stamp); leaves
+ * the last HDU current. The DATASUM of HDU i (1-based) is sums[i - 1] when i <= nsums and that
+ * sum is valid, and is read from the file otherwise (sums may be NULL). */
+wf_status wf_fits_checksum_all(fitsfile *f, const char *path, const wf_fits_datasum *sums, int nsums);
 
 /* Proves the FITS file at path is whole, as the resume of `wfisim survey run` and the plan
  * reader rely on: every section (HDU) has a CHECKSUM and DATASUM that verify, and the sections

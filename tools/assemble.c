@@ -1119,7 +1119,7 @@ static wf_status on_end(assembler *a, exposure *e, char *last_path, size_t last_
     wf_status st;
     if ((e->m.effects && has_word(e->m.effects, "cosmic")) || e->ncr)
         if ((st = write_cosmics(a, e))) return st;
-    if ((st = wf_fits_checksum_all_known(e->f, e->tmp, e->sum, (int)(sizeof e->sum / sizeof e->sum[0])))) {
+    if ((st = wf_fits_checksum_all(e->f, e->tmp, e->sum, (int)(sizeof e->sum / sizeof e->sum[0])))) {
         char why[900];
         snprintf(why, sizeof why, "%s", wf_error_message());
         return fail(a, st, "%s", why);
