@@ -1,7 +1,9 @@
 #include "hal/arena.h"
 
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 
 #define ARENA_ALIGN 64u
 
@@ -20,6 +22,19 @@ wf_status wf_arena_init(wf_arena *arena, void *memory, size_t capacity, const ch
     arena->used = pad > capacity ? capacity : pad;
     arena->high_water = arena->used;
     return WF_OK;
+}
+
+void *wf_arena_host_alloc(size_t size)
+{
+    const size_t huge = (size_t)2 << 20;
+    void *p = NULL;
+    /* a whole number of huge pages, so that the tail can be one too */
+    size_t n = size > SIZE_MAX - huge ? size : (size + huge - 1) / huge * huge;
+    if (!n || posix_memalign(&p, huge, n) != 0) return NULL;
+#ifdef MADV_HUGEPAGE
+    (void)madvise(p, n, MADV_HUGEPAGE); /* advice: without it, ordinary pages */
+#endif
+    return p;
 }
 
 size_t wf_arena_cost(size_t size)

@@ -1,6 +1,7 @@
 #include "sim/render.h"
 
 #include <limits.h>
+#include "hal/arena.h"
 #include <stdlib.h>
 #include <string.h>
 
@@ -76,7 +77,7 @@ wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_obje
     r->stamp_off = malloc((n ? n : 1) * sizeof *r->stamp_off);
     r->active = malloc((n ? n : 1) * sizeof *r->active);
     r->order = malloc((n ? n : 1) * sizeof *r->order);
-    r->pool = cfg->pool_bytes ? malloc(cfg->pool_bytes) : NULL;
+    r->pool = cfg->pool_bytes ? wf_arena_host_alloc(cfg->pool_bytes) : NULL;
     r->skyrow = malloc((size_t)cfg->ncols * sizeof *r->skyrow);
     if (!r->objs || !r->stamp_off || !r->active || !r->order || (cfg->pool_bytes && !r->pool) || !r->skyrow) {
         wf_renderer_destroy(r);

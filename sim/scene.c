@@ -388,7 +388,7 @@ static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const 
     size_t keep, scratch;
     if ((st = wf_profile_psf_need(&s->psf_wide_image, &s->acc_wide, &keep, &scratch))) return st;
     size_t bytes = keep + scratch + 4096;
-    if (!(s->psf_wide_memory = malloc(bytes))) return wf_error(WF_ERR_NOMEM, "scene: wide PSF table");
+    if (!(s->psf_wide_memory = wf_arena_host_alloc(bytes))) return wf_error(WF_ERR_NOMEM, "scene: wide PSF table");
     wf_arena_init(&s->psf_wide_arena, s->psf_wide_memory, bytes, "scene wide PSF arena");
     if ((st = wf_profile_psf_init(&s->ppsf_wide, &s->psf_wide_image, &s->acc_wide, &s->psf_wide_arena))) return st;
     release_tail(&s->psf_wide_arena);
@@ -555,7 +555,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     size_t keep, scratch;
     if ((st = wf_profile_psf_need(&s->psf_image, &s->acc, &keep, &scratch))) goto bad;
     size_t pbytes = keep + scratch + 4096;
-    if (!(s->psf_memory = malloc(pbytes))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF table"); goto bad; }
+    if (!(s->psf_memory = wf_arena_host_alloc(pbytes))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF table"); goto bad; }
     wf_arena_init(&s->psf_arena, s->psf_memory, pbytes, "scene PSF arena");
     if ((st = wf_profile_psf_init(&s->ppsf, &s->psf_image, &s->acc, &s->psf_arena))) goto bad;
     release_tail(&s->psf_arena);

@@ -79,7 +79,7 @@ wf_status wf_expose_run(wf_expose_job *job)
         w->rows_done = &rows_done;
         w->failed = &failed;
         /* The host reserves each instance's whole budget once; the firmware never asks again. */
-        w->memory = malloc(need);
+        w->memory = wf_arena_host_alloc(need);
         if (!w->memory) { st = wf_error(WF_ERR_NOMEM, "cannot reserve %zu bytes for readout %d", need, i); goto out; }
         wf_arena_init(&w->arena, w->memory, need, "readout arena");
         if ((st = wf_readout_create(&job->ro, &job->clock, &job->scenes[i], &job->noise, job->link,
