@@ -2,6 +2,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <limits.h>
 #include <fitsio2.h>
 #include <pthread.h>
 #include <stdint.h>
@@ -14,6 +15,8 @@
 #define PREFIX "wfdisk://"
 #define NSLOTS 1024 /* files being created at once; a slot costs its buffer only when used */
 #define BUF_BYTES ((size_t)1 << 20)
+
+typedef struct hole { long long lo, hi; } hole;
 
 /* One open file. cfitsio calls a handle's read/write/seek from the one thread that owns the
  * fitsfile, so only taking and freeing a slot needs the lock. */
@@ -31,6 +34,8 @@ typedef struct slot {
     long long buf_off;
     size_t buf_len;
     long long read_end;         /* where the last read stopped: the next one there is sequential */
+    hole *holes;                /* ranges never written (zeros), sorted, disjoint */
+    size_t nholes, holes_cap;
 } slot;
 
 static slot slots[NSLOTS];
@@ -109,6 +114,73 @@ static int sync_disk(slot *s)
     return st;
 }
 
+/* The holes: zero records cfitsio appended and the driver did not write. cfitsio reads a
+ * record back before it writes part of it (the first and last records of every run of rows),
+ * and one inside a hole is zeros without asking the kernel, or flushing the buffer first. */
+static int hole_covers(const slot *s, long long lo, long long hi)
+{
+    for (size_t i = 0; i < s->nholes; i++)
+        if (s->holes[i].lo <= lo) {
+            if (hi <= s->holes[i].hi) return 1;
+        } else {
+            break;
+        }
+    return 0;
+}
+
+/* [lo, hi) now holds written bytes: no longer (part of) a hole. */
+static int hole_fill(slot *s, long long lo, long long hi)
+{
+    for (size_t i = 0; i < s->nholes; i++) {
+        hole *h = &s->holes[i];
+        if (h->hi <= lo) continue;
+        if (h->lo >= hi) break;
+        if (h->lo < lo && h->hi > hi) { /* split in two */
+            if (s->nholes == s->holes_cap) {
+                size_t cap = s->holes_cap ? 2 * s->holes_cap : 16;
+                hole *v = realloc(s->holes, cap * sizeof *v);
+                if (!v) return MEMORY_ALLOCATION;
+                s->holes = v;
+                s->holes_cap = cap;
+                h = &s->holes[i];
+            }
+            memmove(h + 1, h, (s->nholes - i) * sizeof *h);
+            s->nholes++;
+            h[0].hi = lo;
+            h[1].lo = hi;
+            return 0;
+        }
+        if (h->lo >= lo && h->hi <= hi) { /* gone */
+            memmove(h, h + 1, (s->nholes - i - 1) * sizeof *h);
+            s->nholes--;
+            i--;
+        } else if (h->lo < lo) {
+            h->hi = lo;
+        } else {
+            h->lo = hi;
+        }
+    }
+    return 0;
+}
+
+/* Zeros appended at the end of the file: a new hole, or the last one grown. */
+static int hole_append(slot *s, long long lo, long long hi)
+{
+    if (s->nholes && s->holes[s->nholes - 1].hi == lo) {
+        s->holes[s->nholes - 1].hi = hi;
+        return 0;
+    }
+    if (s->nholes == s->holes_cap) {
+        size_t cap = s->holes_cap ? 2 * s->holes_cap : 16;
+        hole *v = realloc(s->holes, cap * sizeof *v);
+        if (!v) return MEMORY_ALLOCATION;
+        s->holes = v;
+        s->holes_cap = cap;
+    }
+    s->holes[s->nholes++] = (hole){lo, hi};
+    return 0;
+}
+
 static int all_zero(const unsigned char *p, size_t n)
 {
     uint64_t acc = 0, w;
@@ -162,6 +234,7 @@ static int d_truncate(int handle, LONGLONG size)
     int st = flush_buf(s);
     if (st) return st;
     if (ftruncate(s->fd, (off_t)size) != 0) return s->error = sys_error(WRITE_ERROR, "truncating the file failed");
+    if ((st = hole_fill(s, size, LLONG_MAX))) return st; /* what was cut off is no hole */
     s->size = s->disk = size;
     s->pos = size; /* as file:// does: cfitsio takes the end of the file for its position */
     return 0;
@@ -172,6 +245,7 @@ static void slot_free(slot *s)
     pthread_mutex_lock(&lock);
     free(s->buf);
     free(s->path);
+    free(s->holes);
     memset(s, 0, sizeof *s);
     s->fd = -1;
     pthread_mutex_unlock(&lock);
@@ -226,6 +300,11 @@ static int d_read(int handle, void *buffer, long nbytes)
     size_t n = (size_t)nbytes;
     int st = 0;
     if (s->error) return s->error;
+    if (s->pos + (long long)n <= s->size && hole_covers(s, s->pos, s->pos + (long long)n)) {
+        memset(buffer, 0, n); /* never written, so not in the buffer either */
+        s->pos += (long long)n;
+        return 0;
+    }
     if (s->dirty && (st = flush_buf(s))) return st;
     if (s->buf_len && s->pos >= s->buf_off && s->pos + (long long)n <= s->buf_off + (long long)s->buf_len) {
         memcpy(buffer, s->buf + (s->pos - s->buf_off), n);
@@ -257,9 +336,16 @@ static int d_write(int handle, void *buffer, long nbytes)
     size_t n = (size_t)nbytes;
     int st = 0;
     if (s->error) return s->error;
-    if (s->pos >= s->size && all_zero(p, n)) {
-        /* cfitsio's fill records at the end of the file: a hole reads back the same zeros */
-    } else if (s->dirty && s->pos == s->buf_off + (long long)s->buf_len && s->buf_len + n <= BUF_BYTES) {
+    long long end = s->pos + (long long)n;
+    if ((s->pos >= s->size || hole_covers(s, s->pos, end)) && all_zero(p, n)) {
+        /* cfitsio's fill records: a hole reads back the same zeros */
+        if (s->pos >= s->size && (st = hole_append(s, s->size, end))) return st;
+        s->pos = end;
+        if (s->pos > s->size) s->size = s->pos;
+        return 0;
+    }
+    if ((st = hole_fill(s, s->pos, end))) return st;
+    if (s->dirty && s->pos == s->buf_off + (long long)s->buf_len && s->buf_len + n <= BUF_BYTES) {
         memcpy(s->buf + s->buf_len, p, n);
         s->buf_len += n;
     } else {

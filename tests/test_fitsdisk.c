@@ -122,6 +122,62 @@ START_TEST(test_same_bytes_as_file_driver)
 }
 END_TEST
 
+/* Rows written one at a time in a scrambled order into an image larger than cfitsio's
+ * buffers: records are evicted and read back half written, some from holes, some after
+ * their data reached the disk. Read back while open, and the bytes after closing, must be
+ * those of cfitsio's own driver. */
+static void scrambled_rows(fitsfile *f, float *img, int ny, int check)
+{
+    int status = 0;
+    long naxes[2] = {NX, ny};
+    fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+    fits_create_img(f, FLOAT_IMG, 2, naxes, &status); /* a second image: the first is a gap */
+    fits_movabs_hdu(f, 1, NULL, &status);
+    for (int k = 0; k < ny; k++) {
+        long y = (long)k * 7919 % ny; /* 7919 is prime, ny not a multiple: every row once */
+        long first[2] = {1, y + 1};
+        fits_write_pix(f, TFLOAT, first, NX, img + y * NX, &status);
+    }
+    ck_assert_int_eq(status, 0);
+    if (check) {
+        float *back = malloc((size_t)NX * (size_t)ny * sizeof *back);
+        int anynul = 0;
+        fits_read_img(f, TFLOAT, 1, (LONGLONG)NX * ny, NULL, back, &anynul, &status);
+        ck_assert_int_eq(status, 0);
+        ck_assert(memcmp(back, img, (size_t)NX * (size_t)ny * sizeof *back) == 0);
+        free(back);
+    }
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+}
+
+START_TEST(test_scrambled_rows)
+{
+    enum { NYS = 2000 }; /* 2.4 MB: far more than cfitsio's forty 2880-byte buffers */
+    float *img = malloc((size_t)NX * NYS * sizeof *img);
+    ck_assert_ptr_nonnull(img);
+    for (size_t i = 0; i < (size_t)NX * NYS; i++) img[i] = (float)(i % 9973) + 0.5f;
+    char a[4200], b[4200];
+    tmp_path(a, sizeof a, "rows_file_driver.fits");
+    tmp_path(b, sizeof b, "rows_wfdisk.fits");
+    fitsfile *f;
+    int status = 0;
+    ck_assert_int_eq(fits_create_diskfile(&f, a, &status), 0);
+    scrambled_rows(f, img, NYS, 0);
+    ck_assert_int_eq(wf_fitsdisk_create(&f, b, &status), 0);
+    scrambled_rows(f, img, NYS, 1);
+    size_t la = 0, lb = 0;
+    char *da = wf_test_slurp(a, &la), *db = wf_test_slurp(b, &lb);
+    ck_assert_ptr_nonnull(da);
+    ck_assert_ptr_nonnull(db);
+    ck_assert_uint_eq(la, lb);
+    ck_assert(memcmp(da, db, la) == 0);
+    free(da);
+    free(db);
+    free(img);
+}
+END_TEST
+
 /* The zero records cfitsio writes before a header placed after unwritten data become a
  * hole: the file is as long as with zeros written, and reads back the same zeros. */
 START_TEST(test_gap_is_a_hole)
@@ -254,6 +310,7 @@ static Suite *suite(void)
     TCase *tc = tcase_create("core");
     tcase_add_test(tc, test_same_bytes_as_file_driver);
     tcase_add_test(tc, test_gap_is_a_hole);
+    tcase_add_test(tc, test_scrambled_rows);
     tcase_add_test(tc, test_names_and_slots);
     tcase_add_test(tc, test_write_failure_reported);
     tcase_add_test(tc, test_full_disk_at_the_close);
