@@ -180,8 +180,14 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
     size_t bytes = stamp_bytes(o), dbytes = draw_bytes(o);
     if (r->stamp_off[i] == NO_STAMP && dbytes <= r->cfg.pool_bytes) {
         /* compact only when that makes room: a futile compaction per request would cost
-         * O(active) each time on a crowded tile */
-        if (r->pool_used + dbytes > r->cfg.pool_bytes && r->live_bytes + dbytes <= r->cfg.pool_bytes) compact(r);
+         * O(active) each time on a crowded tile. The pool is used up to twice what is live
+         * (4 MiB at least) before it is compacted, not to its end: every page the bump
+         * allocation reaches becomes resident and costs a fault, while moving the live
+         * stamps down costs about one copy of what is drawn. */
+        size_t soft = 2 * (r->live_bytes + dbytes);
+        if (soft < ((size_t)4 << 20)) soft = (size_t)4 << 20;
+        if (soft > r->cfg.pool_bytes) soft = r->cfg.pool_bytes;
+        if (r->pool_used + dbytes > soft && r->live_bytes + dbytes <= r->cfg.pool_bytes) compact(r);
         if (r->pool_used + dbytes <= r->cfg.pool_bytes) {
             double *dst = (double *)(void *)(r->pool + r->pool_used);
             wf_status st = r->draw(r->draw_ctx, o, o->by0, o->by0 + o->bny, dst);

@@ -277,6 +277,43 @@ START_TEST(each_stamp_drawn_once)
 }
 END_TEST
 
+/* The pool is used up to about twice the live stamps before it is compacted, not to its
+ * end: the pages a bump allocation reaches are resident memory. 4,000 stamps (~60 MB drawn in
+ * all) pass through a 64 MiB pool whose live set is a few hundred kB. */
+START_TEST(pool_kept_near_live_stamps)
+{
+    enum { N = 4000, W = 80, H = 20000 };
+    static gauss g[N];
+    static wf_render_object o[N];
+    make_objects(N, W, H, g, o, 9);
+    const size_t mib = (size_t)1 << 20;
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 64 * mib, 0, NULL};
+    counter c = {0, 0};
+    wf_renderer *r;
+    ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
+    wf_scene_source src;
+    wf_renderer_source(r, &src);
+    float *buf = malloc((size_t)16 * W * sizeof *buf);
+    for (int y0 = 0; y0 < H; y0 += 16) ck_assert_int_eq(wf_scene_fill(&src, y0, y0 + 16, W, buf), WF_OK);
+    wf_renderer_stats st;
+    wf_renderer_get_stats(r, &st);
+    wf_renderer_destroy(r);
+    free(buf);
+    size_t drawn = 0, largest = 0;
+    for (int i = 0; i < N; i++) {
+        size_t px = (size_t)o[i].nx * (size_t)o[i].ny; /* the box is the footprint here */
+        drawn += px * sizeof(float);                     /* kept as float */
+        if (px * sizeof(double) > largest) largest = px * sizeof(double); /* drawn in double */
+    }
+    ck_assert_uint_gt(drawn, 16 * mib); /* the pool would otherwise fill to that */
+    ck_assert_uint_eq((size_t)st.stamps_drawn, (size_t)c.calls);
+    size_t bound = 2 * (st.live_high_water + largest);
+    if (bound < 4 * mib) bound = 4 * mib;
+    ck_assert_msg(st.pool_high_water <= bound + largest, "pool used to %zu bytes, live at most %zu",
+                  st.pool_high_water, st.live_high_water);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("render");
@@ -286,6 +323,7 @@ static Suite *suite(void)
     tcase_add_test(tc, flux_conserved_and_off_sca_skipped);
     tcase_add_test(tc, crowded_tile_and_empty_scene);
     tcase_add_test(tc, each_stamp_drawn_once);
+    tcase_add_test(tc, pool_kept_near_live_stamps);
     tcase_add_test(tc, halo_objects);
     tcase_add_test(tc, halo_clipped);
     suite_add_tcase(s, tc);
