@@ -30,6 +30,7 @@ typedef struct spec {
     uint16_t sca;
     double frame_time, gain, read_noise, nl_beta, exptime;
     int sat_x, sat_y, sat_val; /* one pixel's SATURATION value (sat_val < 0: none) */
+    int low_x;                 /* single frame: this column at or below the bias (-1: none) */
     const char *extra;         /* hdr.* lines */
 } spec;
 
@@ -53,6 +54,7 @@ static spec default_spec(void)
     s.nl_beta = -6.0e-7;
     s.exptime = 100.0;
     s.sat_val = -1;
+    s.low_x = -1;
     return s;
 }
 
@@ -139,6 +141,7 @@ static void build(const spec *sp, stream *s)
                     res[(size_t)r * TILE * NCOLS + i] = (uint16_t)nearbyint(q / sp->gain);
                 }
                 single[i] = (float)(rate * sp->exptime / sp->gain);
+                if (x == sp->low_x) single[i] = -1.5f * (float)(y % 5); /* 0, -0 and below */
                 sat[i] = x == sp->sat_x && y == sp->sat_y && sp->sat_val >= 0 ? (uint8_t)sp->sat_val : 255;
             }
         if (sp->single)
@@ -582,6 +585,7 @@ START_TEST(test_single_frame)
     sp.sat_x = 63;
     sp.sat_y = 95;
     sp.sat_val = 0;
+    sp.low_x = 5;
     stream s;
     build(&sp, &s);
     int order[MAX_PACKETS], n = identity(order, &s);
@@ -599,9 +603,20 @@ START_TEST(test_single_frame)
     fits_close_file(f, &status);
     ck_assert_int_eq(assert_checksums(fits), 4);
     for (int i = 0; i < NROWS * NCOLS; i++) {
-        double rate = true_rate(i % NCOLS, i / NCOLS), q = rate * sp.exptime;
-        ck_assert(fabs(sci[i] - rate) <= 1e-5 * rate);
-        ck_assert(fabs(err[i] - sqrt(q + 25.0) / sp.exptime) <= 1e-5 * err[i]);
+        int x = i % NCOLS, y = i / NCOLS;
+        double rate = true_rate(x, y), q = rate * sp.exptime;
+        if (x != sp.low_x) {
+            ck_assert(fabs(sci[i] - rate) <= 1e-5 * rate);
+            ck_assert(fabs(err[i] - sqrt(q + 25.0) / sp.exptime) <= 1e-5 * err[i]);
+        } else { /* at or below the bias: no Poisson term */
+            ck_assert(sci[i] <= 0.0f);
+            ck_assert(err[i] == (float)(5.0 / sp.exptime));
+        }
+        /* to the bit, the assembler's formula in double, whichever code path computed it */
+        float adu = x == sp.low_x ? -1.5f * (float)(y % 5) : (float)(rate * sp.exptime / sp.gain);
+        double qq = (adu - 0.0) * sp.gain;
+        ck_assert(sci[i] == (float)(qq * (1.0 / sp.exptime)));
+        ck_assert(err[i] == (float)(sqrt((qq > 0 ? qq : 0) + 25.0) * (1.0 / sp.exptime)));
         ck_assert_uint_eq(dq[i], i == NROWS * NCOLS - 1 ? WF_DQ_SATURATED : 0u);
     }
     free(s.data);
