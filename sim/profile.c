@@ -28,14 +28,12 @@
 
 #include "sim/profile.h"
 #include "sim/profile_int.h"
+#include "sim/fftw_lock.h"
 
 /* The knot lattice (see "knot lattice" below): most kernel taps per axis, coarsest step. */
 #define LAT_WMAX 16
 #define LAT_RMAX 64
 
-static pthread_mutex_t fftw_mutex = PTHREAD_MUTEX_INITIALIZER;
-void wf_profile_fftw_lock(void) { pthread_mutex_lock(&fftw_mutex); }
-void wf_profile_fftw_unlock(void) { pthread_mutex_unlock(&fftw_mutex); }
 
 void wf_profile_accuracy_default(wf_profile_accuracy *acc)
 {
@@ -199,27 +197,27 @@ wf_status wf_profile_work_init(wf_profile_work *w, const wf_profile_accuracy *ac
     w->sersic = wf_sersic4_table();
     w->nsizes = l.nsizes;
     memcpy(w->sizes, l.sizes, sizeof w->sizes);
-    wf_profile_fftw_lock();
+    wf_fftw_lock();
     for (int i = 0; i < w->nsizes; i++) {
         int n = w->sizes[i];
         w->plans[i] = fftw_plan_dft_c2r_2d(n, n, (fftw_complex *)w->fft, w->fft, FFTW_ESTIMATE);
         if (!w->plans[i]) {
-            wf_profile_fftw_unlock();
+            wf_fftw_unlock();
             wf_profile_work_free(w);
             return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", n);
         }
     }
-    wf_profile_fftw_unlock();
+    wf_fftw_unlock();
     return WF_OK;
 }
 
 void wf_profile_work_free(wf_profile_work *w)
 {
     if (!w) return;
-    wf_profile_fftw_lock();
+    wf_fftw_lock();
     for (int i = 0; i < w->nsizes; i++)
         if (w->plans[i]) fftw_destroy_plan((fftw_plan)w->plans[i]);
-    wf_profile_fftw_unlock();
+    wf_fftw_unlock();
     w->nsizes = 0;
 }
 

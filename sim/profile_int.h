@@ -56,11 +56,6 @@ static inline double wf_sersic4_eval(const wf_sersic_table *t, double w)
  * 2 pi D / lambda stays below it for every lambda > 0.3 um. */
 #define WF_PSF_BAND_NYQ 8.0
 
-/* FFTW's planner is not thread-safe: every plan made or destroyed in sim/profile*.c holds
- * this process-wide lock. */
-void wf_profile_fftw_lock(void);
-void wf_profile_fftw_unlock(void);
-
 /* WF_OK when the knobs are in range, else an error naming the first one out of range. */
 struct wf_profile_accuracy;
 wf_status wf_profile_check_accuracy(const struct wf_profile_accuracy *acc);

@@ -17,6 +17,7 @@
 
 #include "sim/profile.h"
 #include "sim/profile_int.h"
+#include "sim/fftw_lock.h"
 
 #define WF_PSF_KFLOOR 1e-7
 #define WF_PSF_TAPER 0.1
@@ -177,14 +178,14 @@ static wf_status transform_fft(const wf_psf_image *img, int os, int table_fft, i
     for (int j = 0; j < img->n; j++)
         for (int i = 0; i < img->n; i++)
             buf[(size_t)(j % np) * rowlen + (size_t)(i % np)] += img->pix[(size_t)j * img->n + i];
-    wf_profile_fftw_lock();
+    wf_fftw_lock();
     fftw_plan plan = fftw_plan_dft_r2c_2d(np, np, buf, (fftw_complex *)buf, FFTW_ESTIMATE);
-    wf_profile_fftw_unlock();
+    wf_fftw_unlock();
     if (!plan) return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", np);
     fftw_execute(plan);
-    wf_profile_fftw_lock();
+    wf_fftw_lock();
     fftw_destroy_plan(plan);
-    wf_profile_fftw_unlock();
+    wf_fftw_unlock();
     /* The DFT puts sample i at i * scale; the image centre c = (n-1)/2 is the PSF's origin,
      * so multiply by exp(+i k c scale). k = m dk_t and scale = pixel / os, so the phase per
      * step is 2 pi c / (os table_fft) = 2 pi c / np. */
@@ -467,18 +468,18 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
                 bb[0] = (double)re[at] - (double)co->re[at];
                 bb[1] = (double)im[at] - (double)co->im[at];
             }
-        wf_profile_fftw_lock();
+        wf_fftw_lock();
         fftw_plan plan = fftw_plan_dft_c2r_2d(g.nfft, g.nfft, (fftw_complex *)buf, buf,
                                               FFTW_ESTIMATE);
-        wf_profile_fftw_unlock();
+        wf_fftw_unlock();
         if (!plan) {
             wf_arena_release(arena, mark);
             return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", g.nfft);
         }
         fftw_execute(plan);
-        wf_profile_fftw_lock();
+        wf_fftw_lock();
         fftw_destroy_plan(plan);
-        wf_profile_fftw_unlock();
+        wf_fftw_unlock();
         /* e(X) = (1 / lw^2) sum_k T(k) e^{i k X} for the draws' convention (sim/profile.c) */
         const double norm = 1.0 / ((double)g.lw * g.lw);
         const long nfl = (long)g.nfft;

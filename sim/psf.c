@@ -1,4 +1,5 @@
 #include "sim/psf.h"
+#include "sim/fftw_lock.h"
 
 #include <fftw3.h>
 #include <math.h>
@@ -12,7 +13,6 @@
 #define COEF_FLOOR 1e-13       /* |c| below this (c_0 = 1) is FFT round-off outside the support */
 
 /* FFTW's planner is not thread-safe; execution of an existing plan is. */
-static pthread_mutex_t planner_lock = PTHREAD_MUTEX_INITIALIZER;
 
 typedef struct mono {
     double lambda_nm, weight; /* weight normalised over the set */
@@ -175,10 +175,10 @@ wf_status wf_psf_build(const wf_pupil *pupil, const wf_aberrations *ab, const do
         st = wf_error(WF_ERR_NOMEM, "psf: cannot allocate %zu MB for the build", need >> 20);
         goto done;
     }
-    pthread_mutex_lock(&planner_lock);
+    wf_fftw_lock();
     fwd = fftw_plan_dft_2d(nyf, nxf, field, field, FFTW_FORWARD, FFTW_ESTIMATE);
     r2c = fftw_plan_dft_r2c_2d(nyf, nxf, (double *)power, power, FFTW_ESTIMATE);
-    pthread_mutex_unlock(&planner_lock);
+    wf_fftw_unlock();
     if (!fwd || !r2c) {
         st = wf_error(WF_ERR_INTERNAL, "psf: FFTW could not plan %dx%d transforms", nxf, nyf);
         goto done;
@@ -279,10 +279,10 @@ wf_status wf_psf_build(const wf_pupil *pupil, const wf_aberrations *ab, const do
     snprintf(in->pupil_source, sizeof in->pupil_source, "%s", pupil->source);
     snprintf(in->aberr_source, sizeof in->aberr_source, "%s", ab->source);
 done:
-    pthread_mutex_lock(&planner_lock);
+    wf_fftw_lock();
     if (fwd) fftw_destroy_plan(fwd);
     if (r2c) fftw_destroy_plan(r2c);
-    pthread_mutex_unlock(&planner_lock);
+    wf_fftw_unlock();
     fftw_free(field);
     fftw_free(power);
     free(wave);
