@@ -271,6 +271,35 @@ START_TEST(bright_star_within_budget)
 }
 END_TEST
 
+/* Set-up runs the drawing works on a helper thread beside the PSF build when there are
+ * threads to spare: a failure there is reported like any other, and the same scene comes
+ * out whatever the thread count. */
+START_TEST(setup_threads)
+{
+    wf_scene_setup ss;
+    setup_small(&ss);
+    ss.sky_on = 1;
+    ss.threads = 3;
+    ss.flux_fraction = 1.5; /* refused by the drawing works' accuracy check */
+    wf_scene *scene = NULL;
+    ck_assert_int_ne(wf_scene_create(&ss, NULL, NULL, &scene), WF_OK);
+    ck_assert_ptr_null(scene);
+    ck_assert_msg(strstr(wf_error_message(), "flux") != NULL, "message: %s", wf_error_message());
+    setup_small(&ss);
+    ss.sky_on = 1;
+    float *img[2];
+    for (int k = 0; k < 2; k++) {
+        ss.threads = k ? 3 : 1;
+        ck_assert_msg(wf_scene_create(&ss, NULL, NULL, &scene) == WF_OK, "%s", wf_error_message());
+        img[k] = render(scene);
+        wf_scene_destroy(scene);
+    }
+    ck_assert(memcmp(img[0], img[1], (size_t)W * H * sizeof *img[0]) == 0);
+    free(img[0]);
+    free(img[1]);
+}
+END_TEST
+
 START_TEST(empty_scene_is_sky)
 {
     wf_scene_setup ss;
@@ -455,6 +484,7 @@ static Suite *suite(void)
     tcase_add_test(tc, bright_star_within_budget);
     tcase_add_test(tc, bright_star_wide_psf);
     tcase_add_test(tc, empty_scene_is_sky);
+    tcase_add_test(tc, setup_threads);
     tcase_add_test(tc, noise_tolerance_bounds);
     suite_add_tcase(s, tc);
     return s;
