@@ -1,8 +1,9 @@
 /* Tile renderer: the scene source behind the firmware (hal/scene.h) when the scene is a list
  * of objects. Objects are sorted by their first row; an object's stamp is drawn once, when
  * the first tile that touches it asks, its rows are added to every tile it overlaps, and it
- * is dropped once the tiles have passed it. Stamps live in a pool of fixed size; an object
- * whose stamp does not fit is drawn in pieces (the rows a tile needs), never dropped.
+ * is dropped once the tiles have passed it. Stamps live in a pool of fixed size, compacted
+ * once it holds twice the live stamps (so that only about that much of it is ever resident);
+ * an object whose stamp does not fit is drawn in pieces (the rows a tile needs), never dropped.
  * Objects entirely off the SCA are never drawn. Stamps are drawn in double and kept in the
  * pool as float. An object may keep only a box of its footprint in the pool and have the
  * rest of its light (over the whole footprint) added row by row by a halo function: a PSF
