@@ -28,9 +28,11 @@ void *wf_arena_host_alloc(size_t size)
 {
     const size_t huge = (size_t)2 << 20;
     void *p = NULL;
-    /* a whole number of huge pages, so that the tail can be one too */
-    size_t n = size > SIZE_MAX - huge ? size : (size + huge - 1) / huge * huge;
-    if (!n || posix_memalign(&p, huge, n) != 0) return NULL;
+    /* a whole number of huge pages, so that the tail can be one too; more than the address
+     * space could hold is refused here, not handed to the allocator */
+    if (!size || size > SIZE_MAX / 4) return NULL;
+    size_t n = (size + huge - 1) / huge * huge;
+    if (posix_memalign(&p, huge, n) != 0) return NULL;
 #ifdef MADV_HUGEPAGE
     (void)madvise(p, n, MADV_HUGEPAGE); /* advice: without it, ordinary pages */
 #endif

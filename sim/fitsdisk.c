@@ -303,6 +303,7 @@ static int d_read(int handle, void *buffer, long nbytes)
     if (s->pos + (long long)n <= s->size && hole_covers(s, s->pos, s->pos + (long long)n)) {
         memset(buffer, 0, n); /* never written, so not in the buffer either */
         s->pos += (long long)n;
+        s->read_end = s->pos;
         return 0;
     }
     if (s->dirty && (st = flush_buf(s))) return st;

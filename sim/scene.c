@@ -512,6 +512,10 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
         st = wf_error(WF_ERR_NOMEM, "scene: out of memory");
         goto bad;
     }
+    /* the knobs are checked here, so that a bad one is reported the same whatever the thread
+     * count; the helper can then fail only for memory or FFTW */
+    size_t work_bytes;
+    if ((st = wf_profile_work_need(&s->acc, &work_bytes))) goto bad;
     works_running = setup->threads > 1 && pthread_create(&works_thread, NULL, init_works, &works) == 0;
     if ((st = wf_filter_parse(setup->filter, &s->filter))) goto bad;
     if ((st = wf_wcs_focal_plane(data, &s->fp))) goto bad;

@@ -586,6 +586,7 @@ START_TEST(test_single_frame)
     sp.sat_y = 95;
     sp.sat_val = 0;
     sp.low_x = 5;
+    sp.extra = "bias = 0.37\n"; /* not a whole ADU: adu - bias is rounded in both paths */
     stream s;
     build(&sp, &s);
     int order[MAX_PACKETS], n = identity(order, &s);
@@ -604,17 +605,17 @@ START_TEST(test_single_frame)
     ck_assert_int_eq(assert_checksums(fits), 4);
     for (int i = 0; i < NROWS * NCOLS; i++) {
         int x = i % NCOLS, y = i / NCOLS;
-        double rate = true_rate(x, y), q = rate * sp.exptime;
+        double rate = true_rate(x, y), q = rate * sp.exptime - 0.37 * sp.gain; /* bias off */
         if (x != sp.low_x) {
-            ck_assert(fabs(sci[i] - rate) <= 1e-5 * rate);
+            ck_assert(fabs(sci[i] - q / sp.exptime) <= 1e-5 * rate);
             ck_assert(fabs(err[i] - sqrt(q + 25.0) / sp.exptime) <= 1e-5 * err[i]);
-        } else { /* at or below the bias: no Poisson term */
-            ck_assert(sci[i] <= 0.0f);
+        } else { /* below the bias: no Poisson term */
+            ck_assert(sci[i] < 0.0f);
             ck_assert(err[i] == (float)(5.0 / sp.exptime));
         }
         /* to the bit, the assembler's formula in double, whichever code path computed it */
         float adu = x == sp.low_x ? -1.5f * (float)(y % 5) : (float)(rate * sp.exptime / sp.gain);
-        double qq = (adu - 0.0) * sp.gain;
+        double qq = (adu - 0.37) * sp.gain;
         ck_assert(sci[i] == (float)(qq * (1.0 / sp.exptime)));
         ck_assert(err[i] == (float)(sqrt((qq > 0 ? qq : 0) + 25.0) * (1.0 / sp.exptime)));
         ck_assert_uint_eq(dq[i], i == NROWS * NCOLS - 1 ? WF_DQ_SATURATED : 0u);

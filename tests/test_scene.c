@@ -272,19 +272,25 @@ START_TEST(bright_star_within_budget)
 END_TEST
 
 /* Set-up runs the drawing works on a helper thread beside the PSF build when there are
- * threads to spare: a failure there is reported like any other, and the same scene comes
- * out whatever the thread count. */
+ * threads to spare: a bad knob is refused before it starts (with the helper running, the
+ * error path joins it), and the same scene comes out whatever the thread count. */
 START_TEST(setup_threads)
 {
     wf_scene_setup ss;
     setup_small(&ss);
     ss.sky_on = 1;
     ss.threads = 3;
-    ss.flux_fraction = 1.5; /* refused by the drawing works' accuracy check */
+    ss.flux_fraction = 1.5; /* refused by the accuracy check */
     wf_scene *scene = NULL;
     ck_assert_int_ne(wf_scene_create(&ss, NULL, NULL, &scene), WF_OK);
     ck_assert_ptr_null(scene);
     ck_assert_msg(strstr(wf_error_message(), "flux") != NULL, "message: %s", wf_error_message());
+    setup_small(&ss);
+    ss.threads = 3;
+    snprintf(ss.filter, sizeof ss.filter, "Z999"); /* refused once the helper is running */
+    ck_assert_int_ne(wf_scene_create(&ss, NULL, NULL, &scene), WF_OK);
+    ck_assert_ptr_null(scene);
+    ck_assert_msg(strstr(wf_error_message(), "Z999") != NULL, "message: %s", wf_error_message());
     setup_small(&ss);
     ss.sky_on = 1;
     float *img[2];
