@@ -128,6 +128,18 @@ static int hole_covers(const slot *s, long long lo, long long hi)
     return 0;
 }
 
+/* Room for one more hole; nonzero when out of memory. */
+static int holes_room(slot *s)
+{
+    if (s->nholes < s->holes_cap) return 0;
+    size_t cap = s->holes_cap ? 2 * s->holes_cap : 16;
+    hole *v = realloc(s->holes, cap * sizeof *v);
+    if (!v) return 1;
+    s->holes = v;
+    s->holes_cap = cap;
+    return 0;
+}
+
 /* [lo, hi) now holds written bytes: no longer (part of) a hole. */
 static int hole_fill(slot *s, long long lo, long long hi)
 {
@@ -136,14 +148,8 @@ static int hole_fill(slot *s, long long lo, long long hi)
         if (h->hi <= lo) continue;
         if (h->lo >= hi) break;
         if (h->lo < lo && h->hi > hi) { /* split in two */
-            if (s->nholes == s->holes_cap) {
-                size_t cap = s->holes_cap ? 2 * s->holes_cap : 16;
-                hole *v = realloc(s->holes, cap * sizeof *v);
-                if (!v) return MEMORY_ALLOCATION;
-                s->holes = v;
-                s->holes_cap = cap;
-                h = &s->holes[i];
-            }
+            if (holes_room(s)) return MEMORY_ALLOCATION;
+            h = &s->holes[i];
             memmove(h + 1, h, (s->nholes - i) * sizeof *h);
             s->nholes++;
             h[0].hi = lo;
@@ -170,13 +176,7 @@ static int hole_append(slot *s, long long lo, long long hi)
         s->holes[s->nholes - 1].hi = hi;
         return 0;
     }
-    if (s->nholes == s->holes_cap) {
-        size_t cap = s->holes_cap ? 2 * s->holes_cap : 16;
-        hole *v = realloc(s->holes, cap * sizeof *v);
-        if (!v) return MEMORY_ALLOCATION;
-        s->holes = v;
-        s->holes_cap = cap;
-    }
+    if (holes_room(s)) return MEMORY_ALLOCATION;
     s->holes[s->nholes++] = (hole){lo, hi};
     return 0;
 }
