@@ -1,5 +1,6 @@
 #include "sim/skyindex.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -134,17 +135,22 @@ wf_status wf_skyindex_polygon(const double *ra_deg, const double *dec_deg, int n
                 out->v[i][k] = out->v[n - 1 - i][k];
                 out->v[n - 1 - i][k] = t;
             }
+    double tol[WF_SKY_MAXVERT];
     for (int i = 0; i < n; i++) {
         double c[3];
         cross3(out->v[i], out->v[(i + 1) % n], c);
         double l = sqrt(dot3(c, c));
         for (int k = 0; k < 3; k++) out->nrm[i][k] = c[k] / l;
+        /* the cross product of unit vectors carries ~eps of rounding whatever its length l
+         * (the sine of the edge), so the normal carries ~eps / l: 1e-11 rad for the 1.8"
+         * short edge of a 16-row sub-array */
+        tol[i] = 1e-12 + 16.0 * DBL_EPSILON / l;
     }
-    /* Convex and simple: every vertex on the inner side of every edge (a tolerance of
-     * 1e-12 rad lets collinear vertices of a rectangle's edge pass). */
+    /* Convex and simple: every vertex on the inner side of every edge (the tolerance lets
+     * collinear vertices of a rectangle's edge pass). */
     for (int i = 0; i < n; i++)
         for (int j = 0; j < n; j++)
-            if (dot3(out->nrm[i], out->v[j]) < -1e-12)
+            if (dot3(out->nrm[i], out->v[j]) < -tol[i])
                 return wf_error(WF_ERR_INPUT,
                                 "sky polygon: not convex (vertex %d lies outside edge %d-%d)", j,
                                 i, (i + 1) % n);

@@ -992,6 +992,54 @@ START_TEST(test_region_errors)
 }
 END_TEST
 
+/* A point (x east, y north) arcsec from (ra0, dec0), through the tangent plane. */
+static void offset_radec(double ra0, double dec0, double x, double y, double *ra, double *dec)
+{
+    double c[3] = {cos(dec0 * DEG) * cos(ra0 * DEG), cos(dec0 * DEG) * sin(ra0 * DEG), sin(dec0 * DEG)};
+    double e[3] = {-sin(ra0 * DEG), cos(ra0 * DEG), 0.0};
+    double n[3] = {-sin(dec0 * DEG) * cos(ra0 * DEG), -sin(dec0 * DEG) * sin(ra0 * DEG), cos(dec0 * DEG)};
+    double p[3], as = DEG / 3600.0;
+    for (int k = 0; k < 3; k++) p[k] = c[k] + x * as * e[k] + y * as * n[k];
+    double l = sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+    *dec = asin(p[2] / l) / DEG;
+    *ra = fmod(atan2(p[1], p[0]) / DEG + 360.0, 360.0);
+}
+
+START_TEST(test_region_thin)
+{
+    /* SCA-wide rectangles one to 16 rows tall (4088 x 0.11" by 0.11" to 1.76"), at random
+     * places and angles: a valid footprint of a sub-array readout. The short edges' normals
+     * carry rounding of ~eps / their length, which a fixed 1e-12 rad tolerance did not
+     * allow (the 16-row synthetic scene failed "not convex"). */
+    wf_noise nz = {WF_NOISE_PHILOX, 77, 0, 0};
+    wf_rng rng;
+    wf_rng_init(&rng, &nz, 0, 0, WF_PURPOSE_TEST);
+    const double heights[3] = {0.11, 0.44, 1.76};
+    int n = 0;
+    for (int t = 0; t < 300; t++) {
+        double u[4];
+        for (int k = 0; k < 4; k++) u[k] = wf_rng_uniform53(&rng);
+        double ra0 = 360.0 * u[0], dec0 = -85.0 + 170.0 * u[1], th = 2.0 * M_PI * u[2];
+        double w = 4088 * 0.11 / 2.0, h = heights[t % 3] / 2.0;
+        const double lx[4] = {-w, w, w, -w}, ly[4] = {-h, -h, h, h};
+        double ra[4], dec[4];
+        for (int k = 0; k < 4; k++)
+            offset_radec(ra0, dec0, lx[k] * cos(th) - ly[k] * sin(th), lx[k] * sin(th) + ly[k] * cos(th),
+                         &ra[k], &dec[k]);
+        wf_skyregion reg;
+        ck_assert_msg(wf_skyindex_polygon(ra, dec, 4, 0.0, &reg) == WF_OK, "case %d (height %g\"): %s", t,
+                      2 * h, wf_error_message());
+        double ri, di, ro, dout;
+        offset_radec(ra0, dec0, 0.3 * w * cos(th), 0.3 * w * sin(th), &ri, &di);
+        offset_radec(ra0, dec0, -(h + 0.5) * sin(th), (h + 0.5) * cos(th), &ro, &dout);
+        ck_assert_msg(wf_skyindex_contains(&reg, ri, di), "case %d: a point inside is out", t);
+        ck_assert_msg(!wf_skyindex_contains(&reg, ro, dout), "case %d: a point 0.5\" outside is in", t);
+        n++;
+    }
+    ck_assert_int_eq(n, 300);
+}
+END_TEST
+
 START_TEST(test_index_timing)
 {
     /* 2.7 million galaxies over 5 deg² around the deep field: build once, then select the
@@ -1085,6 +1133,7 @@ static Suite *catalog_suite(void)
     tcase_add_test(tc, test_synth_clustered);
     tcase_add_test(tc, test_index_equals_brute_force);
     tcase_add_test(tc, test_region_errors);
+    tcase_add_test(tc, test_region_thin);
     tcase_add_test(tc, test_index_timing);
     suite_add_tcase(s, tc);
     return s;

@@ -219,6 +219,39 @@ START_TEST(object_scene_deterministic)
 }
 END_TEST
 
+/* A full-width sub-array of 16 rows (the synthetic field's footprint is a thin sky
+ * polygon, which the region builder once refused as "not convex"): it runs, the product
+ * has the sub-array's shape, and tile height and threads change no byte. */
+START_TEST(thin_subarray)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+#define THIN "--quiet --mode single --set scene.kind=synthetic --set readout.nrows=16 --set psf.pupil_bin=8"
+    ck_assert_int_eq(wf_test_run("%s expose " THIN " --out %s/thin", bin, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose " THIN " --tile-rows 5 --threads 2 --out %s/thin5", bin, d), 0);
+    const char *names[] = {FITS, "wfisim_e000001_sca01_truth.fits"};
+    for (int k = 0; k < 2; k++) {
+        char a[4200], b[4200];
+        snprintf(a, sizeof a, "%s/thin/%s", d, names[k]);
+        snprintf(b, sizeof b, "%s/thin5/%s", d, names[k]);
+        assert_same_file(a, b);
+    }
+    char path[4200];
+    snprintf(path, sizeof path, "%s/thin/" FITS, d);
+    fitsfile *f;
+    int status = 0, naxis = 0;
+    long nax[2] = {0, 0};
+    fits_open_file(&f, path, READONLY, &status);
+    fits_movnam_hdu(f, IMAGE_HDU, "SCI", 0, &status);
+    fits_get_img_dim(f, &naxis, &status);
+    fits_get_img_size(f, 2, nax, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_msg(naxis == 2 && nax[0] == 4088 && nax[1] == 16, "SCI is %ld x %ld", nax[0], nax[1]);
+}
+END_TEST
+
 /* A catalog file through the command line: the objects the SCA sees are drawn and listed
  * in the truth, the others (far away, selected out by the sky index) are not. */
 START_TEST(catalog_file_on_the_command_line)
@@ -308,6 +341,7 @@ static Suite *suite(void)
     tcase_add_test(tc, flat_sky_ramp_bright);
     tcase_add_test(tc, flat_sky_single);
     tcase_add_test(tc, object_scene_deterministic);
+    tcase_add_test(tc, thin_subarray);
     tcase_add_test(tc, catalog_file_on_the_command_line);
     suite_add_tcase(s, tc);
     return s;
