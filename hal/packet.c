@@ -143,11 +143,25 @@ wf_status wf_packer_send(wf_packer *pk, const wf_link *link, wf_packet_header *h
     return wf_link_send(link, pk->buf, WF_PACKET_HEADER_SIZE + wire_len);
 }
 
-void wf_packet_reader_open(wf_packet_reader *r, FILE *file, const char *name)
+long wf_packet_read_file(void *ctx, void *buf, size_t n)
+{
+    FILE *f = ctx;
+    size_t got = fread(buf, 1, n, f);
+    return got < n && ferror(f) ? -1 : (long)got;
+}
+
+void wf_packet_reader_open_source(wf_packet_reader *r, wf_packet_read_fn read, void *ctx,
+                                  const char *name)
 {
     memset(r, 0, sizeof *r);
-    r->file = file;
+    r->read = read;
+    r->ctx = ctx;
     r->name = name;
+}
+
+void wf_packet_reader_open(wf_packet_reader *r, FILE *file, const char *name)
+{
+    wf_packet_reader_open_source(r, wf_packet_read_file, file, name);
 }
 
 void wf_packet_reader_close(wf_packet_reader *r)
@@ -173,13 +187,15 @@ wf_status wf_packet_reader_next(wf_packet_reader *r, wf_packet_header *h, const 
     unsigned char hb[WF_PACKET_HEADER_SIZE];
     *eof = 0;
     *payload = NULL;
-    size_t got = fread(hb, 1, sizeof hb, r->file);
-    if (got == 0 && feof(r->file)) {
+    long got = r->read(r->ctx, hb, sizeof hb);
+    if (got < 0)
+        return wf_error(WF_ERR_IO, "%s: read error at offset %llu", r->name, (unsigned long long)r->offset);
+    if (got == 0) {
         *eof = 1;
         return WF_OK;
     }
-    if (got != sizeof hb)
-        return wf_error(WF_ERR_CORRUPT, "%s: truncated stream: %zu of %d header bytes at offset %llu",
+    if (got != (long)sizeof hb)
+        return wf_error(WF_ERR_CORRUPT, "%s: truncated stream: %ld of %d header bytes at offset %llu",
                         r->name, got, WF_PACKET_HEADER_SIZE, (unsigned long long)r->offset);
     wf_status st = wf_packet_header_read(hb, h);
     if (st != WF_OK) {
@@ -194,7 +210,11 @@ wf_status wf_packet_reader_next(wf_packet_reader *r, wf_packet_header *h, const 
                         r->name, r->count + 1, (unsigned long long)r->offset, h->payload_len,
                         h->raw_len, (unsigned)WF_PACKET_MAX_PAYLOAD);
     if ((st = grow(&r->wire, &r->wire_cap, (size_t)h->payload_len + 1u)) != WF_OK) return st;
-    if (fread(r->wire, 1, h->payload_len, r->file) != h->payload_len)
+    got = h->payload_len ? r->read(r->ctx, r->wire, h->payload_len) : 0;
+    if (got < 0)
+        return wf_error(WF_ERR_IO, "%s: read error in packet %ld at offset %llu", r->name, r->count + 1,
+                        (unsigned long long)r->offset);
+    if (got != (long)h->payload_len)
         return wf_error(WF_ERR_CORRUPT, "%s: truncated stream: packet %ld (rows %u-%u) at offset %llu ends early",
                         r->name, r->count + 1, h->first_row, h->first_row + h->row_count - 1,
                         (unsigned long long)r->offset);

@@ -68,9 +68,13 @@ wf_status wf_packer_send(wf_packer *pk, const wf_link *link, wf_packet_header *h
 void wf_packet_header_write(const wf_packet_header *h, unsigned char out[WF_PACKET_HEADER_SIZE]);
 wf_status wf_packet_header_read(const unsigned char in[WF_PACKET_HEADER_SIZE], wf_packet_header *h);
 
-/* Host-side reader (uses malloc: host tools only). */
+/* Host-side reader (uses malloc: host tools only). It reads through a byte source: a stdio
+ * stream, or any function that fills buf with n bytes and returns how many it gave (fewer
+ * only at the end of the stream) or -1 on a read error. */
+typedef long (*wf_packet_read_fn)(void *ctx, void *buf, size_t n);
 typedef struct wf_packet_reader {
-    FILE *file;
+    wf_packet_read_fn read;
+    void *ctx;
     const char *name;
     unsigned char *wire, *raw;
     size_t wire_cap, raw_cap;
@@ -79,6 +83,10 @@ typedef struct wf_packet_reader {
 } wf_packet_reader;
 
 void wf_packet_reader_open(wf_packet_reader *r, FILE *file, const char *name);
+void wf_packet_reader_open_source(wf_packet_reader *r, wf_packet_read_fn read, void *ctx,
+                                  const char *name);
+/* The stdio source wf_packet_reader_open uses (ctx: the FILE). */
+long wf_packet_read_file(void *ctx, void *buf, size_t n);
 /* Next packet: *eof = 1 at a clean end of stream. The payload (inflated) stays valid until
  * the next call. Any damage is WF_ERR_CORRUPT with the offset and what was wrong. */
 wf_status wf_packet_reader_next(wf_packet_reader *r, wf_packet_header *h, const void **payload,

@@ -127,6 +127,27 @@ START_TEST(corrupt_stream_leaves_nothing)
 }
 END_TEST
 
+/* The in-process assembler fails (its file may not grow past 1 MB, the shell's ulimit -f,
+ * with SIGXFSZ ignored so the write returns EFBIG): the run stops at once with the
+ * assembler's reason, not the readout's "the reader has stopped", and leaves no product. */
+START_TEST(assembler_failure_reported)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    ck_assert_int_ne(wf_test_run("sh -c \"trap '' XFSZ; ulimit -f 2000; exec %s expose --quiet --mode single "
+                                 "--set scene.kind=grid --out %s/full 2>%s/full.err\"", bin, d, d), 0);
+    char err[4200], out[4200], tmp[4300];
+    snprintf(err, sizeof err, "%s/full.err", d);
+    ck_assert_msg(wf_test_file_contains(err, "File too large"), "the assembler's reason is not reported");
+    ck_assert_msg(!wf_test_file_contains(err, "reader has stopped"), "the readout's error masks the assembler's");
+    snprintf(out, sizeof out, "%s/full/" FITS, d);
+    snprintf(tmp, sizeof tmp, "%s.tmp", out);
+    ck_assert(!exists(out));
+    ck_assert(!exists(tmp));
+}
+END_TEST
+
 START_TEST(fits_opens_in_astropy)
 {
     const char *bin = wf_test_program();
@@ -336,6 +357,7 @@ static Suite *suite(void)
     tcase_add_test(tc, tile_height_and_threads_do_not_matter);
     tcase_add_test(tc, bad_config_named_and_no_product);
     tcase_add_test(tc, corrupt_stream_leaves_nothing);
+    tcase_add_test(tc, assembler_failure_reported);
     tcase_add_test(tc, fits_opens_in_astropy);
     tcase_add_test(tc, flat_sky_ramp);
     tcase_add_test(tc, flat_sky_ramp_bright);

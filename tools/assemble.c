@@ -1225,10 +1225,16 @@ static wf_status handle(assembler *a, const void *payload, char *last_path, size
 wf_status wf_assemble_stream(FILE *in, const char *name, const wf_assemble_options *opt,
                              char *last_path, size_t last_path_len)
 {
+    return wf_assemble_source(wf_packet_read_file, in, name, opt, last_path, last_path_len);
+}
+
+wf_status wf_assemble_source(wf_packet_read_fn read, void *ctx, const char *name,
+                             const wf_assemble_options *opt, char *last_path, size_t last_path_len)
+{
     if (last_path && last_path_len) last_path[0] = '\0';
     assembler a = {.name = name ? name : "-", .opt = opt};
     wf_packet_reader r;
-    wf_packet_reader_open(&r, in, a.name);
+    wf_packet_reader_open_source(&r, read, ctx, a.name);
     wf_status st = WF_OK;
     for (;;) {
         const void *payload;

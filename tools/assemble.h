@@ -9,6 +9,7 @@
 #define WF_ASSEMBLE_H
 
 #include <stdio.h>
+#include "hal/packet.h"
 #include "hal/status.h"
 
 typedef struct wf_assemble_options {
@@ -21,5 +22,8 @@ typedef struct wf_assemble_options {
  * quiet, and the last one is copied to last_path (may be NULL). */
 wf_status wf_assemble_stream(FILE *in, const char *name, const wf_assemble_options *opt,
                              char *last_path, size_t last_path_len);
+/* The same from any byte source (hal/packet.h), e.g. an in-process pipe (hal/link.h). */
+wf_status wf_assemble_source(wf_packet_read_fn read, void *ctx, const char *name,
+                             const wf_assemble_options *opt, char *last_path, size_t last_path_len);
 
 #endif
