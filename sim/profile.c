@@ -197,17 +197,18 @@ wf_status wf_profile_work_init(wf_profile_work *w, const wf_profile_accuracy *ac
     w->sersic = wf_sersic4_table();
     w->nsizes = l.nsizes;
     memcpy(w->sizes, l.sizes, sizeof w->sizes);
-    wf_fftw_lock();
+    /* the lock is taken per plan: a scene's set-up helper makes these while the main thread
+     * builds the PSF, whose few plans then wait for one of these at most, not all */
     for (int i = 0; i < w->nsizes; i++) {
         int n = w->sizes[i];
+        wf_fftw_lock();
         w->plans[i] = fftw_plan_dft_c2r_2d(n, n, (fftw_complex *)w->fft, w->fft, FFTW_ESTIMATE);
+        wf_fftw_unlock();
         if (!w->plans[i]) {
-            wf_fftw_unlock();
             wf_profile_work_free(w);
             return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", n);
         }
     }
-    wf_fftw_unlock();
     return WF_OK;
 }
 
