@@ -85,3 +85,25 @@ void wf_arena_release(wf_arena *arena, size_t mark)
     if (mark <= arena->used)
         arena->used = mark;
 }
+
+wf_status wf_arena_split(wf_arena *arena, size_t size, const char *name, wf_arena *top)
+{
+    memset(top, 0, sizeof *top);
+    uintptr_t end = (uintptr_t)arena->base + arena->capacity, low = (uintptr_t)arena->base + arena->used;
+    if (size > end - low || (end - size) / ARENA_ALIGN * ARENA_ALIGN < low)
+        return wf_error(WF_ERR_NOMEM,
+                        "%s: cannot split off %zu bytes for %s (%zu of %zu bytes in use); "
+                        "raise the memory budget",
+                        arena->name, size, name ? name : "scratch", arena->used, arena->capacity);
+    uintptr_t start = (end - size) / ARENA_ALIGN * ARENA_ALIGN;
+    arena->capacity = (size_t)(start - (uintptr_t)arena->base);
+    return wf_arena_init(top, (void *)start, (size_t)(end - start), name);
+}
+
+void wf_arena_join(wf_arena *arena, const wf_arena *top)
+{
+    size_t at = (size_t)(top->base - arena->base);
+    if (at != arena->capacity) return; /* not this arena's top: nothing to give back */
+    arena->capacity += top->capacity;
+    if (at + top->high_water > arena->high_water) arena->high_water = at + top->high_water;
+}

@@ -39,6 +39,13 @@ void *wf_arena_host_alloc(size_t size);
 size_t wf_arena_mark(const wf_arena *arena);
 void wf_arena_release(wf_arena *arena, size_t mark);
 
+/* Takes `size` bytes (or up to 63 more, for alignment) off the top of the arena as an arena
+ * of its own, `top`: scratch that must not lie below what the caller keeps, which it keeps
+ * from the bottom meanwhile. The arena's capacity shrinks by as much until wf_arena_join
+ * gives them back (top's contents are then free space). */
+wf_status wf_arena_split(wf_arena *arena, size_t size, const char *name, wf_arena *top);
+void wf_arena_join(wf_arena *arena, const wf_arena *top);
+
 /* Bytes an allocation of `size` consumes, alignment included: lets a module report its need
  * before anything is reserved. */
 size_t wf_arena_cost(size_t size);

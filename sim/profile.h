@@ -187,13 +187,17 @@ wf_status wf_profile_work_tune(wf_profile_work *work, double flux_fraction,
                                double folding_threshold, double kvalue_accuracy,
                                double wing_tolerance, double knot_accuracy);
 
-/* Bytes wf_profile_psf_init keeps (*bytes) and the scratch it needs while running (*scratch). */
+/* Bytes wf_profile_psf_init keeps at most (*bytes) and the scratch each of its threads needs
+ * while running (*scratch). */
 wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy *acc,
                               size_t *bytes, size_t *scratch);
-/* Tabulates the PSF's transform times the pixel's. Scratch is taken from the arena and given
- * back (LIFO), so call it before reserving anything that must outlive it. */
+/* Tabulates the PSF's transform times the pixel's: the whole image's table, then each core's
+ * and its wing on up to `threads` threads (the same tables for any count), as many as the
+ * arena holds *bytes + threads x (*scratch + 64) for; one needs *bytes + *scratch. Scratch is
+ * taken from the arena's top and given back, so call it before reserving anything that must
+ * outlive it. */
 wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
-                              const wf_profile_accuracy *acc, wf_arena *arena);
+                              const wf_profile_accuracy *acc, wf_arena *arena, int threads);
 
 /* Stamp bounds around (x, y) holding acc.flux_fraction of the object's light (the PSF image's
  * sum counting as the whole PSF); psf NULL means no PSF (pixel response only). Stamps are

@@ -18,6 +18,7 @@
 #include "sim/profile.h"
 #include "sim/profile_int.h"
 #include "sim/fftw_lock.h"
+#include "sim/parallel.h"
 
 #define WF_PSF_KFLOOR 1e-7
 #define WF_PSF_TAPER 0.1
@@ -301,56 +302,158 @@ static wf_status pixel_transform(const wf_psf_image *img, const wf_profile_accur
     return WF_OK;
 }
 
+/* What the passes of wf_profile_psf_init share: each pass (the whole image's table, then
+ * each core's) and each wing is a task of its own, run on the thread slot's scratch arena. */
+typedef struct init_job {
+    wf_profile_psf *psf;
+    const wf_psf_image *img;
+    const wf_profile_accuracy *acc;
+    wf_arena *slot;             /* scratch arena per thread slot */
+    int kr_s, kr;
+    double dkt, band, sum, c;
+    split_geom g;
+    float *re, *im;
+    double *env;
+    double pixel_max[1 + WF_PROFILE_MAX_CORES];
+} init_job;
+
+/* Table, envelope and pixel bound of one pass from its raw transform (side_s^2 complex). */
+static void fill_table(init_job *j, int pass, const double *raw)
+{
+    wf_profile_psf *psf = j->psf;
+    wf_profile_core *co = pass ? &psf->core[pass - 1] : NULL;
+    const int kr = j->kr, kr_s = j->kr_s;
+    const size_t side = 2 * (size_t)kr + 1, side_s = 2 * (size_t)kr_s + 1;
+    float *tr = pass ? co->re : j->re, *ti = pass ? co->im : j->im;
+    double *te = pass ? co->env : j->env, sabs = 0.0;
+    for (int v = -kr; v <= kr; v++)
+        for (int u = -kr; u <= kr; u++) {
+            const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
+            size_t at = (size_t)(v + kr) * side + (size_t)(u + kr);
+            double wt = band_taper(j->dkt * hypot(u, v), j->band);
+            tr[at] = (float)(wt * o[0]);
+            ti[at] = (float)(wt * o[1]);
+            int ring = (int)hypot(u, v);
+            if (ring <= kr) te[ring] = fmax(te[ring], wt * hypot(o[0], o[1]));
+            sabs += wt * hypot(o[0], o[1]);
+        }
+    /* the image (pixel included) periodised with the samples' period of N = table_fft
+     * pixels is (1 / N^2) sum_k T(k) e^{i k.X} at any X, and not below the image: no
+     * pixel exceeds sum |T| / N^2 (at Y106 0.477, 0.6% above the brightest pixel found
+     * by a 1/16-pixel search: the transform is nearly real and positive) */
+    const double nn = (double)j->acc->psf_table_fft * j->acc->psf_table_fft;
+    j->pixel_max[pass] = sabs / (nn * j->sum);
+    for (int i = kr; i > 0; i--) te[i - 1] = fmax(te[i - 1], te[i]);
+}
+
+/* Core `task`: the image times its taper, transformed. */
+static wf_status core_pass(void *ctx, int task, int slot)
+{
+    init_job *j = ctx;
+    const wf_psf_image *img = j->img;
+    wf_profile_core *co = &j->psf->core[task];
+    wf_arena *arena = &j->slot[slot];
+    size_t mark = wf_arena_mark(arena);
+    double *tapered, *raw;
+    wf_status st = wf_arena_calloc(arena, (size_t)img->n * (size_t)img->n, sizeof(double), "PSF core image",
+                                   (void **)&tapered);
+    if (!st) {
+        for (int jj = 0; jj < img->n; jj++)
+            for (int i = 0; i < img->n; i++) {
+                double r = hypot(i - j->c, jj - j->c) * img->scale_arcsec;
+                size_t at = (size_t)jj * img->n + i;
+                tapered[at] = img->pix[at] * core_taper(r, co->radius);
+                co->flux += tapered[at];
+            }
+        wf_psf_image src = *img;
+        src.pix = tapered;
+        if (!(st = pixel_transform(&src, j->acc, j->kr_s, arena, &raw))) fill_table(j, task + 1, raw);
+    }
+    wf_arena_release(arena, mark);
+    return st;
+}
+
+/* Core `task`'s wing: (whole - core table) at every q-th step, c2r. */
+static wf_status wing_pass(void *ctx, int task, int slot)
+{
+    init_job *j = ctx;
+    const split_geom *g = &j->g;
+    wf_profile_core *co = &j->psf->core[task];
+    wf_arena *arena = &j->slot[slot];
+    const int kr = j->kr;
+    const size_t side = 2 * (size_t)kr + 1;
+    size_t mark = wf_arena_mark(arena);
+    const size_t nf = (size_t)g->nfft, half = nf / 2 + 1;
+    double *buf;
+    wf_status st = wf_arena_calloc(arena, nf * (nf + 2), sizeof(double), "PSF wing FFT", (void **)&buf);
+    if (st) {
+        wf_arena_release(arena, mark);
+        return st;
+    }
+    const int kq = kr / g->q;
+    for (int vq = -kq; vq <= kq; vq++)
+        for (int uq = 0; uq <= kq; uq++) {
+            size_t at = (size_t)(vq * g->q + kr) * side + (size_t)(uq * g->q + kr);
+            double *bb = buf + 2 * ((size_t)((vq % g->nfft + g->nfft) % g->nfft) * half + (size_t)uq);
+            bb[0] = (double)j->re[at] - (double)co->re[at];
+            bb[1] = (double)j->im[at] - (double)co->im[at];
+        }
+    wf_fftw_lock();
+    fftw_plan plan = fftw_plan_dft_c2r_2d(g->nfft, g->nfft, (fftw_complex *)buf, buf, FFTW_ESTIMATE);
+    wf_fftw_unlock();
+    if (!plan) {
+        wf_arena_release(arena, mark);
+        return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", g->nfft);
+    }
+    fftw_execute(plan);
+    wf_fftw_lock();
+    fftw_destroy_plan(plan);
+    wf_fftw_unlock();
+    /* e(X) = (1 / lw^2) sum_k T(k) e^{i k X} for the draws' convention (sim/profile.c) */
+    const double norm = 1.0 / ((double)g->lw * g->lw);
+    const long nfl = (long)g->nfft;
+    for (int b = 0; b < WING_OS; b++)
+        for (int a = 0; a < WING_OS; a++) {
+            float *plane = co->wing + ((size_t)b * WING_OS + (size_t)a) * (size_t)g->np * g->np;
+            for (int ny = 0; ny < g->np; ny++) {
+                long J = (long)b + (long)WING_OS * (ny - g->h);
+                size_t row = (size_t)(((J % nfl) + nfl) % nfl) * (nf + 2);
+                for (int nx = 0; nx < g->np; nx++) {
+                    long I = (long)a + (long)WING_OS * (nx - g->h);
+                    float v = (float)(norm * buf[row + (size_t)(((I % nfl) + nfl) % nfl)]);
+                    plane[(size_t)ny * g->np + nx] = v;
+                    if (fabs(v) > co->wing_max) co->wing_max = fabs(v);
+                }
+            }
+        }
+    wf_arena_release(arena, mark);
+    return WF_OK;
+}
+
 wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
-                              const wf_profile_accuracy *acc, wf_arena *arena)
+                              const wf_profile_accuracy *acc, wf_arena *arena, int threads)
 {
     memset(psf, 0, sizeof *psf);
     double sum;
-    wf_status st = wf_profile_check_accuracy(acc);
-    if (st || (st = check_image(img, &sum))) return st;
+    size_t keep_bound, scratch;
+    wf_status st = wf_profile_psf_need(img, acc, &keep_bound, &scratch);
+    if (st) return st;
+    (void)check_image(img, &sum);
     if (img->scale_arcsec > 0.5 * acc->pixel_scale)
         return wf_error(WF_ERR_RANGE,
                         "profile: PSF sampled at %g arcsec, coarser than half the %g arcsec "
                         "pixel; an undersampled PSF image cannot be resampled",
                         img->scale_arcsec, acc->pixel_scale);
-    int kr_s = sampling_kr(img, acc);
-    size_t side_s = 2 * (size_t)kr_s + 1;
-    double dkt = 2.0 * M_PI / (acc->psf_table_fft * acc->pixel_scale);
-
-    /* The band is known only after the transform, and the arena frees only from the top: so
-     * transform once in scratch to find the band, reserve the trimmed table, and transform
-     * again above it (an FFT of the PSF costs ~10 ms; the untrimmed table would cost up to
-     * 3x the memory for as long as the PSF lives). */
-    size_t mark = wf_arena_mark(arena);
-    double *raw;
-    if ((st = pixel_transform(img, acc, kr_s, arena, &raw))) {
-        wf_arena_release(arena, mark);
-        return st;
-    }
-    int kr = 0;
-    double kmax = 0.0;
-    double band = img->band_limit > 0.0 ? img->band_limit : INFINITY;
-    for (int v = -kr_s; v <= kr_s; v++)
-        for (int u = -kr_s; u <= kr_s; u++) {
-            const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
-            if (dkt * hypot(u, v) <= band && hypot(o[0], o[1]) >= WF_PSF_KFLOOR * sum) {
-                int r = abs(u) > abs(v) ? abs(u) : abs(v);
-                if (r > kr) kr = r;
-                if (dkt * hypot(u, v) > kmax) kmax = dkt * hypot(u, v);
-            }
-        }
-    wf_arena_release(arena, mark);
-    kr += 2; /* room for the bicubic interpolation's outer taps */
-    if (kr > kr_s) kr = kr_s;
-    size_t side = 2 * (size_t)kr + 1;
-
-    float *re, *im;
-    double *ee, *env;
-    size_t nee = ee_count(img);
+    init_job j = {.psf = psf, .img = img, .acc = acc, .sum = sum};
+    j.kr_s = sampling_kr(img, acc);
+    const int kr_s = j.kr_s;
+    const size_t side_s = 2 * (size_t)kr_s + 1;
+    j.dkt = 2.0 * M_PI / (acc->psf_table_fft * acc->pixel_scale);
+    j.band = img->band_limit > 0.0 ? img->band_limit : INFINITY;
+    j.c = 0.5 * (img->n - 1);
     const int ncore = acc->core_radius > 0.0 ? acc->core_levels : 0;
-    split_geom g = {0};
     if (ncore) {
-        split_layout(img, acc, &g);
+        split_layout(img, acc, &j.g);
         double edge = 0.5 * (img->n - 1) * img->scale_arcsec;
         if (!(acc->core_radius < edge))
             return wf_error(WF_ERR_RANGE, "profile: core_radius %g arcsec reaches the PSF image's edge "
@@ -363,147 +466,93 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
                             "%g arcsec core, under two %g arcsec pixels; use fewer levels",
                             acc->core_radius, ncore, smallest, acc->pixel_scale);
         /* the wing table's period must hold it without overlap */
-        if (g.lw < g.np)
+        if (j.g.lw < j.g.np)
             return wf_error(WF_ERR_RANGE, "profile: a %d-sample PSF image (%g arcsec) is wider than "
                             "psf_table_fft %d pixels allows for its wing table; raise psf_table_fft",
                             img->n, 2.0 * edge, acc->psf_table_fft);
     }
-    if ((st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&re)) ||
-        (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&im)) ||
-        (st = wf_arena_calloc(arena, nee, sizeof(double), "PSF encircled energy", (void **)&ee)) ||
-        (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF envelope",
-                              (void **)&env)))
+    /* Scratch per thread slot off the arena's top, the tables from its bottom: the whole
+     * image's transform, which gives the band, then stays in slot 0 for its own table (the
+     * tables are trimmed to the band, so they can be reserved only once it is known). As
+     * many slots as the arena holds, up to `threads`; passes and wings run in parallel. */
+    size_t room = arena->capacity - arena->used;
+    size_t slot_bytes = scratch + 64;
+    int T = threads < 1 ? 1 : threads;
+    if (T > 1 + ncore) T = 1 + ncore;
+    if (T > WF_PROFILE_MAX_CORES) T = WF_PROFILE_MAX_CORES;
+    while (T > 1 && keep_bound + (size_t)T * slot_bytes > room) T--;
+    wf_arena top, slots[WF_PROFILE_MAX_CORES];
+    if ((st = wf_arena_split(arena, T == 1 && slot_bytes > room ? room : (size_t)T * slot_bytes,
+                             "PSF table scratch", &top)))
         return st;
+    for (int t = 0; t < T; t++) {
+        size_t part = top.capacity / (size_t)T;
+        wf_arena_init(&slots[t], top.base + (size_t)t * part, t == T - 1 ? top.capacity - (size_t)t * part : part,
+                      "PSF table scratch");
+    }
+    j.slot = slots;
+    double *raw;
+    const size_t mark0 = wf_arena_mark(&slots[0]);
+    if ((st = pixel_transform(img, acc, kr_s, &slots[0], &raw))) goto out;
+    int kr = 0;
+    double kmax = 0.0;
+    for (int v = -kr_s; v <= kr_s; v++)
+        for (int u = -kr_s; u <= kr_s; u++) {
+            const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
+            if (j.dkt * hypot(u, v) <= j.band && hypot(o[0], o[1]) >= WF_PSF_KFLOOR * sum) {
+                int r = abs(u) > abs(v) ? abs(u) : abs(v);
+                if (r > kr) kr = r;
+                if (j.dkt * hypot(u, v) > kmax) kmax = j.dkt * hypot(u, v);
+            }
+        }
+    kr += 2; /* room for the bicubic interpolation's outer taps */
+    if (kr > kr_s) kr = kr_s;
+    j.kr = kr;
+    const size_t side = 2 * (size_t)kr + 1;
+
+    double *ee;
+    size_t nee = ee_count(img);
+    if ((st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&j.re)) ||
+        (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&j.im)) ||
+        (st = wf_arena_calloc(arena, nee, sizeof(double), "PSF encircled energy", (void **)&ee)) ||
+        (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF envelope", (void **)&j.env)))
+        goto out;
     for (int l = 0; l < ncore; l++) {
         wf_profile_core *co = &psf->core[l];
         co->radius = ldexp(acc->core_radius, -l);
-        if ((st = wf_arena_calloc(arena, (size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np,
+        if ((st = wf_arena_calloc(arena, (size_t)WING_OS * WING_OS * (size_t)j.g.np * (size_t)j.g.np,
                                   sizeof(float), "PSF wing", (void **)&co->wing)) ||
-            (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table",
-                                  (void **)&co->re)) ||
-            (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table",
-                                  (void **)&co->im)) ||
+            (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table", (void **)&co->re)) ||
+            (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table", (void **)&co->im)) ||
             (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF core envelope",
                                   (void **)&co->env)))
-            return st;
+            goto out;
     }
     /* encircled energy about the image centre, for stamp sizes */
-    const double c = 0.5 * (img->n - 1), dr = 0.5 * img->scale_arcsec;
-    for (int j = 0; j < img->n; j++)
+    const double dr = 0.5 * img->scale_arcsec;
+    for (int jj = 0; jj < img->n; jj++)
         for (int i = 0; i < img->n; i++) {
-            size_t bin = (size_t)(hypot(i - c, j - c) * img->scale_arcsec / dr);
-            ee[bin < nee ? bin : nee - 1] += img->pix[(size_t)j * img->n + i];
+            size_t bin = (size_t)(hypot(i - j.c, jj - j.c) * img->scale_arcsec / dr);
+            ee[bin < nee ? bin : nee - 1] += img->pix[(size_t)jj * img->n + i];
         }
-    /* the whole image's table; with a split, then each core's (the tapered image) */
-    for (int pass = 0; pass <= ncore; pass++) {
-        wf_profile_core *co = pass ? &psf->core[pass - 1] : NULL;
-        mark = wf_arena_mark(arena);
-        wf_psf_image src = *img;
-        if (pass) {
-            double *tapered;
-            if ((st = wf_arena_calloc(arena, (size_t)img->n * (size_t)img->n, sizeof(double),
-                                      "PSF core image", (void **)&tapered))) {
-                wf_arena_release(arena, mark);
-                return st;
-            }
-            for (int j = 0; j < img->n; j++)
-                for (int i = 0; i < img->n; i++) {
-                    double r = hypot(i - c, j - c) * img->scale_arcsec;
-                    size_t at = (size_t)j * img->n + i;
-                    tapered[at] = img->pix[at] * core_taper(r, co->radius);
-                    co->flux += tapered[at];
-                }
-            src.pix = tapered;
-        }
-        if ((st = pixel_transform(&src, acc, kr_s, arena, &raw))) {
-            wf_arena_release(arena, mark);
-            return st;
-        }
-        float *tr = pass ? co->re : re, *ti = pass ? co->im : im;
-        double *te = pass ? co->env : env, sabs = 0.0;
-        for (int v = -kr; v <= kr; v++)
-            for (int u = -kr; u <= kr; u++) {
-                const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
-                size_t at = (size_t)(v + kr) * side + (size_t)(u + kr);
-                double wt = band_taper(dkt * hypot(u, v), band);
-                tr[at] = (float)(wt * o[0]);
-                ti[at] = (float)(wt * o[1]);
-                int ring = (int)hypot(u, v);
-                if (ring <= kr) te[ring] = fmax(te[ring], wt * hypot(o[0], o[1]));
-                sabs += wt * hypot(o[0], o[1]);
-            }
-        /* the image (pixel included) periodised with the samples' period of N = table_fft
-         * pixels is (1 / N^2) sum_k T(k) e^{i k.X} at any X, and not below the image: no
-         * pixel exceeds sum |T| / N^2 (at Y106 0.477, 0.6% above the brightest pixel found
-         * by a 1/16-pixel search: the transform is nearly real and positive) */
-        const double nn = (double)acc->psf_table_fft * acc->psf_table_fft;
-        psf->pixel_max = fmax(psf->pixel_max, sabs / (nn * sum));
-        for (int i = kr; i > 0; i--) te[i - 1] = fmax(te[i - 1], te[i]);
-        wf_arena_release(arena, mark);
-    }
+    /* the whole image's table from the transform in hand; then each core's (the tapered
+     * image), and each core's wing, which needs both tables */
+    fill_table(&j, 0, raw);
+    wf_arena_release(&slots[0], mark0);
+    if ((st = wf_parallel_for(ncore, T, core_pass, &j)) || (st = wf_parallel_for(ncore, T, wing_pass, &j)))
+        goto out;
+    for (int pass = 0; pass <= ncore; pass++) psf->pixel_max = fmax(psf->pixel_max, j.pixel_max[pass]);
     double run = 0.0;
     for (size_t bin = 0; bin < nee; bin++) {
         run += ee[bin];
         ee[bin] = run / sum;
     }
     for (int l = 0; l < ncore; l++) psf->core[l].flux /= sum;
-
-    for (int l = 0; l < ncore; l++) {
-        wf_profile_core *co = &psf->core[l];
-        /* the wing: (whole - core table) at every q-th step, c2r */
-        mark = wf_arena_mark(arena);
-        const size_t nf = (size_t)g.nfft, half = nf / 2 + 1;
-        double *buf;
-        if ((st = wf_arena_calloc(arena, nf * (nf + 2), sizeof(double), "PSF wing FFT",
-                                  (void **)&buf))) {
-            wf_arena_release(arena, mark);
-            return st;
-        }
-        const int kq = kr / g.q;
-        for (int vq = -kq; vq <= kq; vq++)
-            for (int uq = 0; uq <= kq; uq++) {
-                size_t at = (size_t)(vq * g.q + kr) * side + (size_t)(uq * g.q + kr);
-                double *bb = buf + 2 * ((size_t)((vq % g.nfft + g.nfft) % g.nfft) * half +
-                                        (size_t)uq);
-                bb[0] = (double)re[at] - (double)co->re[at];
-                bb[1] = (double)im[at] - (double)co->im[at];
-            }
-        wf_fftw_lock();
-        fftw_plan plan = fftw_plan_dft_c2r_2d(g.nfft, g.nfft, (fftw_complex *)buf, buf,
-                                              FFTW_ESTIMATE);
-        wf_fftw_unlock();
-        if (!plan) {
-            wf_arena_release(arena, mark);
-            return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", g.nfft);
-        }
-        fftw_execute(plan);
-        wf_fftw_lock();
-        fftw_destroy_plan(plan);
-        wf_fftw_unlock();
-        /* e(X) = (1 / lw^2) sum_k T(k) e^{i k X} for the draws' convention (sim/profile.c) */
-        const double norm = 1.0 / ((double)g.lw * g.lw);
-        const long nfl = (long)g.nfft;
-        for (int b = 0; b < WING_OS; b++)
-            for (int a = 0; a < WING_OS; a++) {
-                float *plane = co->wing + ((size_t)b * WING_OS + (size_t)a) * (size_t)g.np * g.np;
-                for (int ny = 0; ny < g.np; ny++) {
-                    long J = (long)b + (long)WING_OS * (ny - g.h);
-                    size_t row = (size_t)(((J % nfl) + nfl) % nfl) * (nf + 2);
-                    for (int nx = 0; nx < g.np; nx++) {
-                        long I = (long)a + (long)WING_OS * (nx - g.h);
-                        float v = (float)(norm * buf[row + (size_t)(((I % nfl) + nfl) % nfl)]);
-                        plane[(size_t)ny * g.np + nx] = v;
-                        if (fabs(v) > co->wing_max) co->wing_max = fabs(v);
-                    }
-                }
-            }
-        wf_arena_release(arena, mark);
-    }
     psf->ncore = ncore;
     if (ncore) {
         psf->wing_os = WING_OS;
-        psf->wing_half = g.h;
-        psf->wing_np = g.np;
+        psf->wing_half = j.g.h;
+        psf->wing_np = j.g.np;
     }
 
     psf->pixel_scale = acc->pixel_scale;
@@ -511,12 +560,18 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
     psf->flux = sum;
     psf->table_fft = acc->psf_table_fft;
     psf->kr = kr;
-    psf->re = re;
-    psf->im = im;
-    psf->kmax = kmax + dkt;
+    psf->re = j.re;
+    psf->im = j.im;
+    psf->kmax = kmax + j.dkt;
     psf->nee = (int)nee;
     psf->ee_dr = dr;
     psf->ee = ee;
-    psf->env = env;
-    return WF_OK;
+    psf->env = j.env;
+out:
+    for (int t = 0; t < T; t++) { /* the slots' high water, for the arena's own */
+        size_t hw = (size_t)(slots[t].base - top.base) + slots[t].high_water;
+        if (hw > top.high_water) top.high_water = hw;
+    }
+    wf_arena_join(arena, &top);
+    return st;
 }

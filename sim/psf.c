@@ -1,4 +1,5 @@
 #include "sim/psf.h"
+#include "sim/parallel.h"
 #include "sim/fftw_lock.h"
 
 #include <fftw3.h>
@@ -48,6 +49,7 @@ void wf_psf_draw_opts_default(wf_psf_draw_opts *d)
     d->cx = d->cy = 0.5 * (64 - 1);
     d->pixel = 1;
     d->det_scale = WF_PSF_PIXEL_SCALE;
+    d->threads = 1;
 }
 
 /* Smallest 2^a 3^b 5^c 7^d >= n: sizes FFTW transforms fast. */
@@ -374,13 +376,26 @@ static void phasor(double theta, int delta, double period, double gain, double *
     *im = gain * sin(a);
 }
 
-wf_status wf_psf_draw(const wf_psf *psf, const wf_psf_draw_opts *d, double *out)
+typedef struct draw_job {
+    const wf_psf *psf;
+    const wf_psf_draw_opts *d;
+    double *out;
+    int ntasks;
+} draw_job;
+
+/* Output rows of task `task` (a contiguous share of them: the column phasors are made once
+ * per wavelength and share). Each row's sums run in the same order whatever the share, so the
+ * image does not depend on the thread count. */
+static wf_status draw_rows(void *ctx, int task, int slot)
 {
-    if (!psf) return wf_error(WF_ERR_INPUT, "psf draw: no PSF");
-    wf_status st = check_draw(d);
-    if (st) return st;
+    (void)slot;
+    const draw_job *jb = ctx;
+    const wf_psf *psf = jb->psf;
+    const wf_psf_draw_opts *d = jb->d;
     int nx = d->nx, ny = d->ny, kx = psf->kx, ky = psf->ky, nyc = 2 * ky - 1;
-    int nb = ny < ROW_BLOCK ? ny : ROW_BLOCK;
+    int ja = (int)((long)ny * task / jb->ntasks), jend = (int)((long)ny * (task + 1) / jb->ntasks);
+    if (jend <= ja) return WF_OK;
+    int nb = jend - ja < ROW_BLOCK ? jend - ja : ROW_BLOCK;
     size_t n_ax = (size_t)kx * nx, n_ay = (size_t)nyc * nb, n_b = (size_t)kx * nb;
     double *buf = malloc((2 * n_ax + 2 * n_ay + 2 * n_b) * sizeof(double));
     if (!buf)
@@ -388,7 +403,8 @@ wf_status wf_psf_draw(const wf_psf *psf, const wf_psf_draw_opts *d, double *out)
                         ((2 * n_ax + 2 * n_ay + 2 * n_b) * sizeof(double)) >> 20);
     double *axr = buf, *axi = axr + n_ax, *ayr = axi + n_ax, *ayi = ayr + n_ay;
     double *br = ayi + n_ay, *bi = br + n_b;
-    memset(out, 0, (size_t)nx * ny * sizeof(double));
+    double *out = jb->out;
+    memset(out + (size_t)ja * nx, 0, (size_t)(jend - ja) * nx * sizeof(double));
 
     for (int k = 0; k < psf->nlambda; k++) {
         const mono *m = &psf->m[k];
@@ -400,8 +416,8 @@ wf_status wf_psf_draw(const wf_psf *psf, const wf_psf_draw_opts *d, double *out)
                 phasor((i - d->cx) * d->scale, a, T, g, &axr[(size_t)a * nx + i],
                        &axi[(size_t)a * nx + i]);
         }
-        for (int j0 = 0; j0 < ny; j0 += nb) {
-            int nr = ny - j0 < nb ? ny - j0 : nb;
+        for (int j0 = ja; j0 < jend; j0 += nb) {
+            int nr = jend - j0 < nb ? jend - j0 : nb;
             for (int t = 0; t < nyc; t++) {
                 int dy = t - (ky - 1);
                 double g = axis_gain(d, T, dy);
@@ -437,12 +453,24 @@ wf_status wf_psf_draw(const wf_psf *psf, const wf_psf_draw_opts *d, double *out)
     free(buf);
     /* The discrete pupil makes the PSF periodic; only the central period is the PSF. */
     double half = 0.5 * psf->info.period_arcsec;
-    for (int j = 0; j < ny; j++) {
+    for (int j = ja; j < jend; j++) {
         double ty = fabs((j - d->cy) * d->scale);
         for (int i = 0; i < nx; i++)
             if (ty > half || fabs((i - d->cx) * d->scale) > half) out[(size_t)j * nx + i] = 0.0;
     }
     return WF_OK;
+}
+
+wf_status wf_psf_draw(const wf_psf *psf, const wf_psf_draw_opts *d, double *out)
+{
+    if (!psf) return wf_error(WF_ERR_INPUT, "psf draw: no PSF");
+    wf_status st = check_draw(d);
+    if (st) return st;
+    /* shares of at least ROW_BLOCK rows: below that the phasors each share makes dominate */
+    int T = d->threads > 1 ? d->threads : 1, most = (d->ny + ROW_BLOCK - 1) / ROW_BLOCK;
+    if (T > most) T = most;
+    draw_job jb = {psf, d, out, T};
+    return wf_parallel_for(T, T, draw_rows, &jb);
 }
 
 /* ---- cache ----------------------------------------------------------------------------- */

@@ -73,6 +73,7 @@ typedef struct wf_psf_draw_opts {
      * GalSim comparison in tests/test_psf.c). NULL: none. */
     double (*mtf)(double freq, void *ctx);
     void *mtf_ctx;
+    int threads;      /* rows shared among this many threads (same image for any count) [1] */
 } wf_psf_draw_opts;
 
 typedef struct wf_psf_info {

@@ -14,6 +14,7 @@
 #include "hal/arena.h"
 #include "sim/bandpass.h"
 #include "sim/fitsout.h"
+#include "sim/parallel.h"
 #include "sim/profile.h"
 #include "sim/psf.h"
 #include "sim/render.h"
@@ -388,6 +389,7 @@ static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const 
     d.pixel = 0;
     d.jitter = setup->jitter;
     d.diffusion = setup->diffusion;
+    d.threads = setup->threads;
     if ((st = wf_psf_draw(s->psf_wide, &d, s->psf_wide_pix))) return st;
     wf_psf_free(s->psf_wide); /* the image is all the drawer needs: its coefficients go now */
     s->psf_wide = NULL;
@@ -405,7 +407,7 @@ static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const 
     size_t bytes = keep + scratch + 4096;
     if (!(s->psf_wide_memory = wf_arena_host_alloc(bytes))) return wf_error(WF_ERR_NOMEM, "scene: wide PSF table");
     wf_arena_init(&s->psf_wide_arena, s->psf_wide_memory, bytes, "scene wide PSF arena");
-    if ((st = wf_profile_psf_init(&s->ppsf_wide, &s->psf_wide_image, &s->acc_wide, &s->psf_wide_arena))) return st;
+    if ((st = wf_profile_psf_init(&s->ppsf_wide, &s->psf_wide_image, &s->acc_wide, &s->psf_wide_arena, 1))) return st;
     release_tail(&s->psf_wide_arena);
     free(s->psf_wide_pix); /* the table is all the drawer reads from now on */
     s->psf_wide_pix = NULL;
@@ -414,21 +416,14 @@ static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const 
     return WF_OK;
 }
 
-/* Planning of objects [first, end) with thread t's drawing work (see wf_scene_create). */
-typedef struct plan_job {
-    wf_scene *s;
-    int t;
-    size_t first, end;
-    wf_status st;
-    char message[512];
-} plan_job;
-
-static void *plan_range(void *arg)
+/* Planning of the objects of range `task` (of s->setup.threads ranges) with the drawing work
+ * of the thread that runs it (see wf_scene_create). */
+static wf_status plan_range(void *ctx, int task, int slot)
 {
-    plan_job *j = arg;
-    wf_scene *s = j->s;
-    wf_profile_work *w = &s->ts[j->t].work;
-    for (size_t i = j->first; i < j->end; i++) {
+    wf_scene *s = ctx;
+    size_t T = (size_t)s->setup.threads, first = s->nobj * (size_t)task / T, end = s->nobj * (size_t)(task + 1) / T;
+    wf_profile_work *w = &s->ts[slot].work;
+    for (size_t i = first; i < end; i++) {
         const object *o = &s->obj[i];
         object_plan *pl = &s->plans[i];
         if (o->kind == OBJ_SN && !(o->flux > 0)) continue;
@@ -440,13 +435,9 @@ static void *plan_range(void *arg)
             st = wf_profile_point_bounds(w, o->wide ? &s->ppsf_wide : &s->ppsf, o->x, o->y, &pl->bounds, NULL);
             pl->box = pl->bounds;
         }
-        if (st) {
-            j->st = st;
-            snprintf(j->message, sizeof j->message, "object %zu of the scene: %s", i, wf_error_message());
-            return NULL;
-        }
+        if (st) return wf_error(st, "object %zu of the scene: %s", i, wf_error_message());
     }
-    return NULL;
+    return WF_OK;
 }
 
 /* The drawing works, one per thread. They depend only on the accuracy knobs, so with more
@@ -480,26 +471,11 @@ static void *init_works(void *arg)
     return NULL;
 }
 
+/* Independent per object, so planned by the threads in parallel, each with its own
+ * drawing work; the first failure in object order is the one reported. */
 static wf_status plan_objects(wf_scene *s)
 {
-    int T = s->setup.threads;
-    plan_job jobs[64];
-    if (T > 64) T = 64;
-    pthread_t th[64];
-    int started = 0;
-    for (int t = 0; t < T; t++)
-        jobs[t] = (plan_job){s, t, s->nobj * (size_t)t / (size_t)T, s->nobj * (size_t)(t + 1) / (size_t)T,
-                             WF_OK, ""};
-    for (int t = 1; t < T; t++) {
-        if (pthread_create(&th[t], NULL, plan_range, &jobs[t]) != 0) break;
-        started = t;
-    }
-    for (int t = started + 1; t < T; t++) plan_range(&jobs[t]); /* threads that did not start */
-    plan_range(&jobs[0]);
-    for (int t = 1; t <= started; t++) pthread_join(th[t], NULL);
-    for (int t = 0; t < T; t++) /* the first failure in object order, whatever the threads */
-        if (jobs[t].st) return wf_error(jobs[t].st, "%s", jobs[t].message);
-    return WF_OK;
+    return wf_parallel_for(s->setup.threads, s->setup.threads, plan_range, s);
 }
 
 wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
@@ -600,6 +576,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     d.pixel = 0; /* the drawer applies the pixel */
     d.jitter = setup->jitter;
     d.diffusion = setup->diffusion;
+    d.threads = setup->threads;
     if ((st = wf_psf_draw(s->psf, &d, s->psf_pix))) goto bad;
     /* The image holds ~99% of the light within its 7" (the rest is far wings and spikes);
      * normalised, every object keeps its whole flux, the wings' share moved inside. */
@@ -612,10 +589,12 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     s->psf_image = (wf_psf_image){n, d.scale, s->psf_pix, band_limit};
     size_t keep, scratch;
     if ((st = wf_profile_psf_need(&s->psf_image, &s->acc, &keep, &scratch))) goto bad;
-    size_t pbytes = keep + scratch + 4096;
+    /* the cores' tables on up to one thread each (scratch for each, given back at once) */
+    const int pt = setup->threads < 1 + s->acc.core_levels ? setup->threads : 1 + s->acc.core_levels;
+    size_t pbytes = keep + (size_t)pt * (scratch + 64) + 4096;
     if (!(s->psf_memory = wf_arena_host_alloc(pbytes))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF table"); goto bad; }
     wf_arena_init(&s->psf_arena, s->psf_memory, pbytes, "scene PSF arena");
-    if ((st = wf_profile_psf_init(&s->ppsf, &s->psf_image, &s->acc, &s->psf_arena))) goto bad;
+    if ((st = wf_profile_psf_init(&s->ppsf, &s->psf_image, &s->acc, &s->psf_arena, pt))) goto bad;
     release_tail(&s->psf_arena);
     /* objects */
     size_t cap = 0;

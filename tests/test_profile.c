@@ -82,7 +82,7 @@ static void ctx_open(ctx *c, const wf_profile_accuracy *acc, const wf_psf_image 
     ck_assert(c->mem != NULL);
     wf_arena_init(&c->arena, c->mem, cap, "test");
     if (img) {
-        ck_assert_msg(wf_profile_psf_init(&c->psf, img, acc, &c->arena) == WF_OK, "%s",
+        ck_assert_msg(wf_profile_psf_init(&c->psf, img, acc, &c->arena, 1) == WF_OK, "%s",
                       wf_error_message());
         c->has_psf = 1;
     }
@@ -1591,6 +1591,69 @@ END_TEST
  * galaxy takes the smallest core whose bound 2 flux wing_max its tolerance allows, gets a
  * box no larger than with a larger core, stays within that core's bound, and its core box
  * plus that core's wing is its whole split stamp. */
+/* The split PSF's tables on 1 to 4 threads (core passes and wings run in parallel on
+ * scratch of their own, off the arena's top): every table bit for bit the same; an arena
+ * sized for one thread serves a request for four with fewer, and still the same tables. */
+static void assert_same_psf(const wf_profile_psf *a, const wf_profile_psf *b, int threads)
+{
+    ck_assert_msg(a->kr == b->kr && a->ncore == b->ncore && a->wing_np == b->wing_np && a->nee == b->nee,
+                  "%d threads: layout differs", threads);
+    size_t tab = (size_t)(2 * a->kr + 1) * (size_t)(2 * a->kr + 1);
+    size_t wing = (size_t)a->wing_os * a->wing_os * (size_t)a->wing_np * a->wing_np;
+    ck_assert_msg(!memcmp(a->re, b->re, tab * sizeof(float)) && !memcmp(a->im, b->im, tab * sizeof(float)) &&
+                  !memcmp(a->env, b->env, ((size_t)a->kr + 2) * sizeof(double)) &&
+                  !memcmp(a->ee, b->ee, (size_t)a->nee * sizeof(double)), "%d threads: whole table differs", threads);
+    ck_assert_msg(a->pixel_max == b->pixel_max && a->kmax == b->kmax, "%d threads: bounds differ", threads);
+    for (int l = 0; l < a->ncore; l++) {
+        const wf_profile_core *p = &a->core[l], *q = &b->core[l];
+        ck_assert_msg(!memcmp(p->re, q->re, tab * sizeof(float)) && !memcmp(p->im, q->im, tab * sizeof(float)) &&
+                      !memcmp(p->env, q->env, ((size_t)a->kr + 2) * sizeof(double)) &&
+                      !memcmp(p->wing, q->wing, wing * sizeof(float)) && p->flux == q->flux &&
+                      p->wing_max == q->wing_max, "%d threads: core %d differs", threads, l);
+    }
+}
+
+START_TEST(test_psf_tables_threads)
+{
+    wf_psf_image img;
+    double *psfpix = halo_psf(256, 0.07, 0.8, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    acc.core_radius = 2.0;
+    acc.core_levels = 3;
+    size_t keep, scratch;
+    ck_assert(wf_profile_psf_need(&img, &acc, &keep, &scratch) == WF_OK);
+    wf_profile_psf ref;
+    void *rmem = malloc(keep + scratch + 4096);
+    wf_arena rar;
+    wf_arena_init(&rar, rmem, keep + scratch + 4096, "one thread");
+    ck_assert_msg(wf_profile_psf_init(&ref, &img, &acc, &rar, 1) == WF_OK, "%s", wf_error_message());
+    ck_assert(rar.high_water <= rar.capacity && rar.capacity == keep + scratch + 4096);
+    for (int t = 2; t <= 4; t++) {
+        size_t cap = keep + (size_t)t * (scratch + 64) + 4096;
+        void *mem = malloc(cap);
+        wf_arena ar;
+        wf_arena_init(&ar, mem, cap, "threads");
+        wf_profile_psf p;
+        ck_assert_msg(wf_profile_psf_init(&p, &img, &acc, &ar, t) == WF_OK, "%s", wf_error_message());
+        ck_assert_msg(ar.capacity == cap, "the scratch split off the top was not given back");
+        ck_assert_msg(ar.high_water <= cap, "%d threads: high water %zu past the %zu bytes", t, ar.high_water, cap);
+        assert_same_psf(&ref, &p, t);
+        free(mem);
+    }
+    /* four asked for, one thread's memory given */
+    void *mem = malloc(keep + scratch + 4096);
+    wf_arena ar;
+    wf_arena_init(&ar, mem, keep + scratch + 4096, "one thread's room");
+    wf_profile_psf p;
+    ck_assert_msg(wf_profile_psf_init(&p, &img, &acc, &ar, 4) == WF_OK, "%s", wf_error_message());
+    assert_same_psf(&ref, &p, 4);
+    free(mem);
+    free(rmem);
+    free(psfpix);
+}
+END_TEST
+
 START_TEST(test_core_levels)
 {
     wf_psf_image img;
@@ -1631,10 +1694,10 @@ START_TEST(test_core_levels)
         wf_arena ar;
         wf_arena_init(&ar, mem, keep + scratch + 4096, "bad ladder");
         wf_profile_psf bp;
-        ck_assert(wf_profile_psf_init(&bp, &img, &bad, &ar) == WF_ERR_RANGE);
+        ck_assert(wf_profile_psf_init(&bp, &img, &bad, &ar, 1) == WF_ERR_RANGE);
         ck_assert(strstr(wf_error_message(), "core_levels") != NULL);
         bad.core_levels = 2; /* 0.8", 0.4": allowed */
-        ck_assert(wf_profile_psf_init(&bp, &img, &bad, &ar) == WF_OK && bp.ncore == 2);
+        ck_assert(wf_profile_psf_init(&bp, &img, &bad, &ar, 1) == WF_OK && bp.ncore == 2);
         free(mem);
     }
     wf_stamp junk = stamp_new(0, 0, 3, 3);
@@ -2129,13 +2192,13 @@ START_TEST(test_bad_input)
     double nanpix[16] = {0, 0, 0, 0, 0, NAN, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
     bi.n = 4;
     bi.pix = nanpix;
-    ck_assert(wf_profile_psf_init(&p, &bi, &acc, &c.arena) == WF_ERR_INPUT);
+    ck_assert(wf_profile_psf_init(&p, &bi, &acc, &c.arena, 1) == WF_ERR_INPUT);
     double zero[16] = {0};
     bi.pix = zero;
-    ck_assert(wf_profile_psf_init(&p, &bi, &acc, &c.arena) == WF_ERR_INPUT);
+    ck_assert(wf_profile_psf_init(&p, &bi, &acc, &c.arena, 1) == WF_ERR_INPUT);
     bi = img;
     bi.scale_arcsec = 0.11; /* undersampled */
-    ck_assert(wf_profile_psf_init(&p, &bi, &acc, &c.arena) == WF_ERR_RANGE);
+    ck_assert(wf_profile_psf_init(&p, &bi, &acc, &c.arena, 1) == WF_ERR_RANGE);
     /* accuracy knobs */
     wf_profile_accuracy a = acc;
     a.flux_fraction = 1.0;
@@ -2241,6 +2304,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_pieces_identical);
     tcase_add_test(ind, test_core_wing);
     tcase_add_test(ind, test_core_levels);
+    tcase_add_test(ind, test_psf_tables_threads);
     tcase_add_test(ind, test_psf_table_interpolation);
     tcase_add_test(ind, test_psf_any_sampling);
     tcase_add_test(ind, test_knot_lattice);

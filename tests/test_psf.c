@@ -573,6 +573,34 @@ START_TEST(test_chromatic_linear)
 }
 END_TEST
 
+/* Rows shared among threads: the same image, bit for bit, for 1 to 5 threads (chromatic,
+ * odd sizes, with the pixel and a blur), since each row's sums keep their order. */
+START_TEST(test_draw_threads)
+{
+    wf_psf_optics o;
+    wf_psf_optics_default(&o);
+    o.pupil_bin = 8;
+    double lams[2] = {1000.0, 1200.0}, w[2] = {1.0, 2.0};
+    wf_psf *psf;
+    assert_ok(wf_psf_build_optics(&o, lams, w, 2, &psf));
+    enum { NX = 131, NY = 203 };
+    double *ref = malloc(sizeof(double) * NX * NY), *img = malloc(sizeof(double) * NX * NY);
+    wf_psf_draw_opts d;
+    wf_psf_draw_opts_default(&d);
+    d.nx = NX, d.ny = NY, d.cx = 64.3, d.cy = 100.7, d.scale = 0.0275, d.diffusion = 0.1;
+    assert_ok(wf_psf_draw(psf, &d, ref));
+    for (int t = 2; t <= 5; t++) {
+        d.threads = t;
+        for (int i = 0; i < NX * NY; i++) img[i] = -1.0;
+        assert_ok(wf_psf_draw(psf, &d, img));
+        ck_assert_msg(!memcmp(ref, img, sizeof(double) * NX * NY), "%d threads: the image differs", t);
+    }
+    free(ref);
+    free(img);
+    wf_psf_free(psf);
+}
+END_TEST
+
 /* Jitter and diffusion are the same Gaussian in different units, and the blurred PSF is the
  * PSF convolved with it (checked at one point against a direct quadrature). */
 START_TEST(test_blurs)
@@ -1193,6 +1221,7 @@ static Suite *suite(void)
     tcase_add_test(tc, test_first_moments_zero);
     tcase_add_test(tc, test_pixel_integration_exact);
     tcase_add_test(tc, test_chromatic_linear);
+    tcase_add_test(tc, test_draw_threads);
     tcase_add_test(tc, test_blurs);
     tcase_add_test(tc, test_bad_input);
     tcase_add_test(tc, test_period_window);

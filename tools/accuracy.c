@@ -346,7 +346,7 @@ static wf_status drawer_open(const acc_run *run, int bin, int over, int size, in
         goto bad;
     }
     wf_arena_init(&d->arena, d->mem, cap, "accuracy drawing arena");
-    if ((st = wf_profile_psf_init(&d->ppsf, &d->img, &acc, &d->arena)) ||
+    if ((st = wf_profile_psf_init(&d->ppsf, &d->img, &acc, &d->arena, 1)) ||
         (st = wf_profile_work_init(&d->work, &acc, &d->arena)))
         goto bad;
     d->work_ready = 1;
