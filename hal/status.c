@@ -2,15 +2,20 @@
 
 #include <stdarg.h>
 #include <stdio.h>
+#include <string.h>
 
 static _Thread_local char error_detail[1024];
 
 wf_status wf_error(wf_status code, const char *fmt, ...)
 {
+    /* formatted aside first: a caller may pass wf_error_message() itself as an argument,
+     * to wrap the message it had with context */
+    char buf[sizeof error_detail];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(error_detail, sizeof error_detail, fmt, ap);
+    vsnprintf(buf, sizeof buf, fmt, ap);
     va_end(ap);
+    memcpy(error_detail, buf, sizeof buf);
     return code;
 }
 

@@ -193,7 +193,8 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
                               size_t *bytes, size_t *scratch);
 /* Tabulates the PSF's transform times the pixel's: the whole image's table, then each core's
  * and its wing on up to `threads` threads (the same tables for any count), as many as the
- * arena holds *bytes + threads x (*scratch + 64) for; one needs *bytes + *scratch. Scratch is
+ * arena holds *bytes + threads x (*scratch + 64) + 64 for (one thread at least: *bytes +
+ * *scratch + 128 is always enough; the tables are trimmed, so often less). Scratch is
  * taken from the arena's top and given back, so call it before reserving anything that must
  * outlive it. */
 wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,

@@ -476,11 +476,11 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
      * tables are trimmed to the band, so they can be reserved only once it is known). As
      * many slots as the arena holds, up to `threads`; passes and wings run in parallel. */
     size_t room = arena->capacity - arena->used;
-    size_t slot_bytes = scratch + 64;
+    size_t slot_bytes = scratch + 64; /* a slot's own alignment pad */
     int T = threads < 1 ? 1 : threads;
-    if (T > 1 + ncore) T = 1 + ncore;
+    if (T > (ncore ? ncore : 1)) T = ncore ? ncore : 1; /* pass 0 runs alone, then a core per task */
     if (T > WF_PROFILE_MAX_CORES) T = WF_PROFILE_MAX_CORES;
-    while (T > 1 && keep_bound + (size_t)T * slot_bytes > room) T--;
+    while (T > 1 && keep_bound + (size_t)T * slot_bytes + 64 > room) T--; /* + the split's pad */
     wf_arena top, slots[WF_PROFILE_MAX_CORES];
     if ((st = wf_arena_split(arena, T == 1 && slot_bytes > room ? room : (size_t)T * slot_bytes,
                              "PSF table scratch", &top)))

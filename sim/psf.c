@@ -466,7 +466,8 @@ wf_status wf_psf_draw(const wf_psf *psf, const wf_psf_draw_opts *d, double *out)
     if (!psf) return wf_error(WF_ERR_INPUT, "psf draw: no PSF");
     wf_status st = check_draw(d);
     if (st) return st;
-    /* shares of at least ROW_BLOCK rows: below that the phasors each share makes dominate */
+    /* no more shares than ROW_BLOCK-row blocks: with thinner ones the column phasors each
+     * share makes would dominate */
     int T = d->threads > 1 ? d->threads : 1, most = (d->ny + ROW_BLOCK - 1) / ROW_BLOCK;
     if (T > most) T = most;
     draw_job jb = {psf, d, out, T};

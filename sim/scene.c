@@ -590,7 +590,8 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     size_t keep, scratch;
     if ((st = wf_profile_psf_need(&s->psf_image, &s->acc, &keep, &scratch))) goto bad;
     /* the cores' tables on up to one thread each (scratch for each, given back at once) */
-    const int pt = setup->threads < 1 + s->acc.core_levels ? setup->threads : 1 + s->acc.core_levels;
+    const int cores = s->acc.core_radius > 0.0 ? s->acc.core_levels : 1;
+    const int pt = setup->threads < cores ? setup->threads : cores;
     size_t pbytes = keep + (size_t)pt * (scratch + 64) + 4096;
     if (!(s->psf_memory = wf_arena_host_alloc(pbytes))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF table"); goto bad; }
     wf_arena_init(&s->psf_arena, s->psf_memory, pbytes, "scene PSF arena");

@@ -1,7 +1,8 @@
 /* The set-up's parallel loop (sim/parallel.h) and the arena's top split (hal/arena.h):
  * every task runs exactly once on a slot below the thread count; the error reported is
  * the lowest failing task's, with its message, whatever the timing; a split's memory lies
- * above everything kept from the bottom and comes back on join. */
+ * above everything kept from the bottom and comes back on join; an error message may wrap
+ * the one in hand (hal/status.h). */
 #include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -91,6 +92,15 @@ START_TEST(arena_split_top)
 }
 END_TEST
 
+START_TEST(error_wraps_its_own_message)
+{
+    /* context added around the message in hand, as the planners do */
+    wf_error(WF_ERR_RANGE, "inner reason %d", 7);
+    ck_assert_int_eq(wf_error(WF_ERR_INPUT, "object %d of the scene: %s", 12, wf_error_message()), WF_ERR_INPUT);
+    ck_assert_str_eq(wf_error_message(), "object 12 of the scene: inner reason 7");
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("parallel");
@@ -99,6 +109,7 @@ static Suite *suite(void)
     tcase_add_test(tc, every_task_once);
     tcase_add_test(tc, lowest_failure_reported);
     tcase_add_test(tc, arena_split_top);
+    tcase_add_test(tc, error_wraps_its_own_message);
     suite_add_tcase(s, tc);
     return s;
 }

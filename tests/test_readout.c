@@ -6,6 +6,7 @@
 #include <string.h>
 #include <stdint.h>
 #include <sys/resource.h>
+#include <time.h>
 
 #include "firmware/cosmic.h"
 #include "firmware/readout.h"
@@ -586,6 +587,67 @@ END_TEST
 START_TEST(linear_rate_direct) { check_linear(WF_SAMPLE_DIRECT); }
 END_TEST
 
+/* A grid scene behind a wrapper that records the rows it was asked for and, for instance 1,
+ * takes its time: the fast instance finishes its run and takes the back of the slow one's. */
+typedef struct slow_source {
+    wf_scene_source inner;
+    int delay_us;
+    int max_y0; /* the furthest row asked for */
+} slow_source;
+
+static wf_status slow_fill(void *ctx, int y0, int y1, int ncols, float *rate)
+{
+    slow_source *s = ctx;
+    if (s->delay_us) {
+        struct timespec ts = {0, (long)s->delay_us * 1000};
+        nanosleep(&ts, NULL);
+    }
+    if (y0 > s->max_y0) s->max_y0 = y0;
+    return s->inner.fill_rate(s->inner.ctx, y0, y1, ncols, rate);
+}
+
+START_TEST(tiles_taken_from_a_slow_thread)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 64, 128);
+    cfg.mode = WF_MODE_SINGLE;
+    cfg.exptime = 300.0;
+    cfg.tile_rows = 4; /* 32 tiles, 16 per run */
+    wf_scene_grid g = test_grid(cfg.ncols, cfg.nrows);
+    wf_scene_source grid;
+    ck_assert_int_eq(wf_scene_grid_source(&g, &grid), WF_OK);
+    size_t len;
+    unsigned char *buf = run_stream(&cfg, &clock, &grid, 1, &len);
+    decoded ref, d;
+    decode(buf, len, &ref);
+    free(buf);
+
+    slow_source ss[2] = {{grid, 0, -1}, {grid, 20000, -1}};
+    wf_scene_source scenes[2];
+    for (int i = 0; i < 2; i++) scenes[i] = (wf_scene_source){&ss[i], slow_fill, NULL, NULL};
+    wf_link_memory mem;
+    wf_link link;
+    wf_link_memory_open(&mem, &link);
+    wf_expose_job job = {0};
+    job.ro = cfg;
+    job.clock = clock;
+    job.noise = (wf_noise){WF_NOISE_PHILOX, cfg.seed, cfg.exposure, cfg.sca};
+    job.scenes = scenes;
+    job.threads = 2;
+    job.link = &link;
+    ck_assert_msg(wf_expose_run(&job) == WF_OK, "expose: %s", wf_error_message());
+    decode(mem.data, mem.len, &d);
+    wf_link_memory_close(&mem);
+    /* instance 0's run is rows 0-63; it went on into instance 1's, whose last tiles it took */
+    ck_assert_msg(ss[0].max_y0 >= 64, "the fast instance never left its run (furthest row %d)", ss[0].max_y0);
+    ck_assert_msg(ss[1].max_y0 < 124, "the slow instance drew its whole run (furthest row %d)", ss[1].max_y0);
+    assert_same(&ref, &d, "tiles taken from a slow thread");
+    free_decoded(&ref);
+    free_decoded(&d);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("readout");
@@ -605,6 +667,7 @@ static Suite *suite(void)
     tcase_add_test(tc, replay_equals_source);
     tcase_add_test(tc, linear_rate_per_read);
     tcase_add_test(tc, linear_rate_direct);
+    tcase_add_test(tc, tiles_taken_from_a_slow_thread);
     suite_add_tcase(s, tc);
     return s;
 }

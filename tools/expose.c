@@ -17,6 +17,8 @@ typedef struct worker {
     char message[1024];
     atomic_int *rows_done;
     atomic_int *failed;
+    struct tile_runs *runs;
+    double t0;          /* start, for the progress line */
 } worker;
 
 static double now(void)
@@ -24,32 +26,6 @@ static double now(void)
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-/* Instance i takes a contiguous run of tiles, so a scene renderer behind it draws an object
- * spanning several tiles once, not once per thread. */
-static void tile_range(int ntiles, int threads, int i, int *first, int *end)
-{
-    *first = (int)((long)ntiles * i / threads);
-    *end = (int)((long)ntiles * (i + 1) / threads);
-}
-
-static void *work(void *arg)
-{
-    worker *w = arg;
-    int first, end;
-    tile_range(wf_readout_tile_count(w->ro), w->job->threads, w->index, &first, &end);
-    for (int t = first; t < end && !atomic_load(w->failed); t++) {
-        w->status = wf_readout_run_tile(w->ro, t);
-        if (w->status) {
-            snprintf(w->message, sizeof w->message, "%s", wf_error_message());
-            atomic_store(w->failed, 1);
-            break;
-        }
-        int y0 = t * w->job->ro.tile_rows, rows = w->job->ro.nrows - y0;
-        atomic_fetch_add(w->rows_done, rows < w->job->ro.tile_rows ? rows : w->job->ro.tile_rows);
-    }
-    return NULL;
 }
 
 static void show_progress(int done, int total, double t0)
@@ -60,6 +36,56 @@ static void show_progress(int done, int total, double t0)
     fflush(stderr);
 }
 
+/* Tiles go out in contiguous runs: instance i starts with the i-th run, so that a scene
+ * renderer behind it draws an object spanning several tiles once, not once per thread. An
+ * instance whose run is done takes the back half of the longest run left (the objects that
+ * straddle the new boundary are drawn by both), so a scene crowded on one part of the SCA,
+ * or a core shared with the assembler, does not leave a thread idle. Which instance runs a
+ * tile changes no byte of the product. */
+typedef struct tile_runs {
+    pthread_mutex_t lock;
+    int n;
+    int *next, *end; /* run of instance i: tiles [next[i], end[i]) not yet started */
+} tile_runs;
+
+static int next_tile(tile_runs *q, int i)
+{
+    pthread_mutex_lock(&q->lock);
+    if (q->next[i] >= q->end[i]) {
+        int v = -1, most = 0;
+        for (int k = 0; k < q->n; k++)
+            if (q->end[k] - q->next[k] > most) most = q->end[k] - q->next[k], v = k;
+        if (v >= 0) {
+            int mid = most == 1 ? q->next[v] : q->end[v] - most / 2;
+            q->next[i] = mid;
+            q->end[i] = q->end[v];
+            q->end[v] = mid;
+        }
+    }
+    int t = q->next[i] < q->end[i] ? q->next[i]++ : -1;
+    pthread_mutex_unlock(&q->lock);
+    return t;
+}
+
+static void *work(void *arg)
+{
+    worker *w = arg;
+    for (int t; !atomic_load(w->failed) && (t = next_tile(w->runs, w->index)) >= 0;) {
+        w->status = wf_readout_run_tile(w->ro, t);
+        if (w->status) {
+            snprintf(w->message, sizeof w->message, "%s", wf_error_message());
+            int none = 0; /* the first instance to fail, in time, names the cause */
+            atomic_compare_exchange_strong(w->failed, &none, w->index + 1);
+            break;
+        }
+        int y0 = t * w->job->ro.tile_rows, rows = w->job->ro.nrows - y0;
+        atomic_fetch_add(w->rows_done, rows < w->job->ro.tile_rows ? rows : w->job->ro.tile_rows);
+        if (w->index == 0 && w->job->progress) show_progress(atomic_load(w->rows_done), w->job->ro.nrows, w->t0);
+    }
+    return NULL;
+}
+
+
 wf_status wf_expose_run(wf_expose_job *job)
 {
     int T = job->threads < 1 ? 1 : job->threads;
@@ -69,7 +95,14 @@ wf_status wf_expose_run(wf_expose_job *job)
     if (st) return st;
     job->arena_bytes = need;
     worker *ws = calloc((size_t)T, sizeof *ws);
-    if (!ws) return wf_error(WF_ERR_NOMEM, "cannot allocate %d workers", T);
+    tile_runs runs = {.n = T, .next = calloc((size_t)T, sizeof(int)), .end = calloc((size_t)T, sizeof(int))};
+    if (!ws || !runs.next || !runs.end) {
+        free(ws);
+        free(runs.next);
+        free(runs.end);
+        return wf_error(WF_ERR_NOMEM, "cannot allocate %d workers", T);
+    }
+    pthread_mutex_init(&runs.lock, NULL);
     atomic_int rows_done = 0, failed = 0;
     int created = 0;
     for (int i = 0; i < T; i++) {
@@ -88,6 +121,13 @@ wf_status wf_expose_run(wf_expose_job *job)
     }
     if ((st = wf_readout_send_meta(ws[0].ro, job->meta_extra))) goto out;
     double t0 = now();
+    int ntiles = wf_readout_tile_count(ws[0].ro);
+    for (int i = 0; i < T; i++) {
+        runs.next[i] = (int)((long)ntiles * i / T);
+        runs.end[i] = (int)((long)ntiles * (i + 1) / T);
+        ws[i].runs = &runs;
+        ws[i].t0 = t0;
+    }
     pthread_t *th = calloc((size_t)T, sizeof *th);
     if (!th) { st = wf_error(WF_ERR_NOMEM, "cannot allocate threads"); goto out; }
     for (int i = 1; i < T; i++) {
@@ -98,33 +138,17 @@ wf_status wf_expose_run(wf_expose_job *job)
         }
         created = i;
     }
-    if (job->progress && created == T - 1) {
-        /* the main thread runs instance 0 and reports between its tiles */
-        int first, end;
-        tile_range(wf_readout_tile_count(ws[0].ro), T, 0, &first, &end);
-        for (int t = first; t < end && !atomic_load(&failed); t++) {
-            ws[0].status = wf_readout_run_tile(ws[0].ro, t);
-            if (ws[0].status) {
-                snprintf(ws[0].message, sizeof ws[0].message, "%s", wf_error_message());
-                atomic_store(&failed, 1);
-                break;
-            }
-            int y0 = t * job->ro.tile_rows, rows = job->ro.nrows - y0;
-            atomic_fetch_add(&rows_done, rows < job->ro.tile_rows ? rows : job->ro.tile_rows);
-            show_progress(atomic_load(&rows_done), job->ro.nrows, t0);
-        }
-    } else if (created == T - 1) {
-        work(&ws[0]);
-    }
+    if (created == T - 1) work(&ws[0]); /* the main thread runs instance 0 (and shows progress) */
     for (int i = 1; i <= created; i++) pthread_join(th[i], NULL);
     free(th);
     if (job->progress) {
         show_progress(atomic_load(&rows_done), job->ro.nrows, t0);
         fprintf(stderr, "\n");
     }
-    if (!st)
-        for (int i = 0; i < T; i++)
-            if (ws[i].status) { st = wf_error(ws[i].status, "%s", ws[i].message); break; }
+    /* the first failure in time: a later one may only be its consequence (a link closed
+     * because its reader gave up after the first) */
+    int first = atomic_load(&failed);
+    if (!st && first > 0 && ws[first - 1].status) st = wf_error(ws[first - 1].status, "%s", ws[first - 1].message);
     if (!st) st = wf_readout_send_end(ws[0].ro);
 out:
     job->arena_high_water = 0;
@@ -134,5 +158,8 @@ out:
         free(ws[i].memory);
     }
     free(ws);
+    free(runs.next);
+    free(runs.end);
+    pthread_mutex_destroy(&runs.lock);
     return st;
 }

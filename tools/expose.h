@@ -1,5 +1,6 @@
 /* Host driver of one exposure: reserves an arena per readout instance, runs tiles on
- * `threads` threads (instance t takes the t-th contiguous run of tiles), sends META first
+ * `threads` threads (instance t starts with the t-th contiguous run of tiles, and one done
+ * early takes the back half of the longest run left), sends META first
  * and END last on the shared link, and shows progress on a terminal. Output does not depend on the thread
  * count: tiles are keyed by position, and the assembler places rows by their header. */
 #ifndef WF_EXPOSE_H
