@@ -91,7 +91,7 @@ static wf_status pipe_send(void *ctx, const void *packet, size_t len)
         p->room = 0;
         if (p->read_closed) {
             p->refused = 1;
-            st = wf_error(WF_ERR_IO, "%s: the reader has stopped", p->name);
+            st = wf_error(WF_ERR_IO, "%s: " WF_LINK_PIPE_REFUSED, p->name);
             break;
         }
         size_t n = min_size(len, p->cap - p->len), tail = (p->head + p->len) % p->cap;

@@ -57,6 +57,10 @@ typedef struct wf_link_pipe {
     pthread_cond_t readable, writable;
 } wf_link_pipe;
 
+/* The words of a refused send's message (after the pipe's name), so that a caller can tell
+ * a failure caused by the reader's stop from one of the sender's own. */
+#define WF_LINK_PIPE_REFUSED "the reader has stopped"
+
 wf_status wf_link_pipe_open(wf_link_pipe *p, size_t cap, const char *name, wf_link *out);
 /* The writer is done: the reader sees the end of the stream once the ring is empty. */
 void wf_link_pipe_close_write(wf_link_pipe *p);

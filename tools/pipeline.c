@@ -343,10 +343,11 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
     snprintf(expose_msg, sizeof expose_msg, "%s", wf_error_message());
     wf_link_pipe_close_write(&lp);
     pthread_join(th, NULL);
-    int refused = lp.refused;
+    /* the first failure is the one to report: the readout's (the first in time, among its
+     * threads), unless that was a send refused because the assembler had stopped: then the
+     * assembler's says why */
+    int refused = st && lp.refused && strstr(expose_msg, WF_LINK_PIPE_REFUSED);
     wf_link_pipe_free(&lp);
-    /* the first failure is the one to report: the readout's, unless it failed only because
-     * the assembler had stopped (then the assembler's says why) */
     if (st && !refused) { wf_error(st, "%s", expose_msg); goto done; }
     if (at.status) { st = wf_error(at.status, "%s", at.message); goto done; }
     if (st) { wf_error(st, "%s", expose_msg); goto done; }
