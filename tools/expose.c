@@ -18,6 +18,7 @@ typedef struct worker {
     atomic_int *rows_done;
     atomic_int *failed;
     struct tile_runs *runs;
+    int next, end;      /* this instance's run: tiles [next, end) not yet started */
     double t0;          /* start, for the progress line */
 } worker;
 
@@ -43,26 +44,27 @@ static void show_progress(int done, int total, double t0)
  * or a core shared with the assembler, does not leave a thread idle. Which instance runs a
  * tile changes no byte of the product. */
 typedef struct tile_runs {
-    pthread_mutex_t lock;
+    pthread_mutex_t lock; /* guards every worker's next and end */
+    worker *ws;
     int n;
-    int *next, *end; /* run of instance i: tiles [next[i], end[i]) not yet started */
 } tile_runs;
 
-static int next_tile(tile_runs *q, int i)
+static int next_tile(tile_runs *q, worker *w)
 {
     pthread_mutex_lock(&q->lock);
-    if (q->next[i] >= q->end[i]) {
-        int v = -1, most = 0;
+    if (w->next >= w->end) {
+        worker *v = NULL;
+        int most = 0;
         for (int k = 0; k < q->n; k++)
-            if (q->end[k] - q->next[k] > most) most = q->end[k] - q->next[k], v = k;
-        if (v >= 0) {
-            int mid = most == 1 ? q->next[v] : q->end[v] - most / 2;
-            q->next[i] = mid;
-            q->end[i] = q->end[v];
-            q->end[v] = mid;
+            if (q->ws[k].end - q->ws[k].next > most) most = q->ws[k].end - q->ws[k].next, v = &q->ws[k];
+        if (v) {
+            int mid = most == 1 ? v->next : v->end - most / 2;
+            w->next = mid;
+            w->end = v->end;
+            v->end = mid;
         }
     }
-    int t = q->next[i] < q->end[i] ? q->next[i]++ : -1;
+    int t = w->next < w->end ? w->next++ : -1;
     pthread_mutex_unlock(&q->lock);
     return t;
 }
@@ -70,7 +72,7 @@ static int next_tile(tile_runs *q, int i)
 static void *work(void *arg)
 {
     worker *w = arg;
-    for (int t; !atomic_load(w->failed) && (t = next_tile(w->runs, w->index)) >= 0;) {
+    for (int t; !atomic_load(w->failed) && (t = next_tile(w->runs, w)) >= 0;) {
         w->status = wf_readout_run_tile(w->ro, t);
         if (w->status) {
             snprintf(w->message, sizeof w->message, "%s", wf_error_message());
@@ -95,13 +97,8 @@ wf_status wf_expose_run(wf_expose_job *job)
     if (st) return st;
     job->arena_bytes = need;
     worker *ws = calloc((size_t)T, sizeof *ws);
-    tile_runs runs = {.n = T, .next = calloc((size_t)T, sizeof(int)), .end = calloc((size_t)T, sizeof(int))};
-    if (!ws || !runs.next || !runs.end) {
-        free(ws);
-        free(runs.next);
-        free(runs.end);
-        return wf_error(WF_ERR_NOMEM, "cannot allocate %d workers", T);
-    }
+    if (!ws) return wf_error(WF_ERR_NOMEM, "cannot allocate %d workers", T);
+    tile_runs runs = {.ws = ws, .n = T};
     pthread_mutex_init(&runs.lock, NULL);
     atomic_int rows_done = 0, failed = 0;
     int created = 0;
@@ -123,8 +120,8 @@ wf_status wf_expose_run(wf_expose_job *job)
     double t0 = now();
     int ntiles = wf_readout_tile_count(ws[0].ro);
     for (int i = 0; i < T; i++) {
-        runs.next[i] = (int)((long)ntiles * i / T);
-        runs.end[i] = (int)((long)ntiles * (i + 1) / T);
+        ws[i].next = (int)((long)ntiles * i / T);
+        ws[i].end = (int)((long)ntiles * (i + 1) / T);
         ws[i].runs = &runs;
         ws[i].t0 = t0;
     }
@@ -158,8 +155,6 @@ out:
         free(ws[i].memory);
     }
     free(ws);
-    free(runs.next);
-    free(runs.end);
     pthread_mutex_destroy(&runs.lock);
     return st;
 }
