@@ -609,12 +609,12 @@ typedef struct grid {
 static void phase_range(double theta, int lo, int hi, double *re, double *im, size_t st,
                         int alt)
 {
+    double sr = cos(theta), si = sin(theta); /* step e^{-i theta}, times -1 with alt */
+    if (alt) sr = -sr;
+    else si = -si;
     for (int u0 = lo; u0 <= hi; u0 += 32) {
         double a = -u0 * theta, sg = alt && (u0 & 1) ? -1.0 : 1.0;
         double cr = sg * cos(a), ci = sg * sin(a);
-        double sr = cos(theta), si = sin(theta); /* step e^{-i theta}, times -1 with alt */
-        if (alt) sr = -sr;
-        else si = -si;
         int u1 = u0 + 32 <= hi ? u0 + 32 : hi + 1;
         for (int u = u0; u < u1; u++) {
             re[(size_t)(u - lo) * st] = cr;
