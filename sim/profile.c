@@ -88,7 +88,7 @@ wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
 
 /* ------------------------------------------------------------------------ work buffers */
 
-static int fft_ladder(const wf_profile_accuracy *acc, int *sizes, int cap)
+int wf_profile_fft_ladder(const wf_profile_accuracy *acc, int *sizes, int cap)
 {
     int n = 0;
     for (int m = 8; m <= acc->max_fft && n < cap; m += 2) {
@@ -107,7 +107,7 @@ typedef struct work_layout {
 
 static void layout(const wf_profile_accuracy *acc, work_layout *l)
 {
-    l->nsizes = fft_ladder(acc, l->sizes, 48);
+    l->nsizes = wf_profile_fft_ladder(acc, l->sizes, 48);
     l->max_m = l->nsizes ? l->sizes[l->nsizes - 1] : 0;
     /* |k| <= WF_PSF_BAND_NYQ pi / p is |u| <= WF_PSF_BAND_NYQ M / 2 steps */
     l->cap_line = 2 * ((int)ceil(0.5 * WF_PSF_BAND_NYQ * l->max_m) + 2) + 1;
@@ -1515,7 +1515,19 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
     const int pcap = ladder_max(w) / 2 + 8 + (ladder_max(w) / 2 - half);
     const size_t row_len = (size_t)m + 2; /* doubles per row of the in-place buffer */
     const size_t ks = gd->ks;
-    const int side = psf ? 2 * psf->kr + 1 : 0;
+    /* the table, or its copy at this grid's step, which reads it contiguously */
+    const float *tre = psf ? psf->re : NULL, *tim = psf ? psf->im : NULL;
+    int tkr = psf ? psf->kr : 0, tst = gd->st;
+    if (psf && gd->mode == MODE_EXACT && tst > 1)
+        for (int i = 0; i < psf->steps.n; i++)
+            if (psf->steps.st[i] == tst) {
+                tre = psf->steps.re[i];
+                tim = psf->steps.im[i];
+                tkr = psf->steps.kr[i];
+                tst = 1;
+                break;
+            }
+    const int side = psf ? 2 * tkr + 1 : 0;
     const int smooth = knot0 <= 0;
     double ckr[WF_PROFILE_MAX_KNOTS], cki[WF_PROFILE_MAX_KNOTS];
     lattice *lat = knot0 <= 0 ? gd->lat : NULL;
@@ -1567,9 +1579,9 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
         const double *twx = NULL, *twy = NULL;
         int tiy = 0;
         if (gd->mode == MODE_EXACT) {
-            size_t off = (size_t)(v * gd->st + psf->kr) * side + (size_t)psf->kr;
-            er = psf->re + off;
-            ei = psf->im + off;
+            size_t off = (size_t)(v * tst + tkr) * side + (size_t)tkr;
+            er = tre + off;
+            ei = tim + off;
         } else if (gd->mode == MODE_INTERP) {
             tix = w->ix + u_all;
             twx = w->wx + 4 * (size_t)u_all;
@@ -1602,8 +1614,8 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
             /* times PSF x pixel, into the bins */
             double *bins = crow + 2 * (size_t)(ua - a * m);
             if (gd->mode == MODE_EXACT) {
-                fk->psfmul(n, er + (ptrdiff_t)ua * gd->st, ei + (ptrdiff_t)ua * gd->st,
-                           (size_t)gd->st, runr, runi, bins);
+                fk->psfmul(n, er + (ptrdiff_t)ua * tst, ei + (ptrdiff_t)ua * tst, (size_t)tst, runr,
+                           runi, bins);
             } else {
                 psf_interp(psf, tix, twx, tiy, twy, ua, n, pint, pcap, runr, runi, bins);
             }
@@ -2039,6 +2051,7 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
         view = *psf;
         view.re = psf->core[split - 1].re;
         view.im = psf->core[split - 1].im;
+        view.steps = psf->core[split - 1].steps;
         view.env = psf->core[split - 1].env;
         psf = &view;
     }

@@ -99,10 +99,22 @@ typedef struct wf_stamp {
     int fft;        /* FFT side used */
 } wf_stamp;
 
+/* A table read at every st-th sample (the FFT sides that divide table_fft at st > 1), kept
+ * as its own contiguous copy: entry (u, v) of copy i is the table's (st u, st v), |u|, |v|
+ * <= kr[i]. The draws then load whole vectors instead of gathering one sample per cache
+ * line. */
+#define WF_PROFILE_MAX_STEPS 16
+typedef struct wf_profile_steps {
+    int n;
+    int st[WF_PROFILE_MAX_STEPS], kr[WF_PROFILE_MAX_STEPS];
+    float *re[WF_PROFILE_MAX_STEPS], *im[WF_PROFILE_MAX_STEPS];
+} wf_profile_steps;
+
 /* One core of a split PSF (wf_profile_psf below). */
 typedef struct wf_profile_core {
     double radius;             /* arcsec */
     float *re, *im;            /* the core's table, laid out as the whole one */
+    wf_profile_steps steps;    /* and its copies at the draws' steps */
     double *env;               /* its envelope, as env */
     double flux;               /* the core's share of the image's flux */
     double wing_max;           /* largest |wing| pixel value, per unit flux */
@@ -119,6 +131,7 @@ typedef struct wf_profile_psf {
     int table_fft;             /* the table's k spacing is 2 pi / (table_fft * pixel_scale) */
     int kr;                    /* the table holds |kx|, |ky| <= kr steps */
     float *re, *im;            /* (2 kr + 1)^2, row (ky) major, k = 0 at [kr][kr] */
+    wf_profile_steps steps;    /* its copies at the draws' steps */
     double kmax;               /* rad/arcsec beyond which |PSF(k) pixel(k)| < 1e-7 flux */
     double pixel_max;          /* bound on any pixel of the image per unit flux, for any
                                   position, whole or through any core: sum |table| / N^2 */

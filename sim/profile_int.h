@@ -56,8 +56,12 @@ static inline double wf_sersic4_eval(const wf_sersic_table *t, double w)
  * 2 pi D / lambda stays below it for every lambda > 0.3 um. */
 #define WF_PSF_BAND_NYQ 8.0
 
-/* WF_OK when the knobs are in range, else an error naming the first one out of range. */
 struct wf_profile_accuracy;
+/* The FFT sides a drawing work uses (2^k and 3 2^k from min_fft to max_fft), ascending: up
+ * to cap of them into sizes; returns the count. */
+int wf_profile_fft_ladder(const struct wf_profile_accuracy *acc, int *sizes, int cap);
+
+/* WF_OK when the knobs are in range, else an error naming the first one out of range. */
 wf_status wf_profile_check_accuracy(const struct wf_profile_accuracy *acc);
 
 /* Geometry of a sheared, rotated profile: x_sky = A x_round, A = R(rotation) S(g), with

@@ -126,6 +126,60 @@ static double core_taper(double r, double rc)
     return 0.5 * (1.0 + cos(M_PI * (r - r1) / (rc - r1)));
 }
 
+/* The steps st > 1 at which the draws read a table exactly: table_fft / M for the ladder's
+ * sides M below table_fft that divide it, ascending. */
+static int table_steps(const wf_profile_accuracy *acc, int *st)
+{
+    int sizes[48], n = wf_profile_fft_ladder(acc, sizes, 48), k = 0;
+    for (int i = n - 1; i >= 0 && k < WF_PROFILE_MAX_STEPS; i--)
+        if (sizes[i] < acc->psf_table_fft && acc->psf_table_fft % sizes[i] == 0)
+            st[k++] = acc->psf_table_fft / sizes[i];
+    return k;
+}
+
+/* Arena bytes of one table's copies at its steps, for a table of |k| <= kr steps. */
+static size_t steps_bytes(const wf_profile_accuracy *acc, int kr)
+{
+    int st[WF_PROFILE_MAX_STEPS], n = table_steps(acc, st);
+    size_t bytes = 0;
+    for (int i = 0; i < n; i++) {
+        size_t side = 2 * (size_t)(kr / st[i]) + 1;
+        bytes += 2 * wf_arena_cost(side * side * sizeof(float));
+    }
+    return bytes;
+}
+
+static wf_status steps_alloc(wf_arena *arena, const wf_profile_accuracy *acc, int kr, wf_profile_steps *s)
+{
+    s->n = table_steps(acc, s->st);
+    for (int i = 0; i < s->n; i++) {
+        s->kr[i] = kr / s->st[i];
+        size_t side = 2 * (size_t)s->kr[i] + 1;
+        wf_status st;
+        if ((st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF table step copy", (void **)&s->re[i])) ||
+            (st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF table step copy", (void **)&s->im[i])))
+            return st;
+    }
+    return WF_OK;
+}
+
+/* Every copy filled from its table (|k| <= kr steps). */
+static void steps_fill(const float *re, const float *im, int kr, wf_profile_steps *s)
+{
+    const size_t side = 2 * (size_t)kr + 1;
+    for (int i = 0; i < s->n; i++) {
+        const int st = s->st[i], kd = s->kr[i];
+        const size_t sd = 2 * (size_t)kd + 1;
+        for (int v = -kd; v <= kd; v++)
+            for (int u = -kd; u <= kd; u++) {
+                size_t from = (size_t)(v * st + kr) * side + (size_t)(u * st + kr);
+                size_t to = (size_t)(v + kd) * sd + (size_t)(u + kd);
+                s->re[i][to] = re[from];
+                s->im[i][to] = im[from];
+            }
+    }
+}
+
 wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy *acc,
                               size_t *bytes, size_t *scratch)
 {
@@ -135,7 +189,7 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
     int kr = sampling_kr(img, acc);
     size_t side = 2 * (size_t)kr + 1;
     /* an upper bound: the table is trimmed to the PSF's band once it is known */
-    *bytes = 2 * wf_arena_cost(side * side * sizeof(float)) +
+    *bytes = 2 * wf_arena_cost(side * side * sizeof(float)) + steps_bytes(acc, kr) +
              wf_arena_cost(ee_count(img) * sizeof(double)) +
              wf_arena_cost(((size_t)kr + 2) * sizeof(double));
     /* the transform and the pixel's sinc line */
@@ -144,7 +198,7 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
         split_geom g;
         split_layout(img, acc, &g);
         *bytes += (size_t)acc->core_levels *
-                  (2 * wf_arena_cost(side * side * sizeof(float)) +
+                  (2 * wf_arena_cost(side * side * sizeof(float)) + steps_bytes(acc, kr) +
                    wf_arena_cost(((size_t)kr + 2) * sizeof(double)) +
                    wf_arena_cost((size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np *
                                  sizeof(float)));
@@ -351,6 +405,7 @@ static void fill_table(init_job *j, int pass, const double *raw)
     const double nn = (double)j->acc->psf_table_fft * j->acc->psf_table_fft;
     j->pixel_max[pass] = sabs / (nn * j->sum);
     for (int i = kr; i > 0; i--) te[i - 1] = fmax(te[i - 1], te[i]);
+    steps_fill(tr, ti, kr, pass ? &co->steps : &psf->steps);
 }
 
 /* Core `task`: the image times its taper, transformed. */
@@ -522,7 +577,8 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
     if ((st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&j.re)) ||
         (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&j.im)) ||
         (st = wf_arena_calloc(arena, nee, sizeof(double), "PSF encircled energy", (void **)&ee)) ||
-        (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF envelope", (void **)&j.env)))
+        (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF envelope", (void **)&j.env)) ||
+        (st = steps_alloc(arena, acc, kr, &psf->steps)))
         goto out;
     for (int l = 0; l < ncore; l++) {
         wf_profile_core *co = &psf->core[l];
@@ -532,7 +588,8 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
             (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table", (void **)&co->re)) ||
             (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table", (void **)&co->im)) ||
             (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF core envelope",
-                                  (void **)&co->env)))
+                                  (void **)&co->env)) ||
+            (st = steps_alloc(arena, acc, kr, &co->steps)))
             goto out;
     }
     /* encircled energy about the image centre, for stamp sizes */

@@ -1653,6 +1653,70 @@ START_TEST(test_psf_tables_threads)
 }
 END_TEST
 
+/* The tables' copies at the draws' steps hold the table's own samples, and a draw that reads
+ * them gives the bits of one that gathers from the table itself. */
+static void assert_steps(const float *re, const float *im, int kr, const wf_profile_steps *s, const char *what)
+{
+    static const int expect[] = {2, 3, 4, 6, 8, 12}; /* 192 / M for M = 96 .. 16 of the ladder */
+    ck_assert_msg(s->n == 6, "%s: %d steps", what, s->n);
+    const size_t side = 2 * (size_t)kr + 1;
+    for (int i = 0; i < s->n; i++) {
+        ck_assert_msg(s->st[i] == expect[i] && s->kr[i] == kr / expect[i], "%s: step %d is %d", what, i, s->st[i]);
+        const int kd = s->kr[i], st = s->st[i];
+        for (int v = -kd; v <= kd; v++)
+            for (int u = -kd; u <= kd; u++) {
+                size_t a = (size_t)(v + kd) * (2 * (size_t)kd + 1) + (size_t)(u + kd);
+                size_t b = (size_t)(v * st + kr) * side + (size_t)(u * st + kr);
+                ck_assert_msg(s->re[i][a] == re[b] && s->im[i][a] == im[b], "%s: step %d at (%d, %d)", what, st, u, v);
+            }
+    }
+}
+
+START_TEST(test_psf_table_steps)
+{
+    wf_psf_image img;
+    double *psfpix = halo_psf(256, 0.07, 0.8, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    acc.core_radius = 2.0;
+    acc.core_levels = 3;
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    const wf_profile_psf *p = &c.psf;
+    assert_steps(p->re, p->im, p->kr, &p->steps, "whole");
+    for (int l = 0; l < p->ncore; l++) assert_steps(p->core[l].re, p->core[l].im, p->kr, &p->core[l].steps, "core");
+    wf_profile_psf gather = *p;
+    gather.steps.n = 0;
+    for (int l = 0; l < p->ncore; l++) gather.core[l].steps.n = 0;
+    /* sizes from a star to a large disk, whole and split (a tolerance that takes the cores) */
+    static const double hlr[] = {0.05, 0.2, 0.6, 1.5};
+    int stepped = 0;
+    for (int split = 0; split < 2; split++) {
+        ck_assert(wf_profile_work_tune(&c.work, acc.flux_fraction, acc.folding_threshold, acc.kvalue_accuracy,
+                                       split ? 1.0 : 0.0, acc.knot_accuracy) == WF_OK);
+        for (int k = 0; k < 4; k++) {
+            wf_galaxy g = galaxy(100.0, 0.3, hlr[k], 0.5 * hlr[k], 0.2, -0.1);
+            g.n_knots = 40;
+            g.knot_frac = 0.2;
+            g.knot_seed = 11;
+            wf_stamp a = stamp_new(0, 0, 40, 40), b = stamp_new(0, 0, 40, 40);
+            ck_assert_msg(wf_profile_draw_galaxy(&c.work, &g, p, 19.3, 20.6, &a) == WF_OK, "%s", wf_error_message());
+            ck_assert_msg(wf_profile_draw_galaxy(&c.work, &g, &gather, 19.3, 20.6, &b) == WF_OK, "%s", wf_error_message());
+            ck_assert(a.fft == b.fft);
+            stepped += a.fft < p->table_fft && p->table_fft % a.fft == 0;
+            printf("steps: hlr %g split %d FFT %d\n", hlr[k], split, a.fft);
+            ck_assert_msg(!memcmp(a.pix, b.pix, sizeof(double) * 40 * 40), "hlr %g split %d (FFT %d): the copy's "
+                          "draw differs from the table's", hlr[k], split, a.fft);
+            free(a.pix);
+            free(b.pix);
+        }
+    }
+    ck_assert_msg(stepped >= 4, "only %d draws read a step copy", stepped);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
 START_TEST(test_core_levels)
 {
     wf_psf_image img;
@@ -2304,6 +2368,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_core_wing);
     tcase_add_test(ind, test_core_levels);
     tcase_add_test(ind, test_psf_tables_threads);
+    tcase_add_test(ind, test_psf_table_steps);
     tcase_add_test(ind, test_psf_table_interpolation);
     tcase_add_test(ind, test_psf_any_sampling);
     tcase_add_test(ind, test_knot_lattice);
