@@ -1072,6 +1072,14 @@ static void psfmul_scalar(int n, const float *fr, const float *fi, size_t st, co
     }
 }
 
+/* dst[k] += w00 r00[k] + w01 r01[k] + w10 r10[k] + w11 r11[k], k < n: a row of the split
+ * PSF's wing, bilinear between four of its phase planes (add_wing). */
+static void wing_scalar(long n, double w00, double w01, double w10, double w11, const float *r00,
+                        const float *r01, const float *r10, const float *r11, double *dst)
+{
+    for (long k = 0; k < n; k++) dst[k] += w00 * r00[k] + w01 * r01[k] + w10 * r10[k] + w11 * r11[k];
+}
+
 #if defined(__GNUC__) && defined(__x86_64__) /* SSE2 arithmetic in the scalar code too */
 #include <immintrin.h>
 #define FOLD_SIMD 1
@@ -1223,6 +1231,23 @@ static void psfmul_scalar(int n, const float *fr, const float *fi, size_t st, co
     psfmul_scalar(n - i, fr + (size_t)i * st, fi + (size_t)i * st, st, runr + i, runi + i,  \
                   bins + 2 * i);
 
+#define WING_BODY(V, VF, NL, ZU)                                                           \
+    long k = 0;                                                                            \
+    for (; k + (NL) <= n; k += (NL)) {                                                     \
+        VF a, b, c, d;                                                                     \
+        V o;                                                                               \
+        VLOAD(a, r00 + k);                                                                 \
+        VLOAD(b, r01 + k);                                                                 \
+        VLOAD(c, r10 + k);                                                                 \
+        VLOAD(d, r11 + k);                                                                 \
+        VLOAD(o, dst + k);                                                                 \
+        o += w00 * __builtin_convertvector(a, V) + w01 * __builtin_convertvector(b, V) +   \
+             w10 * __builtin_convertvector(c, V) + w11 * __builtin_convertvector(d, V);    \
+        VSTORE(dst + k, o);                                                                \
+    }                                                                                      \
+    ZU();                                                                                  \
+    wing_scalar(n - k, w00, w01, w10, w11, r00 + k, r01 + k, r10 + k, r11 + k, dst + k);
+
 /* Out-of-table arguments, one lane at a time. Not inlined: the vector kernels' callers are
  * built for the baseline ISA, and a call is where the compiler clears the wide registers'
  * upper halves (SSE code running with them dirty is ~3x slower on some x86 cores). */
@@ -1266,6 +1291,11 @@ static void psfmul_v2(int n, const float *fr, const float *fi, size_t st, const 
                       const double *runi, double *bins)
 {
     PSFMUL_BODY(fv2, ff2, fi2, 2, ((fi2){0, 2}), ((fi2){1, 3}), no_zeroupper, PGATHER2)
+}
+static void wing_v2(long n, double w00, double w01, double w10, double w11, const float *r00,
+                    const float *r01, const float *r10, const float *r11, double *dst)
+{
+    WING_BODY(fv2, ff2, 2, no_zeroupper)
 }
 
 typedef double fv4 __attribute__((vector_size(32)));
@@ -1320,6 +1350,12 @@ __attribute__((target("avx2"))) static void psfmul_v4(int n, const float *fr, co
 {
     PSFMUL_BODY(fv4, ff4, fi4, 4, ((fi4){0, 4, 1, 5}), ((fi4){2, 6, 3, 7}), _mm256_zeroupper,
                 PGATHER4)
+}
+__attribute__((target("avx2"))) static void wing_v4(long n, double w00, double w01, double w10,
+                                                    double w11, const float *r00, const float *r01,
+                                                    const float *r10, const float *r11, double *dst)
+{
+    WING_BODY(fv4, ff4, 4, _mm256_zeroupper)
 }
 
 typedef double fv8 __attribute__((vector_size(64)));
@@ -1378,6 +1414,12 @@ psfmul_v8(int n, const float *fr, const float *fi, size_t st, const double *runr
     PSFMUL_BODY(fv8, ff8, fi8, 8, ((fi8){0, 8, 1, 9, 2, 10, 3, 11}),
                 ((fi8){4, 12, 5, 13, 6, 14, 7, 15}), _mm256_zeroupper, PGATHER8)
 }
+__attribute__((target("avx512f"))) static void wing_v8(long n, double w00, double w01, double w10,
+                                                       double w11, const float *r00, const float *r01,
+                                                       const float *r10, const float *r11, double *dst)
+{
+    WING_BODY(fv8, ff8, 8, _mm256_zeroupper)
+}
 #endif
 
 typedef struct fold_kernels {
@@ -1388,26 +1430,28 @@ typedef struct fold_kernels {
                    int, double *, double *);
     void (*psfmul)(int, const float *, const float *, size_t, const double *, const double *,
                    double *);
+    void (*wing)(long, double, double, double, double, const float *, const float *, const float *,
+                 const float *, double *);
 } fold_kernels;
 
-static fold_kernels fold_k = {smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar};
+static fold_kernels fold_k = {smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar, wing_scalar};
 static pthread_once_t simd_once = PTHREAD_ONCE_INIT;
 static int simd_lanes;
 
 static int simd_select(int lanes)
 {
-    fold_k = (fold_kernels){smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar};
+    fold_k = (fold_kernels){smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar, wing_scalar};
     int used = 0;
 #if defined(FOLD_SIMD)
     __builtin_cpu_init();
     if (lanes >= 8 && __builtin_cpu_supports("avx512f")) {
-        fold_k = (fold_kernels){smooth_v8, latrow_v8, latadd_v8, psfmul_v8};
+        fold_k = (fold_kernels){smooth_v8, latrow_v8, latadd_v8, psfmul_v8, wing_v8};
         used = 8;
     } else if (lanes >= 4 && __builtin_cpu_supports("avx2")) {
-        fold_k = (fold_kernels){smooth_v4, latrow_v4, latadd_v4, psfmul_v4};
+        fold_k = (fold_kernels){smooth_v4, latrow_v4, latadd_v4, psfmul_v4, wing_v4};
         used = 4;
     } else if (lanes >= 2) {
-        fold_k = (fold_kernels){smooth_v2, latrow_v2, latadd_v2, psfmul_v2};
+        fold_k = (fold_kernels){smooth_v2, latrow_v2, latadd_v2, psfmul_v2, wing_v2};
         used = 2;
     }
 #endif
@@ -1623,32 +1667,6 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
     }
 }
 
-/* dst[k] += w00 r00[k] + w01 r01[k] + w10 r10[k] + w11 r11[k], k < n: two at a time in
- * vectors (the scalar operations in the same order, so the same bits; two lanes, since wider
- * ones go through the stack without AVX), then the rest. */
-static void wing_row(long n, double w00, double w01, double w10, double w11, const float *r00,
-                     const float *r01, const float *r10, const float *r11, double *dst)
-{
-    long k = 0;
-#if defined(__GNUC__)
-    typedef float wf2 __attribute__((vector_size(8)));
-    typedef double wd2 __attribute__((vector_size(16)));
-    for (; k + 2 <= n; k += 2) {
-        wf2 a, b, c, d;
-        wd2 o;
-        memcpy(&a, r00 + k, sizeof a);
-        memcpy(&b, r01 + k, sizeof b);
-        memcpy(&c, r10 + k, sizeof c);
-        memcpy(&d, r11 + k, sizeof d);
-        memcpy(&o, dst + k, sizeof o);
-        o += w00 * __builtin_convertvector(a, wd2) + w01 * __builtin_convertvector(b, wd2) +
-             w10 * __builtin_convertvector(c, wd2) + w11 * __builtin_convertvector(d, wd2);
-        memcpy(dst + k, &o, sizeof o);
-    }
-#endif
-    for (; k < n; k++) dst[k] += w00 * r00[k] + w01 * r01[k] + w10 * r10[k] + w11 * r11[k];
-}
-
 /* stamp += flux x wing at (x, y): bilinear between the table's 1 / wing_os pixel samples.
  * The fractional position is the same for every pixel, so each row reads four contiguous
  * runs of the phase planes. */
@@ -1681,7 +1699,7 @@ static void add_wing(const wf_profile_psf *psf, int core, double flux, double x,
         const float *r10 = wing + (size_t)(b1 * K + a0) * plane + (size_t)ny1 * np + (size_t)(i0 + ox0);
         const float *r11 = wing + (size_t)(b1 * K + a1) * plane + (size_t)ny1 * np + (size_t)(i0 + ox1);
         double *dst = stamp->pix + (size_t)yy * stamp->nx + (size_t)(i0 - stamp->x0);
-        wing_row(i1 - i0 + 1, w00, w01, w10, w11, r00, r01, r10, r11, dst);
+        fold_k.wing(i1 - i0 + 1, w00, w01, w10, w11, r00, r01, r10, r11, dst);
     }
 }
 
@@ -2275,6 +2293,7 @@ wf_status wf_profile_add_wing(const wf_profile_psf *psf, int core, double flux, 
     if (!psf || core < 1 || core > psf->ncore)
         return wf_error(WF_ERR_INPUT, "profile: core %d: a wing needs a PSF split into that many "
                         "cores (it has %d)", core, psf ? psf->ncore : 0);
+    (void)wf_profile_simd(-1); /* the kernels, once per process */
     add_wing(psf, core, flux, x, y, stamp);
     return WF_OK;
 }

@@ -2107,6 +2107,56 @@ START_TEST(test_simd_identical)
 }
 END_TEST
 
+/* The split PSF's wing, added row by row, is the same bits with every kernel width. */
+START_TEST(test_simd_identical_wing)
+{
+    wf_psf_image img;
+    double *psfpix = halo_psf(256, 0.07, 0.8, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    acc.core_radius = 2.0;
+    acc.core_levels = 3;
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    ck_assert(wf_profile_work_tune(&c.work, acc.flux_fraction, acc.folding_threshold, acc.kvalue_accuracy, 1.0,
+                                   acc.knot_accuracy) == WF_OK);
+    static const int widths[] = {0, 2, 4, 8};
+    static const double hlr[] = {0.1, 0.4};
+    double *ref[2] = {NULL, NULL};
+    int tried = 0;
+    for (int iw = 0; iw < 4; iw++) {
+        if (wf_profile_simd(widths[iw]) != widths[iw]) continue; /* not on this CPU */
+        tried++;
+        for (int k = 0; k < 2; k++) {
+            wf_galaxy g = galaxy(50.0, 0.3, hlr[k], 0.5 * hlr[k], 0.2, -0.1);
+            wf_stamp b, box;
+            int core;
+            double x = 100.37 + k, y = 90.71; /* odd row lengths: the vector loops' tails too */
+            ck_assert(wf_profile_galaxy_core(&c.work, &g, &c.psf, x, y, &b, &box, &core) == WF_OK);
+            ck_assert_msg(core > 0, "hlr %g takes no core", hlr[k]);
+            wf_stamp s = stamp_new(b.x0, b.y0, b.nx | 1, b.ny);
+            ck_assert(wf_profile_add_wing(&c.psf, core, g.flux, x, y, &s) == WF_OK);
+            double sum = 0.0;
+            for (int i = 0; i < s.nx * s.ny; i++) sum += s.pix[i];
+            ck_assert_msg(sum > 0.0, "the wing added nothing");
+            if (tried == 1) {
+                ref[k] = s.pix;
+                continue;
+            }
+            ck_assert_msg(!memcmp(s.pix, ref[k], sizeof(double) * s.nx * s.ny), "hlr %g: %d-lane wing differs from "
+                          "scalar", hlr[k], widths[iw]);
+            free(s.pix);
+        }
+    }
+    ck_assert(tried >= 2);
+    free(ref[0]);
+    free(ref[1]);
+    wf_profile_simd(8);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
 /* FFT sides that do not divide psf_table_fft read the PSF table through bicubic
  * interpolation: its error, against the same draw with an exact table. */
 START_TEST(test_psf_table_interpolation)
@@ -2375,6 +2425,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_knot_accuracy);
     tcase_add_test(ind, test_knots_smooth_bound);
     tcase_add_test(ind, test_simd_identical);
+    tcase_add_test(ind, test_simd_identical_wing);
     suite_add_tcase(s, ind);
     TCase *stiff = tcase_create("stiff");
     tcase_set_timeout(stiff, 120);
