@@ -8,11 +8,7 @@
 #include <math.h>
 #include <string.h>
 
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
-#define WF_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
-#else
-#define WF_CLONES
-#endif
+#include "hal/simd.h"
 
 /* SPEC §2 (GalSim ipc_kernel), before normalisation. */
 static const double ipc_raw[3][3] = {{0.001269938, 0.015399776, 0.001199862},

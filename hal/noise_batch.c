@@ -11,11 +11,7 @@
 #include <math.h>
 #include <string.h>
 
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
-#define WF_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
-#else
-#define WF_CLONES
-#endif
+#include "hal/simd.h"
 
 /* ---- branch-free arithmetic for the row loops ------------------------------------------------
  * Every clone gives the same bits: IEEE +, -, *, /, sqrt only, no contraction under -std=c11,
