@@ -3,7 +3,7 @@
 #   make demo       run the main job on the built-in default scene
 #   make test       build and run every test (SAN=1: under ASan+UBSan)
 #   make bench      benchmarks -> docs/BENCHMARKS.md
-PKGS    := cfitsio fftw3 zlib yaml-0.1
+PKGS    := cfitsio fftw3 zlib libdeflate yaml-0.1
 CC      ?= cc
 SAN     ?= 0
 # -O2's vectoriser with -O3's cost model: loops of unknown length and possible aliasing get

@@ -199,6 +199,44 @@ START_TEST(packet_reader_through_pipe)
 }
 END_TEST
 
+/* The packets' CRCs (hal/packet.c, libdeflate) are zlib's CRC-32, the stream format's own:
+ * both the header's and the payload's, raw and deflated, of lengths that are not multiples
+ * of the folding's 16- or 64-byte blocks. */
+START_TEST(packet_crcs_are_zlib_crc32)
+{
+    for (int compress = 0; compress < 2; compress++)
+        for (size_t raw = 1; raw < 5000; raw = raw * 3 + 1) {
+            unsigned char *data = malloc(raw);
+            ck_assert_ptr_nonnull(data);
+            for (size_t i = 0; i < raw; i++) data[i] = (unsigned char)(i * 2654435761u >> 11);
+            size_t need = wf_packer_arena_need(raw, compress) + 64; /* malloc's base may be unaligned */
+            void *mem = malloc(need);
+            wf_arena arena;
+            wf_arena_init(&arena, mem, need, "test packer");
+            wf_packer pk;
+            ck_assert_msg(wf_packer_init(&pk, &arena, raw, compress) == WF_OK, "raw %zu compress %d: %s", raw, compress, wf_error_message());
+            wf_link_memory m;
+            wf_link link;
+            ck_assert_int_eq(wf_link_memory_open(&m, &link), WF_OK);
+            wf_packet_header h = {0};
+            h.kind = WF_PK_SATURATION;
+            h.row_count = 1;
+            h.ncols = (uint32_t)raw;
+            h.nplanes = 1;
+            ck_assert_int_eq(wf_packer_send(&pk, &link, &h, data, raw), WF_OK);
+            ck_assert_uint_eq(m.len, WF_PACKET_HEADER_SIZE + h.payload_len);
+            const unsigned char *o = m.data;
+            uint32_t hcrc = (uint32_t)o[44] | (uint32_t)o[45] << 8 | (uint32_t)o[46] << 16 | (uint32_t)o[47] << 24;
+            ck_assert_uint_eq(hcrc, (uint32_t)crc32(0L, o, 44));
+            ck_assert_uint_eq(h.payload_crc, (uint32_t)crc32(0L, o + WF_PACKET_HEADER_SIZE, (uInt)h.payload_len));
+            wf_link_memory_close(&m);
+            wf_packer_close(&pk);
+            free(mem);
+            free(data);
+        }
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("link");
@@ -208,6 +246,7 @@ static Suite *suite(void)
     tcase_add_test(tc, pipe_end_of_stream_mid_read);
     tcase_add_test(tc, pipe_reader_stops);
     tcase_add_test(tc, packet_reader_through_pipe);
+    tcase_add_test(tc, packet_crcs_are_zlib_crc32);
     suite_add_tcase(s, tc);
     return s;
 }
