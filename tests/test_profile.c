@@ -1653,6 +1653,18 @@ START_TEST(test_psf_tables_threads)
 }
 END_TEST
 
+/* A work and a PSF split as the scene splits it (cores of 2", 1", 0.5") over a PSF with a
+ * halo; returns the PSF image's pixels, for the caller to free. */
+static double *open_split(ctx *c, wf_psf_image *img, wf_profile_accuracy *acc)
+{
+    double *pix = halo_psf(256, 0.07, 0.8, img);
+    wf_profile_accuracy_default(acc);
+    acc->core_radius = 2.0;
+    acc->core_levels = 3;
+    ctx_open(c, acc, img);
+    return pix;
+}
+
 /* The tables' copies at the draws' steps hold the table's own samples, and a draw that reads
  * them gives the bits of one that gathers from the table itself. */
 static void assert_steps(const float *re, const float *im, int kr, const wf_profile_steps *s, const char *what)
@@ -1675,13 +1687,9 @@ static void assert_steps(const float *re, const float *im, int kr, const wf_prof
 START_TEST(test_psf_table_steps)
 {
     wf_psf_image img;
-    double *psfpix = halo_psf(256, 0.07, 0.8, &img);
     wf_profile_accuracy acc;
-    wf_profile_accuracy_default(&acc);
-    acc.core_radius = 2.0;
-    acc.core_levels = 3;
     ctx c;
-    ctx_open(&c, &acc, &img);
+    double *psfpix = open_split(&c, &img, &acc);
     const wf_profile_psf *p = &c.psf;
     assert_steps(p->re, p->im, p->kr, &p->steps, "whole");
     for (int l = 0; l < p->ncore; l++) assert_steps(p->core[l].re, p->core[l].im, p->kr, &p->core[l].steps, "core");
@@ -2111,13 +2119,9 @@ END_TEST
 START_TEST(test_simd_identical_wing)
 {
     wf_psf_image img;
-    double *psfpix = halo_psf(256, 0.07, 0.8, &img);
     wf_profile_accuracy acc;
-    wf_profile_accuracy_default(&acc);
-    acc.core_radius = 2.0;
-    acc.core_levels = 3;
     ctx c;
-    ctx_open(&c, &acc, &img);
+    double *psfpix = open_split(&c, &img, &acc);
     ck_assert(wf_profile_work_tune(&c.work, acc.flux_fraction, acc.folding_threshold, acc.kvalue_accuracy, 1.0,
                                    acc.knot_accuracy) == WF_OK);
     static const int widths[] = {0, 2, 4, 8};
