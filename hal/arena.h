@@ -16,7 +16,9 @@ typedef struct wf_arena {
     const char *name;
 } wf_arena;
 
-/* Wraps memory the host reserved; the arena never frees it. */
+/* Wraps memory the host reserved; the arena never frees it. The modules' *_need sizes assume
+ * a block aligned to 64 bytes (wf_arena_host_alloc's): an unaligned one loses up to 63 bytes
+ * to its first alignment. */
 wf_status wf_arena_init(wf_arena *arena, void *memory, size_t capacity, const char *name);
 
 /* Reserves `size` bytes aligned to 64 (cache line, SIMD), zero-filled, for `what`. */
