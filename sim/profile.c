@@ -981,12 +981,14 @@ static int knot_plan(wf_profile_work *w, grid *gd, double p, lattice *l)
 /* The per-sample work of a fold pass on one alias run of a row, in four kernels: the
  * smooth galaxy (or point source) times the centring and sub-pixel phases; a coarse row of
  * the knot lattice interpolated along u; the fine row from w of those; the product with
- * PSF x pixel added into the bins. Each has a scalar version and, on x86-64, vector
+ * PSF x pixel added into the bins. A fifth adds a row of the split PSF's wing to a stamp
+ * (add_wing). Each has a scalar version and, on x86-64, vector
  * versions of 2, 4 (AVX2) and 8 (AVX-512) lanes, chosen once by wf_profile_simd. Lanes
  * never mix, every operation is the scalar one in the same order (a vector's last lanes
  * may recompute values already written: the same values), and ISO C mode contracts no
  * multiply-add into a fused one, so every version gives the same bits: the CPU a stamp is
- * drawn on does not change it (tests/test_profile.c, test_simd_identical). */
+ * drawn on does not change it (tests/test_profile.c, test_simd_identical and
+ * test_simd_identical_wing). */
 
 typedef struct smooth_par {
     double qa, qb, qc;        /* q2 = |A^T k|^2 = (qa u + qb) u + qc along the row */
