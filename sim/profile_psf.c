@@ -561,10 +561,11 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
     for (int v = -kr_s; v <= kr_s; v++)
         for (int u = -kr_s; u <= kr_s; u++) {
             const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
-            if (j.dkt * rad(u, v) <= j.band && rad(o[0], o[1]) >= WF_PSF_KFLOOR * sum) {
+            const double k = j.dkt * rad(u, v);
+            if (k <= j.band && rad(o[0], o[1]) >= WF_PSF_KFLOOR * sum) {
                 int r = abs(u) > abs(v) ? abs(u) : abs(v);
                 if (r > kr) kr = r;
-                if (j.dkt * rad(u, v) > kmax) kmax = j.dkt * rad(u, v);
+                if (k > kmax) kmax = k;
             }
         }
     kr += 2; /* room for the bicubic interpolation's outer taps */

@@ -1712,7 +1712,6 @@ START_TEST(test_psf_table_steps)
             ck_assert_msg(wf_profile_draw_galaxy(&c.work, &g, &gather, 19.3, 20.6, &b) == WF_OK, "%s", wf_error_message());
             ck_assert(a.fft == b.fft);
             stepped += a.fft < p->table_fft && p->table_fft % a.fft == 0;
-            printf("steps: hlr %g split %d FFT %d\n", hlr[k], split, a.fft);
             ck_assert_msg(!memcmp(a.pix, b.pix, sizeof(double) * 40 * 40), "hlr %g split %d (FFT %d): the copy's "
                           "draw differs from the table's", hlr[k], split, a.fft);
             free(a.pix);
