@@ -24,19 +24,38 @@ wf_status wf_arena_init(wf_arena *arena, void *memory, size_t capacity, const ch
     return WF_OK;
 }
 
-void *wf_arena_host_alloc(size_t size)
+#define HUGE_PAGE ((size_t)2 << 20)
+
+/* `size` bytes aligned to a huge page, of which the first `advised` are offered to the kernel
+ * for transparent huge pages (the rest stays ordinary pages). */
+static void *huge_aligned(size_t size, size_t advised)
 {
-    const size_t huge = (size_t)2 << 20;
     void *p = NULL;
-    /* a whole number of huge pages, so that the tail can be one too; more than the address
-     * space could hold is refused here, not handed to the allocator */
+    /* more than the address space could hold is refused here, not handed to the allocator */
     if (!size || size > SIZE_MAX / 4) return NULL;
-    size_t n = (size + huge - 1) / huge * huge;
-    if (posix_memalign(&p, huge, n) != 0) return NULL;
+    size_t n = (size + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE;
+    if (posix_memalign(&p, HUGE_PAGE, n) != 0) return NULL;
 #ifdef MADV_HUGEPAGE
-    (void)madvise(p, n, MADV_HUGEPAGE); /* advice: without it, ordinary pages */
+    if (advised) (void)madvise(p, advised, MADV_HUGEPAGE); /* advice: without it, ordinary pages */
 #endif
     return p;
+}
+
+void *wf_arena_host_alloc(size_t size)
+{
+    /* a whole number of huge pages, so that the tail can be one too */
+    return huge_aligned(size, (size + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE);
+}
+
+void *wf_arena_host_realloc(void *p, size_t used, size_t size)
+{
+    if (size < WF_ARENA_HOST_HUGE) return realloc(p, size ? size : 1);
+    /* huge pages only where the buffer fills them: a partly used one would be resident whole */
+    void *q = huge_aligned(size, size / HUGE_PAGE * HUGE_PAGE);
+    if (!q) return NULL;
+    if (p) memcpy(q, p, used < size ? used : size);
+    free(p);
+    return q;
 }
 
 size_t wf_arena_cost(size_t size)

@@ -1,5 +1,7 @@
 #include "hal/link.h"
 
+#include "hal/arena.h"
+
 #include <stdlib.h>
 #include <string.h>
 
@@ -116,7 +118,7 @@ wf_status wf_link_pipe_open(wf_link_pipe *p, size_t cap, const char *name, wf_li
 {
     memset(p, 0, sizeof *p);
     if (cap < 4096) cap = 4096;
-    if (!(p->ring = malloc(cap)))
+    if (!(p->ring = wf_arena_host_realloc(NULL, 0, cap)))
         return wf_error(WF_ERR_NOMEM, "%s: cannot allocate a %zu-byte pipe", name, cap);
     p->cap = cap;
     p->name = name;

@@ -1,6 +1,7 @@
 #include "sim/psf.h"
 #include "sim/parallel.h"
 #include "sim/fftw_lock.h"
+#include "hal/arena.h"
 
 #include <fftw3.h>
 #include <math.h>
@@ -168,9 +169,11 @@ wf_status wf_psf_build(const wf_pupil *pupil, const wf_aberrations *ab, const do
     int mx, my, nxf, nyf;
     grid_sizes(pupil, &mx, &my, &nxf, &nyf);
     wf_psf *psf = calloc(1, sizeof *psf);
-    fftw_complex *field = fftw_malloc((size_t)nxf * nyf * sizeof(fftw_complex));
+    /* large and filled whole: huge pages (hal/arena.h), which FFTW's alignment needs no more
+     * than fftw_malloc's */
+    fftw_complex *field = wf_arena_host_realloc(NULL, 0, (size_t)nxf * nyf * sizeof(fftw_complex));
     int hx = nxf / 2 + 1;
-    fftw_complex *power = fftw_malloc((size_t)nyf * hx * sizeof(fftw_complex));
+    fftw_complex *power = wf_arena_host_realloc(NULL, 0, (size_t)nyf * hx * sizeof(fftw_complex));
     double *wave = malloc((size_t)mx * my * sizeof(double));
     fftw_plan fwd = NULL, r2c = NULL;
     if (!psf || !field || !power || !wave) {
@@ -285,8 +288,8 @@ done:
     if (fwd) fftw_destroy_plan(fwd);
     if (r2c) fftw_destroy_plan(r2c);
     wf_fftw_unlock();
-    fftw_free(field);
-    fftw_free(power);
+    free(field);
+    free(power);
     free(wave);
     if (st) {
         wf_psf_free(psf);
@@ -397,7 +400,7 @@ static wf_status draw_rows(void *ctx, int task, int slot)
     if (jend <= ja) return WF_OK;
     int nb = jend - ja < ROW_BLOCK ? jend - ja : ROW_BLOCK;
     size_t n_ax = (size_t)kx * nx, n_ay = (size_t)nyc * nb, n_b = (size_t)kx * nb;
-    double *buf = malloc((2 * n_ax + 2 * n_ay + 2 * n_b) * sizeof(double));
+    double *buf = wf_arena_host_realloc(NULL, 0, (2 * n_ax + 2 * n_ay + 2 * n_b) * sizeof(double));
     if (!buf)
         return wf_error(WF_ERR_NOMEM, "psf draw: cannot allocate %zu MB of scratch",
                         ((2 * n_ax + 2 * n_ay + 2 * n_b) * sizeof(double)) >> 20);

@@ -1,5 +1,7 @@
 #include "sim/pupil.h"
 
+#include "hal/arena.h"
+
 #include <errno.h>
 #include <fitsio.h>
 #include <libdeflate.h>
@@ -138,7 +140,7 @@ static void inflate_gz(const char *path, void **mem, size_t *size)
         struct libdeflate_decompressor *d = NULL;
         size_t used = 0, got = 0;
         /* the largest mask wf_pupil_load takes: 16384^2 samples of 8 bytes, and its header */
-        if (isize > 0 && isize <= ((size_t)1 << 31) + (1u << 20) && (out = malloc(isize)) &&
+        if (isize > 0 && isize <= ((size_t)1 << 31) + (1u << 20) && (out = wf_arena_host_realloc(NULL, 0, isize)) &&
             (d = libdeflate_alloc_decompressor()) &&
             libdeflate_gzip_decompress_ex(d, in, (size_t)len, out, isize, &used, &got) == LIBDEFLATE_SUCCESS &&
             used == (size_t)len && got == isize) {

@@ -138,7 +138,8 @@ void wf_renderer_get_stats(const wf_renderer *r, wf_renderer_stats *out) { *out 
 static wf_status grow(double **buf, size_t *cap, size_t count, const char *what)
 {
     if (count <= *cap) return WF_OK;
-    double *p = realloc(*buf, count * sizeof *p);
+    /* the contents need not survive: every use writes before it reads */
+    double *p = wf_arena_host_realloc(*buf, 0, count * sizeof *p);
     if (!p) return wf_error(WF_ERR_NOMEM, "renderer: cannot grow the %s to %zu values", what, count);
     *buf = p;
     *cap = count;

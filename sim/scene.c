@@ -1,6 +1,9 @@
 #include "sim/scene.h"
 
 #include <fitsio.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 #include <math.h>
 #include <pthread.h>
 #include <stdint.h>
@@ -275,7 +278,7 @@ static wf_status grow(wf_scene *s, size_t *cap)
 {
     if (s->nobj < *cap) return WF_OK;
     size_t nc = *cap ? 2 * *cap : 1024;
-    object *p = realloc(s->obj, nc * sizeof *p);
+    object *p = wf_arena_host_realloc(s->obj, s->nobj * sizeof *p, nc * sizeof *p);
     if (!p) return wf_error(WF_ERR_NOMEM, "scene: cannot hold %zu objects", nc);
     s->obj = p;
     *cap = nc;
@@ -567,7 +570,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     }
     s->stats.psf_lambda_nm = lam_mean;
     int n = setup->psf_size;
-    if (!(s->psf_pix = malloc((size_t)n * n * sizeof *s->psf_pix))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF image"); goto bad; }
+    if (!(s->psf_pix = wf_arena_host_realloc(NULL, 0, (size_t)n * n * sizeof *s->psf_pix))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF image"); goto bad; }
     wf_psf_draw_opts d;
     wf_psf_draw_opts_default(&d);
     d.nx = d.ny = n;
@@ -703,6 +706,11 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     for (int t = 0; t < setup->threads; t++)
         if ((st = wf_renderer_create(&rc, s->robj, (size_t)kept, draw_object, &s->ts[t], &s->ts[t].renderer))) goto bad;
     free(sky);
+#ifdef __GLIBC__
+    /* the set-up's large transients (pupil, PSF build) are free but still resident; hand
+     * them back before the rendering's own buffers are made */
+    malloc_trim(0);
+#endif
     s->stats.build_seconds = now() - t0;
     *out = s;
     return WF_OK;

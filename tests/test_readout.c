@@ -5,8 +5,10 @@
 #include <stdlib.h>
 #include <string.h>
 #include <stdint.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "firmware/cosmic.h"
 #include "firmware/readout.h"
@@ -247,6 +249,52 @@ START_TEST(arena_host_memory)
     if (fallback > 0) WF_SKIP("the kernel had no huge page free (thp_fault_fallback): fault count not checked");
     long faults = b.ru_minflt - a.ru_minflt;
     ck_assert_msg(faults < 1024, "8 MiB filled with %ld page faults: no huge pages", faults);
+}
+END_TEST
+
+/* Host buffers grown by wf_arena_host_realloc keep their contents; from 2 MiB they are
+ * aligned to a huge page with their whole huge pages on huge pages, and the tail beyond the
+ * last stays ordinary pages, so that touching it does not make a whole huge page resident. */
+START_TEST(arena_host_realloc_grows)
+{
+    const size_t mib = (size_t)1 << 20, big = 5 * mib + 123;
+    unsigned char *p = wf_arena_host_realloc(NULL, 0, 1000);
+    ck_assert_ptr_nonnull(p);
+    for (int i = 0; i < 1000; i++) p[i] = (unsigned char)(i * 7);
+    p = wf_arena_host_realloc(p, 1000, 3000);
+    ck_assert_ptr_nonnull(p);
+    for (int i = 0; i < 1000; i++) ck_assert_uint_eq(p[i], (unsigned char)(i * 7));
+    unsigned char *q = wf_arena_host_realloc(p, 1000, big);
+    ck_assert_ptr_nonnull(q);
+    ck_assert_uint_eq((uintptr_t)q % (2 * mib), 0);
+    for (int i = 0; i < 1000; i++) ck_assert_uint_eq(q[i], (unsigned char)(i * 7));
+    /* out of memory: NULL, and the buffer is still the caller's */
+    ck_assert_ptr_null(wf_arena_host_realloc(q, big, SIZE_MAX - 4096));
+    ck_assert_uint_eq(q[999], (unsigned char)(999 * 7));
+    char thp[128] = "";
+    FILE *tf = fopen("/sys/kernel/mm/transparent_hugepage/enabled", "r");
+    int madvise_only = tf && fgets(thp, sizeof thp, tf) && strstr(thp, "[madvise]");
+    if (tf) fclose(tf);
+    long page = sysconf(_SC_PAGESIZE);
+    long fallback0 = thp_fallbacks();
+    struct rusage a, b;
+    getrusage(RUSAGE_SELF, &a);
+    memset(q + 1000, 0x5a, 4 * mib - 1000); /* the two whole huge pages */
+    q[4 * mib] = 1;                         /* and one byte of the tail */
+    getrusage(RUSAGE_SELF, &b);
+    unsigned char vec[512];
+    size_t tail_pages = (big - 4 * mib + (size_t)page - 1) / (size_t)page;
+    int resident = -1;
+    if (tail_pages <= sizeof vec && mincore(q + 4 * mib, big - 4 * mib, vec) == 0) {
+        resident = 0;
+        for (size_t i = 0; i < tail_pages; i++) resident += vec[i] & 1;
+    }
+    long fallback = thp_fallbacks() - fallback0, faults = b.ru_minflt - a.ru_minflt;
+    free(q);
+    if (!madvise_only) WF_SKIP("transparent huge pages are not in madvise mode here: page use not checked");
+    if (fallback > 0) WF_SKIP("the kernel had no huge page free (thp_fault_fallback): page use not checked");
+    ck_assert_msg(faults < 64, "4 MiB of whole huge pages filled with %ld page faults", faults);
+    ck_assert_msg(resident == 1, "one byte of the tail made %d of its %zu pages resident", resident, tail_pages);
 }
 END_TEST
 
@@ -659,6 +707,7 @@ static Suite *suite(void)
     tcase_add_test(tc, memory_fixed_by_tile_not_image);
     tcase_add_test(tc, arena_refuses_past_budget);
     tcase_add_test(tc, arena_host_memory);
+    tcase_add_test(tc, arena_host_realloc_grows);
     tcase_add_test(tc, noiseless_flux_conserved);
     tcase_add_test(tc, direct_matches_per_read);
     tcase_add_test(tc, saturation_defined);

@@ -13,6 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "hal/arena.h"
 #include "hal/clock.h"
 #include "hal/packet.h"
 #include "sim/fitsdisk.h"
@@ -717,7 +718,7 @@ static int host_is_little_endian(void)
 static wf_status grow(const assembler *a, void **buf, size_t *cap, size_t need, size_t elem)
 {
     if (need <= *cap) return WF_OK;
-    void *p = realloc(*buf, need * elem);
+    void *p = wf_arena_host_realloc(*buf, *cap * elem, need * elem);
     if (!p) return fail(a, WF_ERR_NOMEM, "cannot allocate %zu bytes for a tile", need * elem);
     *buf = p;
     *cap = need;
