@@ -5,7 +5,7 @@
 set -eu
 cd "$(dirname "$0")/.."
 B=build/rel/bench
-make -s $B/bench_readout $B/bench_direct_error $B/bench_survey $B/bench_profile $B/rss bin/wfisim >/dev/null
+make -s $B/bench_readout $B/bench_direct_error $B/bench_survey $B/bench_profile $B/bench_pages $B/rss bin/wfisim >/dev/null
 out=docs/BENCHMARKS.md
 REF="${WFISIM_REFERENCE:-../shared/reference}/galsim"
 DATA="${WFISIM_DATA:-../shared/data}"
@@ -86,6 +86,21 @@ done
 } >>"$tmp"
 row_readout "single frame, 1 thread" $N $N 64 single 6 1
 row_readout "single frame, 2 threads" $N $N 64 single 6 2
+{
+  echo
+  echo "## First touch of fresh memory: 4 KiB pages against huge pages"
+  echo
+  echo "Why the arenas and the host's large buffers are on transparent huge pages"
+  echo "(\`wf_arena_host_alloc\`, \`wf_arena_host_realloc\` in hal/arena.h): filling fresh memory"
+  echo "the first time, page faults and the kernel's zeroing included, against filling it again."
+  echo "\`bench_pages 64 3\` (64 MiB, best of 3):"
+  echo
+  echo "| pages | first fill, ms per MiB | second fill, ms per MiB | page faults | µs per fault |"
+  echo "|---|---|---|---|---|"
+} >>"$tmp"
+$B/bench_pages 64 3 | while read -r line; do
+  echo "| $(field "$line" pages) | $(field "$line" first_touch_ms_per_MiB) | $(field "$line" refill_ms_per_MiB) | $(field "$line" faults) | $(field "$line" us_per_fault) |" >>"$tmp"
+done
 {
   echo
   echo "## Whole program: \`wfisim demo\` (readout + in-process assembly + ramp fit + FITS)"

@@ -36,6 +36,10 @@ static void *huge_aligned(size_t size, size_t advised)
     size_t n = (size + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE;
     if (posix_memalign(&p, HUGE_PAGE, n) != 0) return NULL;
 #ifdef MADV_HUGEPAGE
+    /* Memory the allocator recycles may still have some of its pages mapped, and a range that
+     * does is faulted in 4 KiB pages whatever the advice: drop them first (the block is ours
+     * whole, its contents are not yet anyone's). */
+    if (advised) (void)madvise(p, advised, MADV_DONTNEED);
     if (advised) (void)madvise(p, advised, MADV_HUGEPAGE); /* advice: without it, ordinary pages */
 #endif
     return p;
@@ -50,8 +54,10 @@ void *wf_arena_host_alloc(size_t size)
 void *wf_arena_host_realloc(void *p, size_t used, size_t size)
 {
     if (size < WF_ARENA_HOST_HUGE) return realloc(p, size ? size : 1);
-    /* huge pages only where the buffer fills them: a partly used one would be resident whole */
-    void *q = huge_aligned(size, size / HUGE_PAGE * HUGE_PAGE);
+    /* the last huge page only when the buffer fills half of it at least: a huge page is
+     * resident whole, so at most 1 MiB goes unused */
+    size_t whole = size / HUGE_PAGE * HUGE_PAGE, tail = size - whole;
+    void *q = huge_aligned(size, whole + (tail >= HUGE_PAGE / 2 ? HUGE_PAGE : 0));
     if (!q) return NULL;
     if (p) memcpy(q, p, used < size ? used : size);
     free(p);

@@ -39,12 +39,14 @@ wf_status wf_arena_calloc(wf_arena *arena, size_t count, size_t elem, const char
 void *wf_arena_host_alloc(size_t size);
 
 /* Grows a host buffer (p NULL: a new one) to `size` bytes, keeping its first `used`. From
- * `size` WF_ARENA_HOST_HUGE up, aligned to 2 MiB with its whole huge pages offered to the
- * kernel (the tail beyond the last stays ordinary pages, so nothing unused is resident); below
- * it, realloc. For the host's large buffers that the run fills whole (tile rows, the object
- * list, an inflated file): on a virtual machine each 4 KiB page's first touch costs
- * microseconds. Free with free(); NULL when out of memory, p then untouched. */
-#define WF_ARENA_HOST_HUGE ((size_t)2 << 20)
+ * `size` WF_ARENA_HOST_HUGE up, aligned to 2 MiB and offered to the kernel for huge pages:
+ * its whole ones, and the last one too when the buffer fills at least half of it (else that
+ * tail stays ordinary pages), so that at most 1 MiB is resident unused. Below it, realloc.
+ * For the host's large buffers that the run fills whole (tile rows, the object list, an
+ * inflated file, packets): on a virtual machine the first touch of a 4 KiB page costs
+ * ~14 us, of a 2 MiB one ~100 us (`bench_pages`, docs/BENCHMARKS.md). Free with free();
+ * NULL when out of memory, p then untouched. */
+#define WF_ARENA_HOST_HUGE ((size_t)1 << 20)
 void *wf_arena_host_realloc(void *p, size_t used, size_t size);
 
 size_t wf_arena_mark(const wf_arena *arena);

@@ -1,5 +1,7 @@
 #include "hal/packet.h"
 
+#include "hal/arena.h"
+
 #include <libdeflate.h>
 
 #include <stdlib.h>
@@ -181,10 +183,13 @@ void wf_packet_reader_close(wf_packet_reader *r)
 static wf_status grow(unsigned char **buf, size_t *cap, size_t need)
 {
     if (need <= *cap) return WF_OK;
-    unsigned char *p = realloc(*buf, need);
+    /* a power of two: a full tile's packet (just under 1 MiB) then takes a huge page */
+    size_t c = 4096;
+    while (c < need) c *= 2;
+    unsigned char *p = wf_arena_host_realloc(*buf, 0, c); /* a packet overwrites it whole */
     if (!p) return wf_error(WF_ERR_NOMEM, "cannot allocate %zu bytes for a packet", need);
     *buf = p;
-    *cap = need;
+    *cap = c;
     return WF_OK;
 }
 

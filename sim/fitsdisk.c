@@ -1,5 +1,7 @@
 #include "sim/fitsdisk.h"
 
+#include "hal/arena.h"
+
 #include <errno.h>
 #include <fcntl.h>
 #include <limits.h>
@@ -383,7 +385,7 @@ int wf_fitsdisk_create(fitsfile **f, const char *path, int *status)
     pthread_once(&once, register_driver);
     if (registered_status) return *status = registered_status;
     int i;
-    unsigned char *buf = malloc(BUF_BYTES);
+    unsigned char *buf = wf_arena_host_realloc(NULL, 0, BUF_BYTES);
     char *copy = strdup(path);
     pthread_mutex_lock(&lock);
     for (i = 0; i < NSLOTS && slots[i].used; i++) {}

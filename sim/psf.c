@@ -98,8 +98,7 @@ void wf_psf_free(wf_psf *psf)
 {
     if (!psf) return;
     for (int k = 0; k < psf->nlambda; k++) {
-        free(psf->m[k].cre);
-        free(psf->m[k].cim);
+        free(psf->m[k].cre); /* cim shares its block */
         free(psf->m[k].lo);
         free(psf->m[k].hi);
     }
@@ -174,7 +173,7 @@ wf_status wf_psf_build(const wf_pupil *pupil, const wf_aberrations *ab, const do
     fftw_complex *field = wf_arena_host_realloc(NULL, 0, (size_t)nxf * nyf * sizeof(fftw_complex));
     int hx = nxf / 2 + 1;
     fftw_complex *power = wf_arena_host_realloc(NULL, 0, (size_t)nyf * hx * sizeof(fftw_complex));
-    double *wave = malloc((size_t)mx * my * sizeof(double));
+    double *wave = wf_arena_host_realloc(NULL, 0, (size_t)mx * my * sizeof(double));
     fftw_plan fwd = NULL, r2c = NULL;
     if (!psf || !field || !power || !wave) {
         st = wf_error(WF_ERR_NOMEM, "psf: cannot allocate %zu MB for the build", need >> 20);
@@ -202,8 +201,9 @@ wf_status wf_psf_build(const wf_pupil *pupil, const wf_aberrations *ab, const do
         m->lambda_nm = lambda_nm[k];
         m->weight = (weight ? weight[k] : 1.0) / wsum;
         m->period = lambda_nm[k] * 1e-9 / pupil->dx * ARCSEC_PER_RAD;
-        m->cre = malloc((size_t)mx * nyc * sizeof(double));
-        m->cim = malloc((size_t)mx * nyc * sizeof(double));
+        /* one block: each half is about 1 MiB, too little for a huge page of its own */
+        m->cre = wf_arena_host_realloc(NULL, 0, 2 * (size_t)mx * nyc * sizeof(double));
+        m->cim = m->cre ? m->cre + (size_t)mx * nyc : NULL;
         m->lo = malloc((size_t)mx * sizeof(int));
         m->hi = malloc((size_t)mx * sizeof(int));
         if (!m->cre || !m->cim || !m->lo || !m->hi) {

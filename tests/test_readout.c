@@ -252,49 +252,64 @@ START_TEST(arena_host_memory)
 }
 END_TEST
 
-/* Host buffers grown by wf_arena_host_realloc keep their contents; from 2 MiB they are
- * aligned to a huge page with their whole huge pages on huge pages, and the tail beyond the
- * last stays ordinary pages, so that touching it does not make a whole huge page resident. */
+/* Host buffers grown by wf_arena_host_realloc keep their contents; from 1 MiB they are
+ * aligned to a huge page and on huge pages, but for a tail beyond the last whole one that
+ * fills less than half a huge page: that stays ordinary pages, so that touching it does not
+ * make 2 MiB resident. */
+static long touch_faults(unsigned char *p, size_t n)
+{
+    struct rusage a, b;
+    getrusage(RUSAGE_SELF, &a);
+    memset(p, 0x5a, n);
+    getrusage(RUSAGE_SELF, &b);
+    return b.ru_minflt - a.ru_minflt;
+}
+
 START_TEST(arena_host_realloc_grows)
 {
-    const size_t mib = (size_t)1 << 20, big = 5 * mib + 123;
+    const size_t mib = (size_t)1 << 20, kib = 1024;
+    const size_t thin = 4 * mib + 100 * kib, thick = 4 * mib + mib; /* tails below / at half a huge page */
+    long fallback0 = thp_fallbacks();
+    /* first, while no large block has been freed: glibc then serves it fresh from the kernel */
+    unsigned char *r = wf_arena_host_realloc(NULL, 0, thick);
+    ck_assert_ptr_nonnull(r);
+    long f_thick = touch_faults(r, thick);
+    ck_assert_uint_eq(r[thick - 1], 0x5a);
     unsigned char *p = wf_arena_host_realloc(NULL, 0, 1000);
     ck_assert_ptr_nonnull(p);
     for (int i = 0; i < 1000; i++) p[i] = (unsigned char)(i * 7);
     p = wf_arena_host_realloc(p, 1000, 3000);
     ck_assert_ptr_nonnull(p);
     for (int i = 0; i < 1000; i++) ck_assert_uint_eq(p[i], (unsigned char)(i * 7));
-    unsigned char *q = wf_arena_host_realloc(p, 1000, big);
+    unsigned char *q = wf_arena_host_realloc(p, 1000, thin);
     ck_assert_ptr_nonnull(q);
     ck_assert_uint_eq((uintptr_t)q % (2 * mib), 0);
     for (int i = 0; i < 1000; i++) ck_assert_uint_eq(q[i], (unsigned char)(i * 7));
     /* out of memory: NULL, and the buffer is still the caller's */
-    ck_assert_ptr_null(wf_arena_host_realloc(q, big, SIZE_MAX - 4096));
+    ck_assert_ptr_null(wf_arena_host_realloc(q, thin, SIZE_MAX - 4096));
     ck_assert_uint_eq(q[999], (unsigned char)(999 * 7));
     char thp[128] = "";
     FILE *tf = fopen("/sys/kernel/mm/transparent_hugepage/enabled", "r");
     int madvise_only = tf && fgets(thp, sizeof thp, tf) && strstr(thp, "[madvise]");
     if (tf) fclose(tf);
     long page = sysconf(_SC_PAGESIZE);
-    long fallback0 = thp_fallbacks();
-    struct rusage a, b;
-    getrusage(RUSAGE_SELF, &a);
-    memset(q + 1000, 0x5a, 4 * mib - 1000); /* the two whole huge pages */
-    q[4 * mib] = 1;                         /* and one byte of the tail */
-    getrusage(RUSAGE_SELF, &b);
+    long f_whole = touch_faults(q, 4 * mib); /* the two whole huge pages */
+    q[4 * mib] = 1;                          /* and one byte of the thin tail */
     unsigned char vec[512];
-    size_t tail_pages = (big - 4 * mib + (size_t)page - 1) / (size_t)page;
+    size_t tail_pages = (thin - 4 * mib + (size_t)page - 1) / (size_t)page;
     int resident = -1;
-    if (tail_pages <= sizeof vec && mincore(q + 4 * mib, big - 4 * mib, vec) == 0) {
+    if (tail_pages <= sizeof vec && mincore(q + 4 * mib, thin - 4 * mib, vec) == 0) {
         resident = 0;
         for (size_t i = 0; i < tail_pages; i++) resident += vec[i] & 1;
     }
-    long fallback = thp_fallbacks() - fallback0, faults = b.ru_minflt - a.ru_minflt;
     free(q);
+    free(r);
+    long fallback = thp_fallbacks() - fallback0;
     if (!madvise_only) WF_SKIP("transparent huge pages are not in madvise mode here: page use not checked");
     if (fallback > 0) WF_SKIP("the kernel had no huge page free (thp_fault_fallback): page use not checked");
-    ck_assert_msg(faults < 64, "4 MiB of whole huge pages filled with %ld page faults", faults);
-    ck_assert_msg(resident == 1, "one byte of the tail made %d of its %zu pages resident", resident, tail_pages);
+    ck_assert_msg(f_whole < 64, "4 MiB of whole huge pages filled with %ld page faults", f_whole);
+    ck_assert_msg(resident == 1, "one byte of a 100 KiB tail made %d of its %zu pages resident", resident, tail_pages);
+    ck_assert_msg(f_thick < 64, "5 MiB (a 1 MiB tail) filled with %ld page faults", f_thick);
 }
 END_TEST
 

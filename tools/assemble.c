@@ -595,9 +595,7 @@ static void exposure_free(exposure *e)
     free(e->rows);
     free(e->cr);
     free(e->cube);
-    free(e->sci);
-    free(e->err);
-    free(e->dq);
+    free(e->sci); /* the block of all three planes */
     free(e);
 }
 
@@ -728,16 +726,18 @@ static wf_status grow(const assembler *a, void **buf, size_t *cap, size_t need, 
 static wf_status grow_out(const assembler *a, exposure *e, size_t npix)
 {
     if (npix <= e->out_cap) return WF_OK;
-    size_t c1 = e->out_cap, c2 = e->out_cap, c3 = e->out_cap;
-    void *sci = e->sci, *err = e->err, *dq = e->dq;
-    wf_status st = grow(a, &sci, &c1, npix, sizeof *e->sci);
-    e->sci = sci;
-    if (!st) st = grow(a, &err, &c2, npix, sizeof *e->err);
-    e->err = err;
-    if (!st) st = grow(a, &dq, &c3, npix, sizeof *e->dq);
-    e->dq = dq;
-    if (!st) e->out_cap = npix;
-    return st;
+    /* the three planes of a tile in one block: a tile's plane is just under 1 MiB, too little
+     * for a huge page of its own (hal/arena.h), and nothing in them outlives the tile */
+    _Static_assert(sizeof *e->sci == 4 && sizeof *e->err == 4 && sizeof *e->dq == 4, "4-byte planes");
+    void *block = e->sci;
+    size_t cap = 3 * e->out_cap;
+    wf_status st = grow(a, &block, &cap, 3 * npix, 4);
+    if (st) return st;
+    e->sci = block;
+    e->err = (float *)block + npix;
+    e->dq = (uint32_t *)((float *)block + 2 * npix);
+    e->out_cap = npix;
+    return WF_OK;
 }
 
 static wf_status grow_cube(const assembler *a, exposure *e, size_t n)
