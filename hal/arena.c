@@ -51,13 +51,24 @@ void *wf_arena_host_alloc(size_t size)
     return huge_aligned(size, (size + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE);
 }
 
+/* The huge pages a range of `filled` bytes from a huge page's start takes: its whole ones,
+ * and the last only when the range fills half of it at least (a huge page is resident
+ * whole, so at most 1 MiB goes unused). */
+static size_t huge_part(size_t filled)
+{
+    size_t whole = filled / HUGE_PAGE * HUGE_PAGE, tail = filled - whole;
+    return whole + (tail >= HUGE_PAGE / 2 ? HUGE_PAGE : 0);
+}
+
+void *wf_arena_host_alloc_dense(size_t size, size_t dense)
+{
+    return huge_aligned(size, huge_part(dense < size ? dense : size));
+}
+
 void *wf_arena_host_realloc(void *p, size_t used, size_t size)
 {
     if (size < WF_ARENA_HOST_HUGE) return realloc(p, size ? size : 1);
-    /* the last huge page only when the buffer fills half of it at least: a huge page is
-     * resident whole, so at most 1 MiB goes unused */
-    size_t whole = size / HUGE_PAGE * HUGE_PAGE, tail = size - whole;
-    void *q = huge_aligned(size, whole + (tail >= HUGE_PAGE / 2 ? HUGE_PAGE : 0));
+    void *q = huge_aligned(size, huge_part(size));
     if (!q) return NULL;
     if (p) memcpy(q, p, used < size ? used : size);
     free(p);

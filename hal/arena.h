@@ -49,6 +49,12 @@ void *wf_arena_host_alloc(size_t size);
 #define WF_ARENA_HOST_HUGE ((size_t)1 << 20)
 void *wf_arena_host_realloc(void *p, size_t used, size_t size);
 
+/* Host memory for an arena that its first user fills only in part: 2 MiB aligned, with the
+ * huge pages of its first `dense` bytes offered to the kernel as wf_arena_host_realloc
+ * chooses them, the rest ordinary pages that stay out of resident memory until touched.
+ * Free with free(); NULL when out of memory. */
+void *wf_arena_host_alloc_dense(size_t size, size_t dense);
+
 size_t wf_arena_mark(const wf_arena *arena);
 void wf_arena_release(wf_arena *arena, size_t mark);
 

@@ -130,7 +130,25 @@ static size_t lattice_ring(const work_layout *l)
     return 2 * (size_t)LAT_WMAX * ((size_t)l->cap_line / 2 + 9) + (size_t)l->cap_line;
 }
 
-wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes)
+/* The zero-filled buffers, which wf_profile_work_init lays out first, and the rest, which
+ * draws touch only as far as they reach. */
+static size_t dense_bytes(const work_layout *l)
+{
+    size_t m = (size_t)l->max_m, d = sizeof(double);
+    return 2 * wf_arena_cost((size_t)l->cap_line * 2 * d) + 2 * wf_arena_cost((size_t)l->cap_line * sizeof(int)) +
+           2 * wf_arena_cost((size_t)l->cap_line * 4 * d) + wf_arena_cost((m / 2 + 8) * 4 * d) +
+           2 * wf_arena_cost((size_t)WF_PROFILE_MAX_KNOTS * 2 * d) + wf_arena_cost(lattice_ring(l) * d) +
+           wf_arena_cost((size_t)l->cap_line * sizeof(int));
+}
+
+static size_t sparse_bytes(const work_layout *l)
+{
+    size_t m = (size_t)l->max_m, d = sizeof(double);
+    return wf_arena_cost(m * (m + 2) * d) + 2 * wf_arena_cost((size_t)WF_PROFILE_KNOT_BLOCK * l->cap_line * 2 * d) +
+           wf_arena_cost(lattice_cap(l) * d);
+}
+
+wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes, size_t *dense)
 {
     wf_status st = wf_profile_check_accuracy(acc);
     if (st) return st;
@@ -139,14 +157,8 @@ wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes)
     if (!l.nsizes)
         return wf_error(WF_ERR_RANGE, "profile: no FFT side of the form 2^a or 3 2^a in "
                         "[%d, %d]", acc->min_fft, acc->max_fft);
-    size_t m = (size_t)l.max_m, d = sizeof(double);
-    *bytes = wf_arena_cost(m * (m + 2) * d) + 2 * wf_arena_cost((size_t)l.cap_line * 2 * d) +
-             2 * wf_arena_cost((size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2 * d) +
-             2 * wf_arena_cost((size_t)l.cap_line * sizeof(int)) +
-             2 * wf_arena_cost((size_t)l.cap_line * 4 * d) + wf_arena_cost((m / 2 + 8) * 4 * d) +
-             2 * wf_arena_cost((size_t)WF_PROFILE_MAX_KNOTS * 2 * d) +
-             wf_arena_cost(lattice_cap(&l) * d) + wf_arena_cost(lattice_ring(&l) * d) +
-             wf_arena_cost((size_t)l.cap_line * sizeof(int));
+    *bytes = dense_bytes(&l) + sparse_bytes(&l);
+    if (dense) *dense = dense_bytes(&l);
     return WF_OK;
 }
 
@@ -155,24 +167,21 @@ wf_status wf_profile_work_init(wf_profile_work *w, const wf_profile_accuracy *ac
 {
     memset(w, 0, sizeof *w);
     size_t need;
-    wf_status st = wf_profile_work_need(acc, &need);
+    wf_status st = wf_profile_work_need(acc, &need, NULL);
     if (st) return st;
     w->acc = *acc;
     work_layout l;
     layout(acc, &l);
     size_t m = (size_t)l.max_m, d = sizeof(double);
-    /* The FFT buffer, the knot phase lines and the knot lattice are not zeroed here: each
-     * draw clears or writes what it reads (the lines' padding lanes only feed unused sums),
-     * so pages beyond the largest box drawn are never touched and cost no resident memory. */
-    if ((st = wf_arena_reserve(arena, m * (m + 2) * d, "profile FFT", (void **)&w->fft)) ||
-        (st = wf_arena_calloc(arena, (size_t)l.cap_line * 2, d, "profile phases",
+    /* The zero-filled buffers first (wf_profile_work_need's `dense`: a host may put them on
+     * huge pages). The FFT buffer, the knot phase lines and the knot lattice come after and
+     * are not zeroed: each draw clears or writes what it reads (the lines' padding lanes only
+     * feed unused sums), so pages beyond the largest box drawn are never touched and cost no
+     * resident memory. */
+    if ((st = wf_arena_calloc(arena, (size_t)l.cap_line * 2, d, "profile phases",
                               (void **)&w->ex)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line * 2, d, "profile phases",
                               (void **)&w->ey)) ||
-        (st = wf_arena_reserve(arena, (size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2 * d,
-                               "knot phases", (void **)&w->kx)) ||
-        (st = wf_arena_reserve(arena, (size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2 * d,
-                               "knot phases", (void **)&w->ky)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line, sizeof(int), "PSF taps",
                               (void **)&w->ix)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line, sizeof(int), "PSF taps",
@@ -186,11 +195,16 @@ wf_status wf_profile_work_init(wf_profile_work *w, const wf_profile_accuracy *ac
                               (void **)&w->knot_pos)) ||
         (st = wf_arena_calloc(arena, (size_t)WF_PROFILE_MAX_KNOTS * 2, d, "knot positions",
                               (void **)&w->knot_box)) ||
-        (st = wf_arena_reserve(arena, lattice_cap(&l) * d, "knot lattice", (void **)&w->lat)) ||
         (st = wf_arena_calloc(arena, lattice_ring(&l), d, "knot lattice rows",
                               (void **)&w->ring)) ||
         (st = wf_arena_calloc(arena, (size_t)l.cap_line, sizeof(int), "profile rows",
-                              (void **)&w->rim)))
+                              (void **)&w->rim)) ||
+        (st = wf_arena_reserve(arena, m * (m + 2) * d, "profile FFT", (void **)&w->fft)) ||
+        (st = wf_arena_reserve(arena, (size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2 * d,
+                               "knot phases", (void **)&w->kx)) ||
+        (st = wf_arena_reserve(arena, (size_t)WF_PROFILE_KNOT_BLOCK * l.cap_line * 2 * d,
+                               "knot phases", (void **)&w->ky)) ||
+        (st = wf_arena_reserve(arena, lattice_cap(&l) * d, "knot lattice", (void **)&w->lat)))
         return st;
     w->cap_lat = lattice_cap(&l);
     w->cap_line = l.cap_line;

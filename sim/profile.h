@@ -187,9 +187,11 @@ typedef struct wf_profile_work {
 #define WF_PROFILE_KNOT_BLOCK 16
 
 /* Bytes the work buffers take from an arena for these knobs (15.7 MB at the defaults,
- * most of it the max_fft^2 FFT buffer). FFT sides are 2^a and 3 * 2^a from min_fft to
- * max_fft; with a PSF, sides up to psf_table_fft are used only if they divide it. */
-wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes);
+ * most of it the max_fft^2 FFT buffer), and (dense, may be NULL) how many of them, from the
+ * start of what wf_profile_work_init takes, it fills whole (~2 MB); the rest is touched only
+ * as far as the draws reach. FFT sides are 2^a and 3 * 2^a from min_fft to max_fft; with a
+ * PSF, sides up to psf_table_fft are used only if they divide it. */
+wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes, size_t *dense);
 wf_status wf_profile_work_init(wf_profile_work *work, const wf_profile_accuracy *acc,
                                wf_arena *arena);
 /* Destroys the FFTW plans; the arena memory is the caller's to release. */

@@ -456,12 +456,13 @@ static void *init_works(void *arg)
 {
     works_job *j = arg;
     wf_scene *s = j->s;
-    size_t wneed;
-    wf_status st = wf_profile_work_need(&s->acc, &wneed);
+    size_t wneed, dense;
+    wf_status st = wf_profile_work_need(&s->acc, &wneed, &dense);
     for (int t = 0; !st && t < s->setup.threads; t++) {
         thread_state *ts = &s->ts[t];
         ts->scene = s;
-        if (!(ts->memory = malloc(wneed + 4096))) {
+        /* what the work fills at once on huge pages, the rest as the draws reach it */
+        if (!(ts->memory = wf_arena_host_alloc_dense(wneed + 4096, dense))) {
             st = wf_error(WF_ERR_NOMEM, "scene: drawing arena");
             break;
         }
@@ -509,7 +510,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     /* the knobs are checked here, so that a bad one is reported the same whatever the thread
      * count; the helper can then fail only for memory or FFTW */
     size_t work_bytes;
-    if ((st = wf_profile_work_need(&s->acc, &work_bytes))) goto bad;
+    if ((st = wf_profile_work_need(&s->acc, &work_bytes, NULL))) goto bad;
     works_running = setup->threads > 1 && pthread_create(&works_thread, NULL, init_works, &works) == 0;
     if ((st = wf_filter_parse(setup->filter, &s->filter))) goto bad;
     if ((st = wf_wcs_focal_plane(data, &s->fp))) goto bad;

@@ -73,7 +73,7 @@ static void ctx_open(ctx *c, const wf_profile_accuracy *acc, const wf_psf_image 
 {
     memset(c, 0, sizeof *c);
     size_t need = 0, pneed = 0, pscratch = 0;
-    ck_assert_msg(wf_profile_work_need(acc, &need) == WF_OK, "%s", wf_error_message());
+    ck_assert_msg(wf_profile_work_need(acc, &need, NULL) == WF_OK, "%s", wf_error_message());
     if (img)
         ck_assert_msg(wf_profile_psf_need(img, acc, &pneed, &pscratch) == WF_OK, "%s",
                       wf_error_message());
@@ -2319,7 +2319,7 @@ START_TEST(test_bad_input)
     wf_profile_accuracy a = acc;
     a.flux_fraction = 1.0;
     size_t b;
-    ck_assert(wf_profile_work_need(&a, &b) == WF_ERR_RANGE);
+    ck_assert(wf_profile_work_need(&a, &b, NULL) == WF_ERR_RANGE);
     ck_assert(wf_profile_work_tune(&c.work, 0.9, 0.0, 1e-5, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_ERR_RANGE);
     /* an arena too small fails cleanly */
     unsigned char small[4096];
@@ -2398,6 +2398,40 @@ START_TEST(test_timing)
 }
 END_TEST
 
+/* wf_profile_work_need's `dense` bytes are what wf_profile_work_init lays out first and fills:
+ * every zero-filled buffer lies inside them, the FFT buffer, knot phases and lattice (touched
+ * only as draws reach) beyond them, and the whole fits the need. Without it, a host that puts
+ * the dense part on huge pages would make the sparse part resident or fault the dense one. */
+START_TEST(test_work_dense_first)
+{
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    acc.max_fft = _i ? 384 : 1024;
+    size_t need = 0, dense = 0;
+    ck_assert_msg(wf_profile_work_need(&acc, &need, &dense) == WF_OK, "%s", wf_error_message());
+    ck_assert(dense > 0 && dense < need);
+    unsigned char *mem = wf_arena_host_alloc_dense(need, dense);
+    ck_assert_ptr_nonnull(mem);
+    wf_arena arena;
+    wf_arena_init(&arena, mem, need, "dense test");
+    wf_profile_work w;
+    ck_assert_msg(wf_profile_work_init(&w, &acc, &arena) == WF_OK, "%s", wf_error_message());
+    ck_assert_uint_le(arena.high_water, need);
+    const void *dense_bufs[] = {w.ex, w.ey, w.ix, w.iy, w.wx, w.wy, w.run, w.knot_pos, w.knot_box, w.ring, w.rim};
+    const void *sparse_bufs[] = {w.fft, w.kx, w.ky, w.lat};
+    for (size_t i = 0; i < sizeof dense_bufs / sizeof *dense_bufs; i++)
+        ck_assert_msg((const unsigned char *)dense_bufs[i] < mem + dense, "dense buffer %zu at %td, past %zu", i,
+                      (const unsigned char *)dense_bufs[i] - mem, dense);
+    for (size_t i = 0; i < sizeof sparse_bufs / sizeof *sparse_bufs; i++)
+        ck_assert_msg((const unsigned char *)sparse_bufs[i] >= mem + dense, "sparse buffer %zu at %td, inside %zu",
+                      i, (const unsigned char *)sparse_bufs[i] - mem, dense);
+    /* the last dense buffer ends where the sparse ones begin: nothing zero-filled beyond */
+    ck_assert_ptr_eq((const unsigned char *)w.rim + wf_arena_cost((size_t)w.cap_line * sizeof(int)), mem + dense);
+    wf_profile_work_free(&w);
+    free(mem);
+}
+END_TEST
+
 static Suite *profile_suite(void)
 {
     Suite *s = suite_create("profile");
@@ -2429,6 +2463,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_knots_smooth_bound);
     tcase_add_test(ind, test_simd_identical);
     tcase_add_test(ind, test_simd_identical_wing);
+    tcase_add_loop_test(ind, test_work_dense_first, 0, 2);
     suite_add_tcase(s, ind);
     TCase *stiff = tcase_create("stiff");
     tcase_set_timeout(stiff, 120);

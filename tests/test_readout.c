@@ -313,6 +313,39 @@ START_TEST(arena_host_realloc_grows)
 }
 END_TEST
 
+/* An arena filled only in part: its dense start on huge pages, the rest ordinary pages that
+ * stay out of resident memory until touched. */
+START_TEST(arena_host_alloc_dense_part)
+{
+    const size_t mib = (size_t)1 << 20, size = 8 * mib, dense = 3 * mib;
+    long fallback0 = thp_fallbacks();
+    unsigned char *p = wf_arena_host_alloc_dense(size, dense);
+    ck_assert_ptr_nonnull(p);
+    ck_assert_uint_eq((uintptr_t)p % (2 * mib), 0);
+    long f_dense = touch_faults(p, dense);
+    p[6 * mib] = 1; /* one byte past the dense part's huge pages */
+    long page = sysconf(_SC_PAGESIZE);
+    size_t n = 2 * mib / (size_t)page;
+    unsigned char vec[1024];
+    int resident = -1;
+    if (n <= sizeof vec && mincore(p + 6 * mib, 2 * mib, vec) == 0) {
+        resident = 0;
+        for (size_t i = 0; i < n; i++) resident += vec[i] & 1;
+    }
+    ck_assert_uint_eq(p[dense - 1], 0x5a);
+    free(p);
+    ck_assert_ptr_null(wf_arena_host_alloc_dense(SIZE_MAX - 4096, 0));
+    char thp[128] = "";
+    FILE *tf = fopen("/sys/kernel/mm/transparent_hugepage/enabled", "r");
+    int madvise_only = tf && fgets(thp, sizeof thp, tf) && strstr(thp, "[madvise]");
+    if (tf) fclose(tf);
+    if (!madvise_only) WF_SKIP("transparent huge pages are not in madvise mode here: page use not checked");
+    if (thp_fallbacks() > fallback0) WF_SKIP("the kernel had no huge page free (thp_fault_fallback): page use not checked");
+    ck_assert_msg(f_dense < 64, "3 MiB of the dense part filled with %ld page faults", f_dense);
+    ck_assert_msg(resident == 1, "one byte past the dense part made %d of %zu pages resident", resident, n);
+}
+END_TEST
+
 START_TEST(arena_refuses_past_budget)
 {
     static unsigned char block[4096];
@@ -723,6 +756,7 @@ static Suite *suite(void)
     tcase_add_test(tc, arena_refuses_past_budget);
     tcase_add_test(tc, arena_host_memory);
     tcase_add_test(tc, arena_host_realloc_grows);
+    tcase_add_test(tc, arena_host_alloc_dense_part);
     tcase_add_test(tc, noiseless_flux_conserved);
     tcase_add_test(tc, direct_matches_per_read);
     tcase_add_test(tc, saturation_defined);

@@ -338,7 +338,7 @@ static wf_status drawer_open(const acc_run *run, int bin, int over, int size, in
     acc.core_radius = core_radius;
     size_t keep, scratch, wneed;
     if ((st = wf_profile_psf_need(&d->img, &acc, &keep, &scratch)) ||
-        (st = wf_profile_work_need(&acc, &wneed)))
+        (st = wf_profile_work_need(&acc, &wneed, NULL)))
         goto bad;
     size_t cap = keep + scratch + wneed + 8192;
     if (!(d->mem = malloc(cap))) {

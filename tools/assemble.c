@@ -73,7 +73,7 @@ typedef struct exposure {
     size_t cube_cap;
     float *sci, *err;
     uint32_t *dq;
-    size_t out_cap;
+    size_t out_cap, block_cap; /* pixels per plane; 4-byte words in the planes' block */
     /* DATASUM of the image HDUs (index hdu - 1), summed as their rows are written: every row
      * is written once, so the product is closed without reading the pixels back */
     wf_fits_datasum sum[5];
@@ -726,17 +726,20 @@ static wf_status grow(const assembler *a, void **buf, size_t *cap, size_t need, 
 static wf_status grow_out(const assembler *a, exposure *e, size_t npix)
 {
     if (npix <= e->out_cap) return WF_OK;
-    /* the three planes of a tile in one block: a tile's plane is just under 1 MiB, too little
-     * for a huge page of its own (hal/arena.h), and nothing in them outlives the tile */
+    /* the three planes of a tile in one block, rounded up to whole huge pages (hal/arena.h):
+     * each is filled whole for every tile, and a tile's plane is just under 1 MiB, too little
+     * for a huge page of its own; nothing in them outlives the tile */
     _Static_assert(sizeof *e->sci == 4 && sizeof *e->err == 4 && sizeof *e->dq == 4, "4-byte planes");
+    const size_t huge = (size_t)2 << 20;
     void *block = e->sci;
-    size_t cap = 3 * e->out_cap;
-    wf_status st = grow(a, &block, &cap, 3 * npix, 4);
+    size_t cap = e->block_cap;
+    wf_status st = grow(a, &block, &cap, (3 * npix * 4 + huge - 1) / huge * huge / 4, 4);
     if (st) return st;
     e->sci = block;
     e->err = (float *)block + npix;
     e->dq = (uint32_t *)((float *)block + 2 * npix);
     e->out_cap = npix;
+    e->block_cap = cap;
     return WF_OK;
 }
 
