@@ -183,9 +183,11 @@ void wf_packet_reader_close(wf_packet_reader *r)
 static wf_status grow(unsigned char **buf, size_t *cap, size_t need)
 {
     if (need <= *cap) return WF_OK;
-    /* a power of two: a full tile's packet (just under 1 MiB) then takes a huge page */
+    /* a power of two, so that a full tile's packet (just under 1 MiB) takes a huge page; past
+     * 64 MiB (rare, huge tiles) just the need */
     size_t c = 4096;
-    while (c < need) c *= 2;
+    while (c < need && c < ((size_t)64 << 20)) c *= 2;
+    if (c < need) c = need;
     unsigned char *p = wf_arena_host_realloc(*buf, 0, c); /* a packet overwrites it whole */
     if (!p) return wf_error(WF_ERR_NOMEM, "cannot allocate %zu bytes for a packet", need);
     *buf = p;

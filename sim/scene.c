@@ -709,7 +709,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     free(sky);
 #ifdef __GLIBC__
     /* the set-up's large transients (pupil, PSF build) are free but still resident; hand
-     * them back before the rendering's own buffers are made */
+     * them back before the rendering fills its own buffers */
     malloc_trim(0);
 #endif
     s->stats.build_seconds = now() - t0;
