@@ -376,12 +376,13 @@ typedef struct init_job {
  * do not need and which costs several times more. */
 static inline double rad(double a, double b) { return sqrt(a * a + b * b); }
 
-/* Table, envelope and pixel bound of one pass from its raw transform (side_s^2 complex). */
-static void fill_table(init_job *j, int pass, const double *raw)
+/* Table, envelope and pixel bound of one pass from its raw transform: (2 kr_s + 1)^2 complex,
+ * kr_s >= the table's kr. */
+static void fill_table(init_job *j, int pass, const double *raw, int kr_s)
 {
     wf_profile_psf *psf = j->psf;
     wf_profile_core *co = pass ? &psf->core[pass - 1] : NULL;
-    const int kr = j->kr, kr_s = j->kr_s;
+    const int kr = j->kr;
     const size_t side = 2 * (size_t)kr + 1, side_s = 2 * (size_t)kr_s + 1;
     float *tr = pass ? co->re : j->re, *ti = pass ? co->im : j->im;
     double *te = pass ? co->env : j->env, sabs = 0.0;
@@ -429,7 +430,9 @@ static wf_status core_pass(void *ctx, int task, int slot)
             }
         wf_psf_image src = *img;
         src.pix = tapered;
-        if (!(st = pixel_transform(&src, j->acc, j->kr_s, arena, &raw))) fill_table(j, task + 1, raw);
+        /* only the table's window: the band, found from the whole image's transform, is
+         * known by now (each sample is computed as in the full plane, so the same bits) */
+        if (!(st = pixel_transform(&src, j->acc, j->kr, arena, &raw))) fill_table(j, task + 1, raw, j->kr);
     }
     wf_arena_release(arena, mark);
     return st;
@@ -602,7 +605,7 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         }
     /* the whole image's table from the transform in hand; then each core's (the tapered
      * image), and each core's wing, which needs both tables */
-    fill_table(&j, 0, raw);
+    fill_table(&j, 0, raw, kr_s);
     wf_arena_release(&slots[0], mark0);
     if ((st = wf_parallel_for(ncore, T, core_pass, &j)) || (st = wf_parallel_for(ncore, T, wing_pass, &j)))
         goto out;
