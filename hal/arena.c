@@ -24,7 +24,7 @@ wf_status wf_arena_init(wf_arena *arena, void *memory, size_t capacity, const ch
     return WF_OK;
 }
 
-#define HUGE_PAGE ((size_t)2 << 20)
+#define HUGE_PAGE WF_ARENA_HUGE_PAGE
 
 /* `size` bytes aligned to a huge page, of which the first `advised` are offered to the kernel
  * for transparent huge pages (the rest stays ordinary pages). */

@@ -47,6 +47,7 @@ void *wf_arena_host_alloc(size_t size);
  * ~14 us, of a 2 MiB one ~100 us (`bench_pages`, docs/BENCHMARKS.md). Free with free();
  * NULL when out of memory, p then untouched. */
 #define WF_ARENA_HOST_HUGE ((size_t)1 << 20)
+#define WF_ARENA_HUGE_PAGE ((size_t)2 << 20) /* x86-64's transparent huge page */
 void *wf_arena_host_realloc(void *p, size_t used, size_t size);
 
 /* Host memory for an arena that its first user fills only in part: 2 MiB aligned, with the

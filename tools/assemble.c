@@ -730,7 +730,7 @@ static wf_status grow_out(const assembler *a, exposure *e, size_t npix)
      * each is filled whole for every tile, and a tile's plane is just under 1 MiB, too little
      * for a huge page of its own; nothing in them outlives the tile */
     _Static_assert(sizeof *e->sci == 4 && sizeof *e->err == 4 && sizeof *e->dq == 4, "4-byte planes");
-    const size_t huge = (size_t)2 << 20;
+    const size_t huge = WF_ARENA_HUGE_PAGE;
     void *block = e->sci;
     size_t cap = e->block_cap;
     wf_status st = grow(a, &block, &cap, (3 * npix * 4 + huge - 1) / huge * huge / 4, 4);
