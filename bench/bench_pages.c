@@ -7,6 +7,7 @@
  *
  * Prints one line per kind: the first fill (page faults and their zeroing included) and a
  * second fill of the same memory (the fill alone), in ms per MiB, best of the rounds. */
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -48,7 +49,7 @@ int main(int argc, char **argv)
                 p = wf_arena_host_realloc(NULL, 0, n);
             } else {
                 p = malloc(n); /* above malloc's mmap threshold: fresh pages from the kernel */
-                if (p) (void)madvise((void *)((unsigned long)p & ~4095ul), n, MADV_NOHUGEPAGE);
+                if (p) (void)madvise((void *)((uintptr_t)p & ~(uintptr_t)4095), n, MADV_NOHUGEPAGE);
             }
             if (!p) {
                 fprintf(stderr, "bench_pages: cannot allocate %ld MiB\n", n_mib);

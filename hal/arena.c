@@ -26,6 +26,8 @@ wf_status wf_arena_init(wf_arena *arena, void *memory, size_t capacity, const ch
 
 #define HUGE_PAGE WF_ARENA_HUGE_PAGE
 
+static size_t whole_huge_pages(size_t size) { return (size + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE; }
+
 /* `size` bytes aligned to a huge page, of which the first `advised` are offered to the kernel
  * for transparent huge pages (the rest stays ordinary pages). */
 static void *huge_aligned(size_t size, size_t advised)
@@ -33,14 +35,15 @@ static void *huge_aligned(size_t size, size_t advised)
     void *p = NULL;
     /* more than the address space could hold is refused here, not handed to the allocator */
     if (!size || size > SIZE_MAX / 4) return NULL;
-    size_t n = (size + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE;
-    if (posix_memalign(&p, HUGE_PAGE, n) != 0) return NULL;
+    if (posix_memalign(&p, HUGE_PAGE, whole_huge_pages(size)) != 0) return NULL;
 #ifdef MADV_HUGEPAGE
     /* Memory the allocator recycles may still have some of its pages mapped, and a range that
      * does is faulted in 4 KiB pages whatever the advice: drop them first (the block is ours
      * whole, its contents are not yet anyone's). */
-    if (advised) (void)madvise(p, advised, MADV_DONTNEED);
-    if (advised) (void)madvise(p, advised, MADV_HUGEPAGE); /* advice: without it, ordinary pages */
+    if (advised) {
+        (void)madvise(p, advised, MADV_DONTNEED);
+        (void)madvise(p, advised, MADV_HUGEPAGE); /* advice: without it, ordinary pages */
+    }
 #endif
     return p;
 }
@@ -48,7 +51,7 @@ static void *huge_aligned(size_t size, size_t advised)
 void *wf_arena_host_alloc(size_t size)
 {
     /* a whole number of huge pages, so that the tail can be one too */
-    return huge_aligned(size, (size + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE);
+    return huge_aligned(size, whole_huge_pages(size));
 }
 
 /* The huge pages a range of `filled` bytes from a huge page's start takes: its whole ones,
