@@ -523,6 +523,43 @@ START_TEST(test_no_nan)
 }
 END_TEST
 
+/* The whole ramp's coefficients made once by wf_rampfit_setup_init give the same bits as
+ * computing them for each pixel (full_nres 0 turns them off): rates from far below the first
+ * Casertano S/N boundary to far above the last, so that every power level is taken, with
+ * cosmic rays (segments that are not the whole ramp) and saturation. */
+START_TEST(test_full_ramp_coefficients)
+{
+    const char *tables[] = {"4", "6", "11"};
+    for (int k = 0; k < 3; k++) {
+        wf_clock clk = make_clock(tables[k]);
+        wf_rampfit_setup su, plain;
+        ck_assert_int_eq(wf_rampfit_setup_init(&clk, READ_NOISE, &su), WF_OK);
+        ck_assert_int_eq(su.full_nres, su.nres);
+        plain = su;
+        plain.full_nres = 0;
+        wf_noise noise = {.kind = WF_NOISE_PHILOX, .seed = 77u, .exposure = (uint32_t)k, .sca = 1};
+        /* the rates reach below S/N 5 and above 100 over the ramp (read noise per resultant
+         * of one read at most), and the six levels' coefficients all differ */
+        double span = su.tbar[su.nres - 1] - su.tbar[0];
+        ck_assert(1e-2 * span / sqrt(READ_NOISE * READ_NOISE + 1e-2 * span) < 5.0);
+        ck_assert(3e3 * span / sqrt(READ_NOISE * READ_NOISE + 3e3 * span) > 100.0);
+        for (int l = 1; l < WF_RAMPFIT_POWER_LEVELS; l++)
+            ck_assert(memcmp(su.full_c[l], su.full_c[l - 1], (size_t)su.nres * sizeof(double)));
+        for (int p = 0; p < 400; p++) {
+            double rate = 1e-2 * pow(10.0, 5.5 * (p % 100) / 99.0), res[WF_MA_MAX_RESULTANTS];
+            int cr_read = p >= 200 ? p % wf_ma_total_reads(&clk.ma) : -1;
+            simulate_ramp(&clk, &noise, (uint32_t)p, rate, READ_NOISE, cr_read, 500.0, res);
+            int first_sat = p % 7 == 3 ? su.nres - 1 - p % 3 : su.nres;
+            wf_rampfit_result a, b;
+            ck_assert_int_eq(wf_rampfit_pixel(&su, res, first_sat, &a), WF_OK);
+            ck_assert_int_eq(wf_rampfit_pixel(&plain, res, first_sat, &b), WF_OK);
+            ck_assert_msg(!memcmp(&a, &b, sizeof a), "table %s pixel %d (rate %g): %.17g vs %.17g", tables[k], p,
+                          rate, a.rate, b.rate);
+        }
+    }
+}
+END_TEST
+
 static Suite *rampfit_suite(void)
 {
     Suite *s = suite_create("rampfit");
@@ -537,6 +574,7 @@ static Suite *rampfit_suite(void)
     tcase_add_test(tc, test_jump_fallbacks);
     tcase_add_test(tc, test_bad_arguments);
     tcase_add_test(tc, test_no_nan);
+    tcase_add_test(tc, test_full_ramp_coefficients);
     suite_add_tcase(s, tc);
 
     TCase *mc = tcase_create("monte_carlo");

@@ -12,6 +12,8 @@ typedef struct seg_fit {
     double pois_coef; /* Var_poisson = rate * pois_coef */
 } seg_fit;
 
+static void prepare_full(wf_rampfit_setup *s);
+
 wf_status wf_rampfit_setup_init(const wf_clock *clock, double read_noise_e,
                                 wf_rampfit_setup *out)
 {
@@ -52,6 +54,7 @@ wf_status wf_rampfit_setup_init(const wf_clock *clock, double read_noise_e,
         s.tbar[r] = sum_t / n;
         s.tau[r] = sum_min / ((double)n * n);
     }
+    prepare_full(&s);
     *out = s;
     return WF_OK;
 }
@@ -79,15 +82,18 @@ static wf_status check_setup(const wf_rampfit_setup *s)
     return WF_OK;
 }
 
-/* Casertano et al. (2022) Table 2: the power of |t - t_mid| in the weights, by S/N. */
-static double cas22_power(double snr)
+/* Casertano et al. (2022) Table 2: the power of |t - t_mid| in the weights, by S/N; level 0
+ * (power 0) is the unweighted fit. */
+static const double cas22_powers[WF_RAMPFIT_POWER_LEVELS] = {0.0, 0.4, 1.0, 3.0, 6.0, 10.0};
+
+static int cas22_level(double snr)
 {
-    if (snr < 5.0) return 0.0;
-    if (snr < 10.0) return 0.4;
-    if (snr < 20.0) return 1.0;
-    if (snr < 50.0) return 3.0;
-    if (snr < 100.0) return 6.0;
-    return 10.0;
+    if (snr < 5.0) return 0;
+    if (snr < 10.0) return 1;
+    if (snr < 20.0) return 2;
+    if (snr < 50.0) return 3;
+    if (snr < 100.0) return 4;
+    return 5;
 }
 
 /* Slope coefficients c_i (sum c_i = 0, sum c_i tbar_i = 1) for the weights w. Times are
@@ -154,20 +160,74 @@ static int gls_slope(const double *t, const double *tau, const int *n, const dou
     return 1;
 }
 
+/* The slope coefficients over m resultants for the weights of a power level: the unweighted
+ * ones (weight n_i: every read counted once) at level 0, and where the power-law weights
+ * leave fewer than two distinct times. */
+static void level_coeffs(const double *t, const int *n, int m, int level, double *c)
+{
+    double w[WF_MA_MAX_RESULTANTS] = {0}, cw[WF_MA_MAX_RESULTANTS] = {0};
+    for (int i = 0; i < m; i++)
+        w[i] = n[i];
+    (void)slope_coeffs(t, w, m, c); /* cannot fail: tbar strictly increasing, m >= 2 */
+    if (level == 0)
+        return;
+    const double power = cas22_powers[level];
+    double tmid = 0.5 * (t[0] + t[m - 1]), tscale = 0.5 * (t[m - 1] - t[0]);
+    for (int i = 0; i < m; i++) {
+        /* Casertano Eq. 45; scaled by tscale so |x|^10 stays within double range. */
+        double x = fabs(t[i] - tmid) / tscale;
+        w[i] = (1.0 + power) * n[i] / (1.0 + power * n[i]) * pow(x, power);
+    }
+    if (slope_coeffs(t, w, m, cw))
+        for (int i = 0; i < m; i++)
+            c[i] = cw[i];
+}
+
+/* Read and Poisson variance of the estimator sum c_i R_i, per unit read variance and per
+ * unit rate: Var = sum_i c_i^2 tau_i + 2 sum_{i<j} c_i c_j tbar_i per unit rate, since
+ * Cov(R_i, R_j) = rate * tbar_i for i < j; suffix holds sum_{j>i} c_j. */
+static void coeff_variances(const double *c, const double *t, const double *tau, const int *n,
+                            int m, double *cr, double *cp)
+{
+    double r = 0.0, p = 0.0, suffix = 0.0;
+    for (int i = m - 1; i >= 0; i--) {
+        r += c[i] * c[i] / n[i];
+        p += c[i] * c[i] * tau[i] + 2.0 * c[i] * t[i] * suffix;
+        suffix += c[i];
+    }
+    *cr = r;
+    *cp = p;
+}
+
+/* The whole ramp's coefficients for every power level depend on the MA table alone: made
+ * once here, not per pixel (the pow calls were a tenth of an up-the-ramp exposure). */
+static void prepare_full(wf_rampfit_setup *s)
+{
+    s->full_nres = 0;
+    if (s->nres < 2)
+        return;
+    for (int l = 0; l < WF_RAMPFIT_POWER_LEVELS; l++) {
+        level_coeffs(s->tbar, s->nreads, s->nres, l, s->full_c[l]);
+        coeff_variances(s->full_c[l], s->tbar, s->tau, s->nreads, s->nres, &s->full_cr[l], &s->full_cp[l]);
+    }
+    s->full_nres = s->nres;
+}
+
 static void fit_segment(const wf_rampfit_setup *su, const double *res, int start, int end,
                         seg_fit *out)
 {
     const int m = end - start + 1;
     const double *t = su->tbar + start, *R = res + start, *tau = su->tau + start;
     const int *n = su->nreads + start;
-    double w[WF_MA_MAX_RESULTANTS] = {0}, c[WF_MA_MAX_RESULTANTS] = {0};
     const double rn2 = su->read_noise * su->read_noise;
+    const int full = start == 0 && end == su->nres - 1 && su->full_nres == su->nres;
+    double cu[WF_MA_MAX_RESULTANTS], cl[WF_MA_MAX_RESULTANTS];
 
-    /* Unweighted first pass (weight n_i: every read counted once) for the rate at which the
-     * GLS covariance is evaluated; GLS weights vary slowly with rate, so this suffices. */
-    for (int i = 0; i < m; i++)
-        w[i] = n[i];
-    (void)slope_coeffs(t, w, m, c); /* cannot fail: tbar strictly increasing, m >= 2 */
+    /* Unweighted first pass for the rate at which the GLS covariance is evaluated; GLS
+     * weights vary slowly with rate, so this suffices. */
+    const double *c = full ? su->full_c[0] : cu;
+    if (!full)
+        level_coeffs(t, n, m, 0, cu);
     double slope0 = 0.0;
     for (int i = 0; i < m; i++)
         slope0 += c[i] * R[i];
@@ -178,31 +238,23 @@ static void fit_segment(const wf_rampfit_setup *su, const double *res, int start
      * should not inherit the charge collected before it). */
     double signal = fmax(snr_slope, 0.0) * (t[m - 1] - t[0]);
     double noise = sqrt(rn2 + signal);
-    double power = cas22_power(noise > 0.0 ? signal / noise : 0.0);
+    int level = cas22_level(noise > 0.0 ? signal / noise : 0.0);
 
-    if (power > 0.0) {
-        double tmid = 0.5 * (t[0] + t[m - 1]), tscale = 0.5 * (t[m - 1] - t[0]);
-        for (int i = 0; i < m; i++) {
-            /* Casertano Eq. 45; scaled by tscale so |x|^10 stays within double range. */
-            double x = fabs(t[i] - tmid) / tscale;
-            w[i] = (1.0 + power) * n[i] / (1.0 + power * n[i]) * pow(x, power);
+    double cr, cp;
+    if (full) {
+        c = su->full_c[level];
+        cr = su->full_cr[level];
+        cp = su->full_cp[level];
+    } else {
+        if (level > 0) {
+            level_coeffs(t, n, m, level, cl);
+            c = cl;
         }
-        if (!slope_coeffs(t, w, m, c)) {
-            for (int i = 0; i < m; i++)
-                w[i] = n[i];
-            (void)slope_coeffs(t, w, m, c);
-        }
+        coeff_variances(c, t, tau, n, m, &cr, &cp);
     }
-
-    double slope = 0.0, cr = 0.0, cp = 0.0, suffix = 0.0;
-    for (int i = m - 1; i >= 0; i--) {
+    double slope = 0.0;
+    for (int i = m - 1; i >= 0; i--)
         slope += c[i] * R[i];
-        cr += c[i] * c[i] / n[i];
-        /* Var = sum_i c_i^2 tau_i + 2 sum_{i<j} c_i c_j tbar_i per unit rate, since
-         * Cov(R_i, R_j) = rate * tbar_i for i < j; suffix holds sum_{j>i} c_j. */
-        cp += c[i] * c[i] * tau[i] + 2.0 * c[i] * t[i] * suffix;
-        suffix += c[i];
-    }
     out->start = start;
     out->end = end;
     out->slope = slope;

@@ -17,6 +17,8 @@
 #define WF_DQ_SATURATED 0x2u
 #define WF_DQ_JUMP_DET 0x4u
 
+#define WF_RAMPFIT_POWER_LEVELS 6 /* Casertano's powers 0, 0.4, 1, 3, 6, 10 */
+
 typedef struct wf_rampfit_setup {
     int nres;
     int nreads[WF_MA_MAX_RESULTANTS];
@@ -25,6 +27,12 @@ typedef struct wf_rampfit_setup {
     double read_noise;                 /* e- per read */
     int detect_jumps;                  /* [1] */
     double jump_threshold;             /* <= 0: stcal's slope-dependent threshold [0] */
+    /* Made by wf_rampfit_setup_init from the MA table's fields above (changing those needs
+     * init again; the others may change): the whole ramp's slope coefficients for each
+     * Casertano power level, with their read and Poisson variance factors. */
+    int full_nres; /* the nres they are for (0: none, fit without them) */
+    double full_c[WF_RAMPFIT_POWER_LEVELS][WF_MA_MAX_RESULTANTS];
+    double full_cr[WF_RAMPFIT_POWER_LEVELS], full_cp[WF_RAMPFIT_POWER_LEVELS];
 } wf_rampfit_setup;
 
 typedef struct wf_rampfit_result {
