@@ -24,6 +24,14 @@ else
 BUILD   := build/rel
 endif
 
+# The compiler and flags a build directory was made with: when they change (OPT=..., another
+# CC), everything in it is rebuilt rather than mixed with objects made with the old ones.
+FLAGS   := $(BUILD)/flags
+FLAGS_NOW := $(strip $(CC) $(CFLAGS) $(LDFLAGS))
+ifneq ($(FLAGS_NOW),$(strip $(shell cat $(FLAGS) 2>/dev/null)))
+$(shell mkdir -p $(BUILD) && printf '%s\n' '$(FLAGS_NOW)' > $(FLAGS))
+endif
+
 LAYERS  := hal firmware sim tools
 LIBSRC  := $(filter-out tools/main.c,$(foreach d,$(LAYERS),$(wildcard $(d)/*.c)))
 LIBOBJ  := $(LIBSRC:%.c=$(BUILD)/%.o)
@@ -43,7 +51,7 @@ all: $(PROG)
 deps:
 	@scripts/install-deps.sh
 
-$(BUILD)/%.o: %.c $(wildcard */*.h)
+$(BUILD)/%.o: %.c $(wildcard */*.h) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c $< -o $@
 
@@ -51,11 +59,11 @@ $(LIB): $(LIBOBJ)
 	@mkdir -p $(dir $@)
 	ar rcs $@ $^
 
-$(PROG): $(BUILD)/tools/main.o $(LIB)
+$(PROG): $(BUILD)/tools/main.o $(LIB) $(FLAGS)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+	$(CC) $(LDFLAGS) -o $@ $(BUILD)/tools/main.o $(LIB) $(LDLIBS)
 
-$(BUILD)/tests/%: tests/%.c $(TESTUTIL) $(LIB) $(wildcard */*.h)
+$(BUILD)/tests/%: tests/%.c $(TESTUTIL) $(LIB) $(wildcard */*.h) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $< $(TESTUTIL) $(LIB) $(TEST_LDLIBS) $(LDLIBS)
 
@@ -73,6 +81,6 @@ bench: deps $(PROG)
 clean:
 	rm -rf build bin
 
-$(BUILD)/bench/%: bench/%.c $(LIB) $(wildcard */*.h)
+$(BUILD)/bench/%: bench/%.c $(LIB) $(wildcard */*.h) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $< $(LIB) $(LDLIBS)
