@@ -3,6 +3,12 @@
 # command that produced each line, and the machine). Sized for a 2-core machine: about
 # 10 minutes. BENCH_QUICK=1 runs a reduced set (smaller images) for a smoke test.
 set -eu
+usage="usage: bench/run.sh (no arguments; BENCH_QUICK=1 for the reduced set). Writes docs/BENCHMARKS.md."
+case "${1-}" in
+  "") ;;
+  -h|--help) echo "$usage"; exit 0 ;;
+  *) echo "bench/run.sh: unknown argument '$1'" >&2; echo "$usage" >&2; exit 2 ;;
+esac
 cd "$(dirname "$0")/.."
 B=build/rel/bench
 make -s $B/bench_readout $B/bench_direct_error $B/bench_survey $B/bench_profile $B/bench_pages $B/rss bin/wfisim >/dev/null
