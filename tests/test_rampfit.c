@@ -484,6 +484,14 @@ START_TEST(test_bad_arguments)
     s2 = su;
     s2.nreads[1] = 0;
     ck_assert_int_eq(wf_rampfit_pixel(&s2, res, 9, &fit), WF_ERR_INPUT);
+    /* a setup whose times changed after init (still increasing): its derived tables no
+     * longer match, an error rather than a fit with stale coefficients */
+    s2 = su;
+    s2.tbar[2] += 1e-3 * (s2.tbar[3] - s2.tbar[2]);
+    ck_assert_int_eq(wf_rampfit_pixel(&s2, res, 9, &fit), WF_ERR_INPUT);
+    s2 = su;
+    s2.tau[4] *= 1.0 + 1e-9;
+    ck_assert_int_eq(wf_rampfit_pixel(&s2, res, 9, &fit), WF_ERR_INPUT);
     res[4] = 1e300;
     ck_assert_int_eq(wf_rampfit_pixel(&su, res, su.nres, &fit), WF_ERR_RANGE);
     res[4] = NAN;

@@ -78,6 +78,10 @@ static wf_status check_setup(const wf_rampfit_setup *s)
         if (r > 0 && !(s->tbar[r] > s->tbar[r - 1]))
             return wf_error(WF_ERR_INPUT, "ramp fit: setup tbar does not increase at resultant %d",
                             r + 1);
+        if (r > 0 && (s->pair_dt[r - 1] != s->tbar[r] - s->tbar[r - 1] ||
+                      s->pair_tau[r - 1] != s->tau[r - 1] + s->tau[r] - 2.0 * s->tbar[r - 1]))
+            return wf_error(WF_ERR_INPUT, "ramp fit: setup resultant %d changed after wf_rampfit_setup_init",
+                            r + 1);
     }
     return WF_OK;
 }
@@ -131,28 +135,31 @@ static int slope_coeffs(const double *tbar, const double *w, int m, double *c)
  * the mean (measured -0.01 sigma per pixel at Casertano's S/N boundaries). The minimum-
  * variance estimate is uncorrelated with the difference of any two unbiased estimators, so
  * choosing on it leaves no first-order bias. Returns 0 when the covariance is singular. */
-static int gls_slope(const double *t, const double *tau, const int *n, const double *R, int m,
-                     double rn2, double rate, double *slope)
+static int gls_slope(const wf_rampfit_setup *su, int start, const double *R, int m, double rn2,
+                     double rate, double *slope)
 {
     const int k = m - 1;
+    const int *n = su->nreads + start;
+    const double *pn = su->pair_inv_n + start, *pt = su->pair_tau + start, *dt = su->pair_dt + start;
+    const double *po = su->pair_off + start;
     double cdiag[WF_MA_MAX_RESULTANTS], x[WF_MA_MAX_RESULTANTS];
     double prev_off = 0.0, num = 0.0, den = 0.0;
     /* Thomas algorithm for C x = dt (C symmetric positive definite: no pivoting needed). */
     for (int i = 0; i < k; i++) {
-        double diag = rn2 * (1.0 / n[i] + 1.0 / n[i + 1]) + rate * (tau[i] + tau[i + 1] - 2.0 * t[i]);
-        double off = i + 1 < k ? rate * (t[i + 1] - tau[i + 1]) - rn2 / n[i + 1] : 0.0;
+        double diag = rn2 * pn[i] + rate * pt[i];
+        double off = i + 1 < k ? rate * po[i] - rn2 / n[i + 1] : 0.0;
         double piv = diag - (i > 0 ? prev_off * cdiag[i - 1] : 0.0);
         if (!(piv > 1e-12 * diag))
             return 0; /* no read noise and no signal: nothing to weight by */
         cdiag[i] = off / piv;
-        x[i] = ((t[i + 1] - t[i]) - (i > 0 ? prev_off * x[i - 1] : 0.0)) / piv;
+        x[i] = (dt[i] - (i > 0 ? prev_off * x[i - 1] : 0.0)) / piv;
         prev_off = off;
     }
     for (int i = k - 2; i >= 0; i--)
         x[i] -= cdiag[i] * x[i + 1];
     for (int i = 0; i < k; i++) {
         num += x[i] * (R[i + 1] - R[i]);
-        den += x[i] * (t[i + 1] - t[i]);
+        den += x[i] * dt[i];
     }
     if (!(den > 0.0) || !isfinite(num / den))
         return 0;
@@ -203,6 +210,12 @@ static void coeff_variances(const double *c, const double *t, const double *tau,
  * once here, not per pixel (the pow calls were a tenth of an up-the-ramp exposure). */
 static void prepare_full(wf_rampfit_setup *s)
 {
+    for (int i = 0; i + 1 < s->nres; i++) {
+        s->pair_inv_n[i] = 1.0 / s->nreads[i] + 1.0 / s->nreads[i + 1];
+        s->pair_tau[i] = s->tau[i] + s->tau[i + 1] - 2.0 * s->tbar[i];
+        s->pair_dt[i] = s->tbar[i + 1] - s->tbar[i];
+        s->pair_off[i] = s->tbar[i + 1] - s->tau[i + 1];
+    }
     s->full_nres = 0;
     if (s->nres < 2)
         return;
@@ -232,7 +245,7 @@ static void fit_segment(const wf_rampfit_setup *su, const double *res, int start
     for (int i = 0; i < m; i++)
         slope0 += c[i] * R[i];
     double snr_slope = slope0;
-    (void)gls_slope(t, tau, n, R, m, rn2, fmax(slope0, 0.0), &snr_slope);
+    (void)gls_slope(su, start, R, m, rn2, fmax(slope0, 0.0), &snr_slope);
 
     /* Casertano Eq. 44 with the signal over this segment (as stcal: a segment after a jump
      * should not inherit the charge collected before it). */
@@ -282,9 +295,8 @@ static int worst_difference(const wf_rampfit_setup *su, const double *res, const
     int best = -1;
     double best_stat = 0.0;
     for (int i = f->start; i < f->end; i++) {
-        double d = res[i + 1] - res[i] - f->slope * (su->tbar[i + 1] - su->tbar[i]);
-        double v = rn2 * (1.0 / su->nreads[i] + 1.0 / su->nreads[i + 1]) +
-                   rate * (su->tau[i] + su->tau[i + 1] - 2.0 * su->tbar[i]);
+        double d = res[i + 1] - res[i] - f->slope * su->pair_dt[i];
+        double v = rn2 * su->pair_inv_n[i] + rate * su->pair_tau[i];
         if (!(v > 0.0))
             continue;
         double z = d / sqrt(v);

@@ -28,11 +28,16 @@ typedef struct wf_rampfit_setup {
     int detect_jumps;                  /* [1] */
     double jump_threshold;             /* <= 0: stcal's slope-dependent threshold [0] */
     /* Made by wf_rampfit_setup_init from the MA table's fields above (changing those needs
-     * init again; the others may change): the whole ramp's slope coefficients for each
-     * Casertano power level, with their read and Poisson variance factors. */
+     * init again: a fit refuses times that no longer match; the other fields may change):
+     * the whole ramp's slope coefficients for each Casertano power level, with their read
+     * and Poisson variance factors. */
     int full_nres; /* the nres they are for (0: none, fit without them) */
     double full_c[WF_RAMPFIT_POWER_LEVELS][WF_MA_MAX_RESULTANTS];
     double full_cr[WF_RAMPFIT_POWER_LEVELS], full_cp[WF_RAMPFIT_POWER_LEVELS];
+    /* and per pair of neighbours (i, i + 1): 1/n_i + 1/n_{i+1}, tau_i + tau_{i+1} - 2 tbar_i,
+     * tbar_{i+1} - tbar_i, tbar_{i+1} - tau_{i+1} */
+    double pair_inv_n[WF_MA_MAX_RESULTANTS], pair_tau[WF_MA_MAX_RESULTANTS];
+    double pair_dt[WF_MA_MAX_RESULTANTS], pair_off[WF_MA_MAX_RESULTANTS];
 } wf_rampfit_setup;
 
 typedef struct wf_rampfit_result {
