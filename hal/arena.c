@@ -48,12 +48,6 @@ static void *huge_aligned(size_t size, size_t advised)
     return p;
 }
 
-void *wf_arena_host_alloc(size_t size)
-{
-    /* a whole number of huge pages, so that the tail can be one too */
-    return huge_aligned(size, whole_huge_pages(size));
-}
-
 /* The huge pages a range of `filled` bytes from a huge page's start takes: its whole ones,
  * and the last only when the range fills half of it at least (a huge page is resident
  * whole, so at most 1 MiB goes unused). */
@@ -61,6 +55,11 @@ static size_t huge_part(size_t filled)
 {
     size_t whole = filled / HUGE_PAGE * HUGE_PAGE, tail = filled - whole;
     return whole + (tail >= HUGE_PAGE / 2 ? HUGE_PAGE : 0);
+}
+
+void *wf_arena_host_alloc(size_t size)
+{
+    return huge_aligned(size, huge_part(size));
 }
 
 void *wf_arena_host_alloc_dense(size_t size, size_t dense)
