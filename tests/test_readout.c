@@ -210,6 +210,19 @@ START_TEST(memory_fixed_by_tile_not_image)
 }
 END_TEST
 
+/* Resident pages of [p, p + n) by mincore, and in *pages how many it spans; -1 when that
+ * cannot be told (more than 512 pages, or mincore failed). */
+static int resident_pages(const unsigned char *p, size_t n, size_t *pages)
+{
+    size_t page = (size_t)sysconf(_SC_PAGESIZE);
+    unsigned char vec[512];
+    *pages = (n + page - 1) / page;
+    if (*pages > sizeof vec || mincore((void *)(uintptr_t)p, n, vec) != 0) return -1;
+    int resident = 0;
+    for (size_t i = 0; i < *pages; i++) resident += vec[i] & 1;
+    return resident;
+}
+
 /* The kernel's count of huge-page faults it served with small pages (none to be had). */
 static long thp_fallbacks(void)
 {
@@ -246,14 +259,8 @@ START_TEST(arena_host_memory)
     ck_assert_ptr_nonnull(q);
     memset(q, 0x5a, 4 * mib);
     q[4 * mib] = 1;
-    long page = sysconf(_SC_PAGESIZE);
-    unsigned char vec[512];
-    size_t tail_pages = (thin - 4 * mib + (size_t)page - 1) / (size_t)page;
-    int resident = -1;
-    if (tail_pages <= sizeof vec && mincore(q + 4 * mib, thin - 4 * mib, vec) == 0) {
-        resident = 0;
-        for (size_t i = 0; i < tail_pages; i++) resident += vec[i] & 1;
-    }
+    size_t tail_pages;
+    int resident = resident_pages(q + 4 * mib, thin - 4 * mib, &tail_pages);
     free(q);
     ck_assert_ptr_null(wf_arena_host_alloc(SIZE_MAX - 4096));
     ck_assert_ptr_null(wf_arena_host_alloc(0));
@@ -323,16 +330,10 @@ START_TEST(arena_host_realloc_grows)
     FILE *tf = fopen("/sys/kernel/mm/transparent_hugepage/enabled", "r");
     int madvise_only = tf && fgets(thp, sizeof thp, tf) && strstr(thp, "[madvise]");
     if (tf) fclose(tf);
-    long page = sysconf(_SC_PAGESIZE);
     long f_whole = touch_faults(q, 4 * mib); /* the two whole huge pages */
     q[4 * mib] = 1;                          /* and one byte of the thin tail */
-    unsigned char vec[512];
-    size_t tail_pages = (thin - 4 * mib + (size_t)page - 1) / (size_t)page;
-    int resident = -1;
-    if (tail_pages <= sizeof vec && mincore(q + 4 * mib, thin - 4 * mib, vec) == 0) {
-        resident = 0;
-        for (size_t i = 0; i < tail_pages; i++) resident += vec[i] & 1;
-    }
+    size_t tail_pages;
+    int resident = resident_pages(q + 4 * mib, thin - 4 * mib, &tail_pages);
     free(q);
     free(r);
     long fallback = thp_fallbacks() - fallback0;
