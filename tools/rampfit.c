@@ -12,7 +12,7 @@ typedef struct seg_fit {
     double pois_coef; /* Var_poisson = rate * pois_coef */
 } seg_fit;
 
-static void prepare_full(wf_rampfit_setup *s);
+static void derive_tables(wf_rampfit_setup *s);
 
 wf_status wf_rampfit_setup_init(const wf_clock *clock, double read_noise_e,
                                 wf_rampfit_setup *out)
@@ -54,7 +54,7 @@ wf_status wf_rampfit_setup_init(const wf_clock *clock, double read_noise_e,
         s.tbar[r] = sum_t / n;
         s.tau[r] = sum_min / ((double)n * n);
     }
-    prepare_full(&s);
+    derive_tables(&s);
     *out = s;
     return WF_OK;
 }
@@ -206,9 +206,10 @@ static void coeff_variances(const double *c, const double *t, const double *tau,
     *cp = p;
 }
 
-/* The whole ramp's coefficients for every power level depend on the MA table alone: made
- * once here, not per pixel (the pow calls were a tenth of an up-the-ramp exposure). */
-static void prepare_full(wf_rampfit_setup *s)
+/* The per-pair factors, and the whole ramp's coefficients for every power level, depend on
+ * the MA table alone: made once here, not per pixel (the pow calls alone were a tenth of an
+ * up-the-ramp exposure). */
+static void derive_tables(wf_rampfit_setup *s)
 {
     for (int i = 0; i + 1 < s->nres; i++) {
         s->pair_inv_n[i] = 1.0 / s->nreads[i] + 1.0 / s->nreads[i + 1];

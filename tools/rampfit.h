@@ -28,7 +28,8 @@ typedef struct wf_rampfit_setup {
     int detect_jumps;                  /* [1] */
     double jump_threshold;             /* <= 0: stcal's slope-dependent threshold [0] */
     /* Made by wf_rampfit_setup_init from the MA table's fields above (changing those needs
-     * init again: a fit refuses times that no longer match; the other fields may change):
+     * init again: a fit refuses times that no longer match, changed nreads go unseen; the
+     * other fields may change):
      * the whole ramp's slope coefficients for each Casertano power level, with their read
      * and Poisson variance factors. */
     int full_nres; /* the nres they are for (0: none, fit without them) */
