@@ -546,8 +546,9 @@ START_TEST(test_full_ramp_coefficients)
         plain = su;
         plain.full_nres = 0;
         wf_noise noise = {.kind = WF_NOISE_PHILOX, .seed = 77u, .exposure = (uint32_t)k, .sca = 1};
-        /* the rates reach below S/N 5 and above 100 over the ramp (read noise per resultant
-         * of one read at most), and the six levels' coefficients all differ */
+        /* the lowest and highest rates have S/N below 5 and above 100 over the whole ramp,
+         * the S/N as fit_segment forms it (signal / sqrt(rn^2 + signal)), so every level is
+         * chosen somewhere between; and the six levels' coefficients all differ */
         double span = su.tbar[su.nres - 1] - su.tbar[0];
         ck_assert(1e-2 * span / sqrt(READ_NOISE * READ_NOISE + 1e-2 * span) < 5.0);
         ck_assert(3e3 * span / sqrt(READ_NOISE * READ_NOISE + 3e3 * span) > 100.0);
