@@ -17,6 +17,9 @@
 #define PREFIX "wfdisk://"
 #define NSLOTS 1024 /* files being created at once; a slot costs its buffer only when used */
 #define BUF_BYTES ((size_t)1 << 20)
+/* A write this large goes to the file as it is: the buffer gathers cfitsio's 2880-byte
+ * records into large writes, and copying an already large one into it gains nothing */
+#define DIRECT_BYTES ((size_t)1 << 18)
 
 typedef struct hole { long long lo, hi; } hole;
 
@@ -348,12 +351,13 @@ static int d_write(int handle, void *buffer, long nbytes)
         return 0;
     }
     if ((st = hole_fill(s, s->pos, end))) return st;
-    if (s->dirty && s->pos == s->buf_off + (long long)s->buf_len && s->buf_len + n <= BUF_BYTES) {
+    if (n < DIRECT_BYTES && s->dirty && s->pos == s->buf_off + (long long)s->buf_len &&
+        s->buf_len + n <= BUF_BYTES) {
         memcpy(s->buf + s->buf_len, p, n);
         s->buf_len += n;
     } else {
         if ((st = flush_buf(s))) return st; /* also drops a read cache the write may overlap */
-        if (n >= BUF_BYTES) {
+        if (n >= DIRECT_BYTES) {
             if ((st = pwrite_all(s, p, n, s->pos))) return st;
         } else {
             memcpy(s->buf, p, n);

@@ -32,6 +32,18 @@ typedef struct wf_fits_datasum {
  * 0x80000000 for cfitsio's BZERO 2^31 storage), each stored as one word. */
 void wf_fits_datasum_add32(wf_fits_datasum *s, const void *values, size_t n, uint32_t flip);
 
+/* Writes n 32-bit values in host order into the current image HDU's data unit from element
+ * `first` (0-based) on, stored exactly as fits_write_pix stores TFLOAT (flip 0) or TUINT
+ * (flip 0x80000000, BZERO 2^31), and adds them to sum. The values are turned into their
+ * stored form in place (the caller's copy is lost) and summed in the same pass: cfitsio
+ * converts, byte-swaps and copies in separate passes, and the checksum would be another,
+ * which for an SCA's three 64 MiB planes was most of the writer's time. The HDU must be an
+ * image of 32-bit words whose stored type matches flip (else BAD_DATATYPE) and hold the
+ * range (else BAD_ELEM_NUM). cfitsio-style: returns and sets *status, a no-op when it is
+ * already > 0. */
+int wf_fits_write32(fitsfile *f, LONGLONG first, void *values, size_t n, uint32_t flip,
+                    wf_fits_datasum *sum, int *status);
+
 /* n 16-bit values in host order (flip 0x8000 for BZERO 32768), the first being element
  * `first` of the data unit: an even element is a word's upper half, an odd one its lower. */
 void wf_fits_datasum_add16(wf_fits_datasum *s, const uint16_t *values, size_t n, uint64_t first,

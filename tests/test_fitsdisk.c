@@ -52,9 +52,22 @@ static void image(fitsfile *f, int bitpix, int naxis, const char *name, int *sta
     ck_assert_int_eq(wf_fits_reserve_checksum(f, "test"), WF_OK);
 }
 
+/* n words of rows from y0 on (host order) through wf_fits_write32, from a copy: it turns
+ * what it writes into the stored form in place */
+static void write32(fitsfile *f, const void *rows, long y0, long n, uint32_t flip,
+                    wf_fits_datasum *sum, int *status)
+{
+    uint32_t *copy = malloc((size_t)(n * NX) * 4);
+    ck_assert_ptr_nonnull(copy);
+    memcpy(copy, rows, (size_t)(n * NX) * 4);
+    wf_fits_write32(f, (LONGLONG)y0 * NX, copy, (size_t)(n * NX), flip, sum, status);
+    free(copy);
+}
+
 /* As the assembler writes an SCA: every header first, then tiles of rows out of order into
- * each image, a table last; known: DATASUMs summed while writing instead of read back. */
-static void write_product(fitsfile *f, const char *path, const pixels *p, int known)
+ * each image, a table last; known: DATASUMs summed while writing instead of read back;
+ * fast: the 32-bit images written by wf_fits_write32 rather than fits_write_pix. */
+static void write_product(fitsfile *f, const char *path, const pixels *p, int known, int fast)
 {
     int status = 0;
     fits_create_img(f, BYTE_IMG, 0, NULL, &status);
@@ -70,11 +83,19 @@ static void write_product(fitsfile *f, const char *path, const pixels *p, int kn
         long y0 = (long)order[t] * TILE, n = y0 + TILE <= NY ? TILE : NY - y0;
         long first[2] = {1, y0 + 1};
         fits_movabs_hdu(f, 2, NULL, &status);
-        fits_write_pix(f, TFLOAT, first, n * NX, (void *)p->sci[y0], &status);
-        wf_fits_datasum_add32(&sum[1], p->sci[y0], (size_t)(n * NX), 0);
+        if (fast) {
+            write32(f, p->sci[y0], y0, n, 0, &sum[1], &status);
+        } else {
+            fits_write_pix(f, TFLOAT, first, n * NX, (void *)p->sci[y0], &status);
+            wf_fits_datasum_add32(&sum[1], p->sci[y0], (size_t)(n * NX), 0);
+        }
         fits_movabs_hdu(f, 3, NULL, &status);
-        fits_write_pix(f, TUINT, first, n * NX, (void *)p->dq[y0], &status);
-        wf_fits_datasum_add32(&sum[2], p->dq[y0], (size_t)(n * NX), 0x80000000u);
+        if (fast) {
+            write32(f, p->dq[y0], y0, n, 0x80000000u, &sum[2], &status);
+        } else {
+            fits_write_pix(f, TUINT, first, n * NX, (void *)p->dq[y0], &status);
+            wf_fits_datasum_add32(&sum[2], p->dq[y0], (size_t)(n * NX), 0x80000000u);
+        }
         fits_movabs_hdu(f, 4, NULL, &status);
         for (int r = 0; r < NR; r++) {
             long fp[3] = {1, y0 + 1, r + 1}, lp[3] = {NX, y0 + n, r + 1};
@@ -105,20 +126,116 @@ START_TEST(test_same_bytes_as_file_driver)
     fitsfile *f;
     int status = 0;
     ck_assert_int_eq(fits_create_diskfile(&f, a, &status), 0);
-    write_product(f, a, p, 0); /* cfitsio's driver, DATASUM read back by cfitsio */
-    ck_assert_int_eq(wf_fitsdisk_create(&f, b, &status), 0);
-    write_product(f, b, p, 1); /* ours, DATASUM summed while writing */
+    write_product(f, a, p, 0, 0); /* cfitsio's driver and writer, DATASUM read back by cfitsio */
+    size_t la = 0;
+    char *da = wf_test_slurp(a, &la);
+    ck_assert_ptr_nonnull(da);
+    ck_assert_uint_gt(la, (size_t)NX * NY * 14);
+    /* ours, DATASUM summed while writing; then with wf_fits_write32, through cfitsio's
+     * driver and through ours */
+    for (int k = 0; k < 3; k++) {
+        status = 0;
+        if (k == 1) ck_assert_int_eq(fits_create_diskfile(&f, b, &status), 0);
+        else ck_assert_int_eq(wf_fitsdisk_create(&f, b, &status), 0);
+        write_product(f, b, p, 1, k > 0);
+        size_t lb = 0;
+        char *db = wf_test_slurp(b, &lb);
+        ck_assert_ptr_nonnull(db);
+        ck_assert_uint_eq(la, lb);
+        ck_assert_msg(memcmp(da, db, la) == 0, "case %d: bytes differ from cfitsio's", k);
+        ck_assert_int_eq(wf_fits_verify_checksums(b, 5), WF_OK);
+        free(db);
+        ck_assert_int_eq(unlink(b), 0);
+    }
+    free(da);
+    free(p);
+}
+END_TEST
+
+/* Tiles of an image several times the driver's buffer, each tile larger than the size it
+ * writes straight to the file, out of order through wf_fits_write32 and our driver: the
+ * bytes of fits_write_pix through cfitsio's driver. And what it refuses: a stored type
+ * other than the words' (a 16-bit image, a float image as TUINT, an unsigned one as
+ * TFLOAT) and elements outside the image, leaving the file as it was. */
+START_TEST(test_write32_large_tiles)
+{
+    enum { W = 1031, H = 700, T = 97 }; /* a tile: 400 kB; the image: 2.9 MB */
+    float *img = malloc((size_t)W * H * sizeof *img), *copy = malloc((size_t)W * T * sizeof *img);
+    ck_assert_ptr_nonnull(img);
+    ck_assert_ptr_nonnull(copy);
+    uint64_t x = 0x2545f4914f6cdd1dull;
+    for (size_t i = 0; i < (size_t)W * H; i++) {
+        x ^= x << 13; x ^= x >> 7; x ^= x << 17;
+        img[i] = (float)((double)(x >> 11) / 9007199254740992.0 * 1e5 - 5e3);
+    }
+    char a[4200], b[4200];
+    tmp_path(a, sizeof a, "large_ref.fits");
+    tmp_path(b, sizeof b, "large_write32.fits");
+    long naxes[2] = {W, H};
+    const int order[] = {3, 6, 0, 5, 1, 7, 2, 4}; /* 8 tiles, the last one short */
+    for (int k = 0; k < 2; k++) {
+        fitsfile *f;
+        int status = 0;
+        if (k == 0) ck_assert_int_eq(fits_create_diskfile(&f, a, &status), 0);
+        else ck_assert_int_eq(wf_fitsdisk_create(&f, b, &status), 0);
+        fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+        fits_create_img(f, USHORT_IMG, 2, naxes, &status);
+        fits_create_img(f, ULONG_IMG, 2, naxes, &status);
+        fits_movabs_hdu(f, 1, NULL, &status);
+        ck_assert_int_eq(status, 0);
+        wf_fits_datasum sum = {0, 0, 1};
+        for (int t = 0; t < 8; t++) {
+            long y0 = (long)order[t] * T, n = y0 + T <= H ? T : H - y0;
+            if (k == 0) {
+                long first[2] = {1, y0 + 1};
+                fits_write_pix(f, TFLOAT, first, n * W, img + y0 * W, &status);
+            } else {
+                memcpy(copy, img + y0 * W, (size_t)(n * W) * sizeof *img);
+                wf_fits_write32(f, (LONGLONG)y0 * W, copy, (size_t)(n * W), 0, &sum, &status);
+                /* the words handed in now hold what the file holds: big-endian */
+                const unsigned char *be = (const unsigned char *)copy;
+                uint32_t w0;
+                memcpy(&w0, img + y0 * W, 4);
+                ck_assert_uint_eq((uint32_t)be[0] << 24 | (uint32_t)be[1] << 16 |
+                                  (uint32_t)be[2] << 8 | be[3], w0);
+            }
+            ck_assert_int_eq(status, 0);
+        }
+        if (k == 1) {
+            wf_fits_datasum want = {0, 0, 1};
+            wf_fits_datasum_add32(&want, img, (size_t)W * H, 0);
+            ck_assert(sum.hi == want.hi && sum.lo == want.lo);
+            uint32_t one = 1;
+            status = 0;
+            ck_assert_int_eq(wf_fits_write32(f, (LONGLONG)W * H - 1, &one, 2, 0, &sum, &status),
+                             BAD_ELEM_NUM);
+            status = 0;
+            ck_assert_int_eq(wf_fits_write32(f, -1, &one, 1, 0, &sum, &status), BAD_ELEM_NUM);
+            status = 0;
+            ck_assert_int_eq(wf_fits_write32(f, 0, &one, 1, 0x80000000u, &sum, &status),
+                             BAD_DATATYPE);
+            for (int h = 2; h <= 3; h++) {
+                status = 0;
+                fits_movabs_hdu(f, h, NULL, &status);
+                ck_assert_int_eq(wf_fits_write32(f, 0, &one, 1, 0, &sum, &status), BAD_DATATYPE);
+            }
+            ck_assert(sum.hi == want.hi && sum.lo == want.lo); /* a refused call adds nothing */
+            status = 0;
+            fits_clear_errmsg();
+        }
+        fits_close_file(f, &status);
+        ck_assert_int_eq(status, 0);
+    }
     size_t la = 0, lb = 0;
     char *da = wf_test_slurp(a, &la), *db = wf_test_slurp(b, &lb);
     ck_assert_ptr_nonnull(da);
     ck_assert_ptr_nonnull(db);
-    ck_assert_uint_gt(la, (size_t)NX * NY * 14);
     ck_assert_uint_eq(la, lb);
     ck_assert(memcmp(da, db, la) == 0);
-    ck_assert_int_eq(wf_fits_verify_checksums(b, 5), WF_OK);
     free(da);
     free(db);
-    free(p);
+    free(img);
+    free(copy);
 }
 END_TEST
 
@@ -312,6 +429,7 @@ static Suite *suite(void)
     Suite *s = suite_create("fitsdisk");
     TCase *tc = tcase_create("core");
     tcase_add_test(tc, test_same_bytes_as_file_driver);
+    tcase_add_test(tc, test_write32_large_tiles);
     tcase_add_test(tc, test_gap_is_a_hole);
     tcase_add_test(tc, test_scrambled_rows);
     tcase_add_test(tc, test_names_and_slots);

@@ -792,11 +792,11 @@ static wf_status write_rows(const assembler *a, exposure *e, int hdu, int type, 
                             uint32_t n, void *data, const char *what)
 {
     int status = 0;
-    long first[2] = {1, (long)y0 + 1};
     fits_movabs_hdu(e->f, hdu, NULL, &status);
-    fits_write_pix(e->f, type, first, (LONGLONG)n * e->m.ncols, data, &status);
-    /* TFLOAT is stored as its bit pattern, TUINT with BZERO 2^31 */
-    wf_fits_datasum_add32(&e->sum[hdu - 1], data, (size_t)n * (size_t)e->m.ncols, type == TUINT ? 0x80000000u : 0);
+    /* TFLOAT is stored as its bit pattern, TUINT with BZERO 2^31; the rows are written in
+     * place (nothing reads a tile's planes after they are written) */
+    wf_fits_write32(e->f, (LONGLONG)y0 * e->m.ncols, data, (size_t)n * (size_t)e->m.ncols,
+                    type == TUINT ? 0x80000000u : 0, &e->sum[hdu - 1], &status);
     if (status) {
         char doing[96];
         snprintf(doing, sizeof doing, "writing %s rows %" PRIu32 "-%" PRIu32, what, y0, y0 + n - 1);
