@@ -1096,6 +1096,18 @@ static void wing_scalar(long n, double w00, double w01, double w10, double w11, 
     for (long k = 0; k < n; k++) dst[k] += w00 * r00[k] + w01 * r01[k] + w10 * r10[k] + w11 * r11[k];
 }
 
+/* acc[k] += max(box[k] + wing, 0) (box NULL: no box pixels), the wing read as wing_scalar:
+ * the renderer's sum of a split galaxy's box and wing in one pass over the row. */
+static void wingclip_scalar(long n, const double *w, const float *const *r, const float *box,
+                            double *acc)
+{
+    for (long k = 0; k < n; k++) {
+        double v = w[0] * r[0][k] + w[1] * r[1][k] + w[2] * r[2][k] + w[3] * r[3][k];
+        if (box) v = (double)box[k] + v;
+        acc[k] += v < 0.0 ? 0.0 : v;
+    }
+}
+
 #if defined(__GNUC__) && defined(__x86_64__) /* SSE2 arithmetic in the scalar code too */
 #include <immintrin.h>
 #define FOLD_SIMD 1
@@ -1264,6 +1276,34 @@ static void wing_scalar(long n, double w00, double w01, double w10, double w11, 
     ZU();                                                                                  \
     wing_scalar(n - k, w00, w01, w10, w11, r00 + k, r01 + k, r10 + k, r11 + k, dst + k);
 
+/* the clip as a mask, no branch: about half the far pixels of a faint object are slightly
+ * negative */
+#define WINGCLIP_LOOP(V, VF, VI, NL)                                                       \
+    const V zero_ = {0};                                                                   \
+    long k = 0;                                                                            \
+    for (; k + (NL) <= n; k += (NL)) {                                                     \
+        VF a, b, c, d;                                                                     \
+        V o, s_;                                                                           \
+        VLOAD(a, r[0] + k);                                                                \
+        VLOAD(b, r[1] + k);                                                                \
+        VLOAD(c, r[2] + k);                                                                \
+        VLOAD(d, r[3] + k);                                                                \
+        o = w[0] * __builtin_convertvector(a, V) + w[1] * __builtin_convertvector(b, V) +  \
+            w[2] * __builtin_convertvector(c, V) + w[3] * __builtin_convertvector(d, V);   \
+        if (box) {                                                                         \
+            VLOAD(a, box + k);                                                             \
+            o = __builtin_convertvector(a, V) + o;                                         \
+        }                                                                                  \
+        VLOAD(s_, acc + k);                                                                \
+        s_ += (V)((VI)o & ~(VI)(o < zero_));                                               \
+        VSTORE(acc + k, s_);                                                               \
+    }
+#define WINGCLIP_BODY(V, VF, VI, NL, ZU)                                                   \
+    WINGCLIP_LOOP(V, VF, VI, NL)                                                           \
+    ZU();                                                                                  \
+    wingclip_scalar(n - k, w, (const float *const[4]){r[0] + k, r[1] + k, r[2] + k, r[3] + k}, \
+                    box ? box + k : NULL, acc + k);
+
 /* Out-of-table arguments, one lane at a time. Not inlined: the vector kernels' callers are
  * built for the baseline ISA, and a call is where the compiler clears the wide registers'
  * upper halves (SSE code running with them dirty is ~3x slower on some x86 cores). */
@@ -1312,6 +1352,11 @@ static void wing_v2(long n, double w00, double w01, double w10, double w11, cons
                     const float *r01, const float *r10, const float *r11, double *dst)
 {
     WING_BODY(fv2, ff2, 2, no_zeroupper)
+}
+static void wingclip_v2(long n, const double *w, const float *const *r,
+                           const float *box, double *acc)
+{
+    WINGCLIP_BODY(fv2, ff2, fi2, 2, no_zeroupper)
 }
 
 typedef double fv4 __attribute__((vector_size(32)));
@@ -1372,6 +1417,11 @@ __attribute__((target("avx2"))) static void wing_v4(long n, double w00, double w
                                                     const float *r10, const float *r11, double *dst)
 {
     WING_BODY(fv4, ff4, 4, _mm256_zeroupper)
+}
+__attribute__((target("avx2"))) static void wingclip_v4(long n, const double *w, const float *const *r,
+                                                           const float *box, double *acc)
+{
+    WINGCLIP_BODY(fv4, ff4, fi4, 4, _mm256_zeroupper)
 }
 
 typedef double fv8 __attribute__((vector_size(64)));
@@ -1436,6 +1486,24 @@ __attribute__((target("avx512f"))) static void wing_v8(long n, double w00, doubl
 {
     WING_BODY(fv8, ff8, 8, _mm256_zeroupper)
 }
+__attribute__((target("avx512f"))) static void wingclip_v8(long n, const double *w, const float *const *r,
+                                                              const float *box, double *acc)
+{
+    WINGCLIP_LOOP(fv8, ff8, fi8, 8)
+    if (k < n) { /* the last few columns (a row is ~100 wide) in one masked vector */
+        const __mmask16 mf = (__mmask16)((1u << (n - k)) - 1);
+        const __mmask8 md = (__mmask8)mf;
+#define LOAD8F(p) (fv8) _mm512_cvtps_pd(_mm512_castps512_ps256(_mm512_maskz_loadu_ps(mf, (p))))
+        fv8 o = w[0] * LOAD8F(r[0] + k) + w[1] * LOAD8F(r[1] + k) + w[2] * LOAD8F(r[2] + k) +
+                w[3] * LOAD8F(r[3] + k);
+        if (box) o = LOAD8F(box + k) + o;
+#undef LOAD8F
+        fv8 s_ = (fv8)_mm512_maskz_loadu_pd(md, acc + k);
+        s_ += (fv8)((fi8)o & ~(fi8)(o < zero_));
+        _mm512_mask_storeu_pd(acc + k, md, (__m512d)s_);
+    }
+    _mm256_zeroupper();
+}
 #endif
 
 typedef struct fold_kernels {
@@ -1448,26 +1516,32 @@ typedef struct fold_kernels {
                    double *);
     void (*wing)(long, double, double, double, double, const float *, const float *, const float *,
                  const float *, double *);
+    void (*wingclip)(long, const double *, const float *const *, const float *, double *);
 } fold_kernels;
 
-static fold_kernels fold_k = {smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar, wing_scalar};
+static fold_kernels fold_k = {smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar, wing_scalar,
+                              wingclip_scalar};
 static pthread_once_t simd_once = PTHREAD_ONCE_INIT;
 static int simd_lanes;
 
 static int simd_select(int lanes)
 {
-    fold_k = (fold_kernels){smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar, wing_scalar};
+    fold_k = (fold_kernels){smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar, wing_scalar,
+                            wingclip_scalar};
     int used = 0;
 #if defined(FOLD_SIMD)
     __builtin_cpu_init();
     if (lanes >= 8 && __builtin_cpu_supports("avx512f")) {
-        fold_k = (fold_kernels){smooth_v8, latrow_v8, latadd_v8, psfmul_v8, wing_v8};
+        fold_k = (fold_kernels){smooth_v8, latrow_v8, latadd_v8, psfmul_v8, wing_v8,
+                                wingclip_v8};
         used = 8;
     } else if (lanes >= 4 && __builtin_cpu_supports("avx2")) {
-        fold_k = (fold_kernels){smooth_v4, latrow_v4, latadd_v4, psfmul_v4, wing_v4};
+        fold_k = (fold_kernels){smooth_v4, latrow_v4, latadd_v4, psfmul_v4, wing_v4,
+                                wingclip_v4};
         used = 4;
     } else if (lanes >= 2) {
-        fold_k = (fold_kernels){smooth_v2, latrow_v2, latadd_v2, psfmul_v2, wing_v2};
+        fold_k = (fold_kernels){smooth_v2, latrow_v2, latadd_v2, psfmul_v2, wing_v2,
+                                wingclip_v2};
         used = 2;
     }
 #endif
@@ -1717,6 +1791,63 @@ static void add_wing(const wf_profile_psf *psf, int core, double flux, double x,
         double *dst = stamp->pix + (size_t)yy * stamp->nx + (size_t)(i0 - stamp->x0);
         fold_k.wing(i1 - i0 + 1, w00, w01, w10, w11, r00, r01, r10, r11, dst);
     }
+}
+
+/* acc[i] += max(box[i], 0) for i in [lo, hi) within the box's columns [ca, cb) */
+static void box_clipped(const float *box, int ca, int cb, int lo, int hi, double *acc)
+{
+    if (lo < ca) lo = ca;
+    if (hi > cb) hi = cb;
+    int i = lo;
+#if defined(FOLD_SIMD) /* two at a time, a mask for the clip: the same bits */
+    const fv2 zero = {0.0, 0.0};
+    for (; i + 2 <= hi; i += 2) {
+        ff2 b;
+        fv2 a;
+        VLOAD(b, box + (i - ca));
+        VLOAD(a, acc + i);
+        fv2 v = __builtin_convertvector(b, fv2);
+        a += (fv2)((fi2)v & ~(fi2)(v < zero));
+        VSTORE(acc + i, a);
+    }
+#endif
+    for (; i < hi; i++) {
+        double v = (double)box[i - ca];
+        acc[i] += v < 0.0 ? 0.0 : v;
+    }
+}
+
+/* add_wing's wing for one row j, summed with the box's pixels and clipped, into acc indexed
+ * by column: the columns the wing table covers in one kernel, with or without box pixels,
+ * the rest box only. */
+static void wing_row(const wf_profile_wing_at *at, int j, int xa, int xb, const float *box,
+                     int ca, int cb, double *acc)
+{
+    const int np = at->np;
+    const long ny0 = j + at->oy[0], ny1 = j + at->oy[1];
+    if (!box) ca = cb = xa;
+    /* the wing's columns: [wa, wb) */
+    long i0 = xa > -at->ox[0] ? xa : -at->ox[0];
+    long i1 = xb - 1 < np - 1 - at->ox[1] ? xb - 1 : np - 1 - at->ox[1];
+    int wa = xa, wb = xa;
+    if (i0 <= i1 && ny0 >= 0 && ny1 <= np - 1) wa = (int)i0, wb = (int)i1 + 1;
+    box_clipped(box, ca, cb, xa, wa, acc);
+    if (wa < wb) {
+        /* the four phase planes' entries at column 0 (the columns before wa are never read) */
+        const long e[4] = {at->plane[0] + ny0 * np + at->ox[0], at->plane[1] + ny0 * np + at->ox[1],
+                           at->plane[2] + ny1 * np + at->ox[0], at->plane[3] + ny1 * np + at->ox[1]};
+        int bl = ca > wa ? ca : wa, br = cb < wb ? cb : wb;
+        if (bl >= br) bl = br = wb;
+        const int cut[4] = {wa, bl, br, wb};
+        for (int seg = 0; seg < 3; seg++) {
+            int lo = cut[seg], hi = cut[seg + 1];
+            if (lo >= hi) continue;
+            const float *const r[4] = {at->wing + e[0] + lo, at->wing + e[1] + lo,
+                                       at->wing + e[2] + lo, at->wing + e[3] + lo};
+            fold_k.wingclip(hi - lo, at->w, r, seg == 1 ? box + (lo - ca) : NULL, acc + lo);
+        }
+    }
+    box_clipped(box, ca, cb, wb, xb, acc);
 }
 
 /* Smallest FFT side in the ladder holding `need` pixels; with a PSF, sides up to the PSF
@@ -2311,6 +2442,46 @@ wf_status wf_profile_add_wing(const wf_profile_psf *psf, int core, double flux, 
                         "cores (it has %d)", core, psf ? psf->ncore : 0);
     (void)wf_profile_simd(-1); /* the kernels, once per process */
     add_wing(psf, core, flux, x, y, stamp);
+    return WF_OK;
+}
+
+wf_status wf_profile_wing_place(const wf_profile_psf *psf, int core, double flux, double x,
+                                double y, wf_profile_wing_at *at)
+{
+    wf_status st = check_position(x, y);
+    if (st) return st;
+    if (!psf || core < 1 || core > psf->ncore)
+        return wf_error(WF_ERR_INPUT, "profile: core %d: a wing needs a PSF split into that many "
+                        "cores (it has %d)", core, psf ? psf->ncore : 0);
+    (void)wf_profile_simd(-1); /* the kernels, once per process */
+    /* as add_wing: fine index of pixel i is K i + s */
+    const int K = psf->wing_os, h = psf->wing_half, np = psf->wing_np;
+    const long plane = (long)np * np;
+    double sx = K * (h - x), sy = K * (h - y);
+    double fx0 = floor(sx), fy0 = floor(sy), fx = sx - fx0, fy = sy - fy0;
+    long ax = (long)fx0, ay = (long)fy0;
+    int a0 = (int)(ax - floor_div_l(ax, K) * K), a1 = (int)(ax + 1 - floor_div_l(ax + 1, K) * K);
+    int b0 = (int)(ay - floor_div_l(ay, K) * K), b1 = (int)(ay + 1 - floor_div_l(ay + 1, K) * K);
+    *at = (wf_profile_wing_at){
+        .wing = psf->core[core - 1].wing,
+        .np = np,
+        .plane = {(b0 * K + a0) * plane, (b0 * K + a1) * plane, (b1 * K + a0) * plane,
+                  (b1 * K + a1) * plane},
+        .ox = {floor_div_l(ax, K), floor_div_l(ax + 1, K)},
+        .oy = {floor_div_l(ay, K), floor_div_l(ay + 1, K)},
+        .w = {flux * (1.0 - fy) * (1.0 - fx), flux * (1.0 - fy) * fx, flux * fy * (1.0 - fx),
+              flux * fy * fx},
+    };
+    return WF_OK;
+}
+
+wf_status wf_profile_add_wing_row(const wf_profile_wing_at *at, int row, int xa, int xb,
+                                  const float *box, int ca, int cb, double *acc)
+{
+    if (!at->wing || xb < xa || (box && (ca < xa || cb > xb || cb < ca)))
+        return wf_error(WF_ERR_INPUT, "profile: wing row columns [%d, %d) with box columns "
+                        "[%d, %d) not within them, or no wing placed", xa, xb, ca, cb);
+    wing_row(at, row, xa, xb, box, ca, cb, acc - xa);
     return WF_OK;
 }
 

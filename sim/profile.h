@@ -252,6 +252,23 @@ wf_status wf_profile_draw_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
                                       wf_stamp *stamp);
 wf_status wf_profile_add_wing(const wf_profile_psf *psf, int core, double flux, double x,
                               double y, wf_stamp *stamp);
+/* A renderer's rows of a split galaxy, each in one pass. wf_profile_wing_place fixes where
+ * flux x that core's wing falls for an object at (x, y) (as wf_profile_add_wing: once per
+ * object, not per row); wf_profile_add_wing_row then adds, for the columns i in [xa, xb) of
+ * pixel row `row`, acc[i - xa] += max(b_i + wing, 0), b_i the box's pixel box[i - ca] for
+ * i in [ca, cb) (within [xa, xb)) and 0 elsewhere or when box is NULL: the same bits as the
+ * box row plus wf_profile_add_wing's, clipped and added. */
+typedef struct wf_profile_wing_at {
+    const float *wing; /* the core's phase planes */
+    int np;
+    long plane[4];     /* the four planes read, (b0, a0), (b0, a1), (b1, a0), (b1, a1) */
+    long ox[2], oy[2]; /* wing column of pixel column i: i + ox (row: j + oy) */
+    double w[4];       /* flux x the bilinear weights */
+} wf_profile_wing_at;
+wf_status wf_profile_wing_place(const wf_profile_psf *psf, int core, double flux, double x,
+                                double y, wf_profile_wing_at *at);
+wf_status wf_profile_add_wing_row(const wf_profile_wing_at *at, int row, int xa, int xb,
+                                  const float *box, int ca, int cb, double *acc);
 
 /* Knot positions (x, y) in arcsec before shear and rotation, as the draw uses them: from
  * g->knot_xy when given, else from the counter-based stream (knot_seed, id,

@@ -219,63 +219,25 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
     return WF_OK;
 }
 
-/* acc[x] += max(d[x], 0), x < n: two at a time (a mask, no branch: about half the far
- * pixels of a faint object are slightly negative), the same bits as the scalar tail. */
-static void add_clipped(double *restrict acc, const double *restrict d, int n)
-{
-    int x = 0;
-#if defined(__GNUC__)
-    typedef double vd2 __attribute__((vector_size(16)));
-    typedef long long vl2 __attribute__((vector_size(16)));
-    const vd2 zero = {0.0, 0.0};
-    for (; x + 2 <= n; x += 2) {
-        vd2 v, a;
-        memcpy(&v, d + x, sizeof v);
-        memcpy(&a, acc + x, sizeof a);
-        a += (vd2)((vl2)v & ~(vl2)(v < zero));
-        memcpy(acc + x, &a, sizeof a);
-    }
-#endif
-    for (; x < n; x++) acc[x] += d[x] < 0.0 ? 0.0 : d[x];
-}
-
-/* A halo object's rows, one at a time: its box's pixels plus its halo over columns [xa, xb)
- * into one row buffer (footprints are at most max_fft pixels wide); negatives are for the
- * caller to drop. */
+/* A halo object's rows, one at a time: its box's pixels within the footprint's columns
+ * [xa, xb), for the halo function to add with the halo. */
 typedef struct halo_view {
-    size_t i;
-    int xa, xb, ba, bb, ca, cb; /* footprint columns; box rows and columns within them */
-    const float *src;           /* the box's rows [ba, bb) */
+    int ba, bb, ca, cb; /* box rows and columns within the footprint */
+    const float *src;   /* the box's rows [ba, bb) from column ca */
 } halo_view;
 
 static wf_status halo_open(wf_renderer *r, size_t i, int ya, int yb, int xa, int xb, halo_view *h)
 {
     const wf_render_object *o = &r->objs[i];
-    wf_status st = grow(&r->hbuf, &r->hbuf_cap, (size_t)(xb - xa), "halo row");
-    if (st) return st;
-    *h = (halo_view){i, xa, xb, o->by0 > ya ? o->by0 : ya, o->by0 + o->bny < yb ? o->by0 + o->bny : yb,
+    *h = (halo_view){o->by0 > ya ? o->by0 : ya, o->by0 + o->bny < yb ? o->by0 + o->bny : yb,
                      o->bx0 > xa ? o->bx0 : xa, o->bx0 + o->bnx < xb ? o->bx0 + o->bnx : xb, NULL};
-    if (h->ba < h->bb && h->ca < h->cb) return stamp_rows(r, i, h->ba, h->bb, &h->src);
-    h->ba = h->bb = ya;
-    return WF_OK;
-}
-
-static wf_status halo_line(wf_renderer *r, const halo_view *h, int y, double **out)
-{
-    const wf_render_object *o = &r->objs[h->i];
-    size_t w = (size_t)(h->xb - h->xa);
-    double *d = r->hbuf;
-    if (y >= h->ba && y < h->bb) {
-        const float *s = h->src + (size_t)(y - h->ba) * o->bnx + (h->ca - o->bx0);
-        size_t c0 = (size_t)(h->ca - h->xa), c1 = (size_t)(h->cb - h->xa);
-        memset(d, 0, c0 * sizeof *d);
-        for (size_t x = c0; x < c1; x++) d[x] = s[x - c0];
-        memset(d + c1, 0, (w - c1) * sizeof *d);
-    } else {
-        memset(d, 0, w * sizeof *d);
+    if (h->ba >= h->bb || h->ca >= h->cb) {
+        h->ba = h->bb = ya;
+        return WF_OK;
     }
-    *out = d;
-    return r->cfg.halo(r->draw_ctx, o, y, h->xa, h->xb, d);
+    wf_status st = stamp_rows(r, i, h->ba, h->bb, &h->src);
+    if (!st) h->src += h->ca - o->bx0;
+    return st;
 }
 
 static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
@@ -332,9 +294,9 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
             halo_view h;
             if ((st = halo_open(r, i, ya, yb, xa, xb, &h))) return st;
             for (int y = ya; y < yb; y++) {
-                double *d, *acc = r->acc + (size_t)(y - y0) * ncols + xa;
-                if ((st = halo_line(r, &h, y, &d))) return st;
-                add_clipped(acc, d, xb - xa);
+                double *acc = r->acc + (size_t)(y - y0) * ncols + xa;
+                const float *box = y >= h.ba && y < h.bb ? h.src + (size_t)(y - h.ba) * o->bnx : NULL;
+                if ((st = r->cfg.halo(r->draw_ctx, o, y, xa, xb, box, h.ca, h.cb, acc))) return st;
             }
             continue;
         }
@@ -370,11 +332,14 @@ static wf_status fill_slope(void *ctx, int y0, int y1, int ncols, float *slope, 
         if (o->halo) {
             halo_view h;
             if ((st = halo_open(r, i, ya, yb, xa, xb, &h))) return st;
+            if ((st = grow(&r->hbuf, &r->hbuf_cap, (size_t)(xb - xa), "halo row"))) return st;
+            double *d = r->hbuf;
             for (int y = ya; y < yb; y++) {
-                double *d;
                 float *dst = slope + (size_t)(y - y0) * ncols + xa;
-                if ((st = halo_line(r, &h, y, &d))) return st;
-                for (int x = 0; x < xb - xa; x++) dst[x] += (float)(o->rel_slope * (d[x] < 0.0 ? 0.0 : d[x]));
+                const float *box = y >= h.ba && y < h.bb ? h.src + (size_t)(y - h.ba) * o->bnx : NULL;
+                memset(d, 0, (size_t)(xb - xa) * sizeof *d);
+                if ((st = r->cfg.halo(r->draw_ctx, o, y, xa, xb, box, h.ca, h.cb, d))) return st;
+                for (int x = 0; x < xb - xa; x++) dst[x] += (float)(o->rel_slope * d[x]);
             }
             *any = 1;
             continue;

@@ -39,10 +39,11 @@ typedef wf_status (*wf_draw_fn)(void *ctx, const wf_render_object *obj, int ya, 
 typedef wf_status (*wf_sky_fn)(void *ctx, int y, int ncols, double *out);
 
 /* Adds a halo object's light of row y, columns [xa, xb) (within its footprint and the SCA),
- * into out[x - xa]; called with the draw function's ctx. The
- * box's pixels and the halo are summed per pixel, negatives set to zero, then added. */
+ * into acc[x - xa]: per pixel the box's value (box[x - ca] for x in [ca, cb); box NULL: the
+ * row has no box pixels) plus the halo, negatives set to zero. Called with the draw
+ * function's ctx. */
 typedef wf_status (*wf_halo_fn)(void *ctx, const wf_render_object *obj, int y, int xa, int xb,
-                                double *out);
+                                const float *box, int ca, int cb, double *acc);
 
 typedef struct wf_renderer_config {
     int ncols, nrows;

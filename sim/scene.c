@@ -56,6 +56,11 @@ typedef struct thread_state {
     double *stamp;    /* the largest stamp, for objects asked for in pieces */
     size_t stamp_cap;
     wf_renderer *renderer;
+    /* the wing placed last, and for what: the renderer asks for an object's rows one after
+     * another, and the placement costs more than a row of the wing */
+    const wf_render_object *wing_obj;
+    double wing_key[3]; /* flux, x, y */
+    wf_profile_wing_at wing;
 } thread_state;
 
 struct wf_scene {
@@ -258,14 +263,23 @@ static wf_status draw_object(void *ctx, const wf_render_object *ro, int ya, int 
     return WF_OK;
 }
 
-/* A split galaxy's wing over row y, columns [xa, xb): recomputed as the tiles pass, so that
- * the pool keeps only the core box (a few times smaller than the stamp). */
-static wf_status halo_row(void *ctx, const wf_render_object *ro, int y, int xa, int xb, double *out)
+/* A split galaxy's wing over row y, columns [xa, xb), with its box's pixels: recomputed as
+ * the tiles pass, so that the pool keeps only the core box (a few times smaller than the
+ * stamp). */
+static wf_status halo_row(void *ctx, const wf_render_object *ro, int y, int xa, int xb,
+                          const float *box, int ca, int cb, double *acc)
 {
-    const thread_state *ts = ctx;
+    thread_state *ts = ctx;
     const object *o = ro->data;
-    wf_stamp row = {xa, y, xb - xa, 1, out, 0, 0, 0};
-    return wf_profile_add_wing(&ts->scene->ppsf, ro->halo, o->g.flux, o->x, o->y, &row);
+    if (ts->wing_obj != ro || ts->wing_key[0] != o->g.flux || ts->wing_key[1] != o->x ||
+        ts->wing_key[2] != o->y) {
+        ts->wing_obj = NULL;
+        wf_status st = wf_profile_wing_place(&ts->scene->ppsf, ro->halo, o->g.flux, o->x, o->y, &ts->wing);
+        if (st) return st;
+        ts->wing_obj = ro;
+        ts->wing_key[0] = o->g.flux, ts->wing_key[1] = o->x, ts->wing_key[2] = o->y;
+    }
+    return wf_profile_add_wing_row(&ts->wing, y, xa, xb, box, ca, cb, acc);
 }
 
 static long long object_id(const wf_scene *s, const object *o)
@@ -777,17 +791,24 @@ wf_status wf_scene_draw_object(wf_scene *s, size_t k, wf_scene_object *info, int
         return wf_error(WF_ERR_NOMEM, "scene: a %d x %d stamp", ro->nx, ro->ny);
     }
     wf_status st = draw_object(&s->ts[0], ro, ro->by0, ro->by0 + ro->bny, bx);
-    for (int j = 0; j < ro->bny && !st; j++) {
-        double *dst = buf + (size_t)(ro->by0 - ro->y0 + j) * ro->nx + (ro->bx0 - ro->x0);
-        for (int i = 0; i < ro->bnx; i++) dst[i] = (float)bx[(size_t)j * ro->bnx + i];
+    float *bf = (float *)bx; /* in place: each float is written after its double is read */
+    for (size_t i = 0; i < (size_t)ro->bnx * ro->bny && !st; i++) bf[i] = (float)bx[i];
+    if (!ro->halo) {
+        for (int j = 0; j < ro->bny && !st; j++)
+            for (int i = 0; i < ro->bnx; i++)
+                buf[(size_t)(ro->by0 - ro->y0 + j) * ro->nx + (ro->bx0 - ro->x0) + i] =
+                    bf[(size_t)j * ro->bnx + i];
+    }
+    int ca = ro->bx0 > ro->x0 ? ro->bx0 : ro->x0;
+    int cb = ro->bx0 + ro->bnx < ro->x0 + ro->nx ? ro->bx0 + ro->bnx : ro->x0 + ro->nx;
+    for (int j = 0; j < ro->ny && !st && ro->halo; j++) {
+        int by = ro->y0 + j - ro->by0;
+        const float *box = by >= 0 && by < ro->bny && ca < cb
+                               ? bf + (size_t)by * ro->bnx + (ca - ro->bx0) : NULL;
+        st = halo_row(&s->ts[0], ro, ro->y0 + j, ro->x0, ro->x0 + ro->nx, box, ca, cb,
+                      buf + (size_t)j * ro->nx);
     }
     free(bx);
-    for (int j = 0; j < ro->ny && !st && ro->halo; j++) {
-        double *row = buf + (size_t)j * ro->nx;
-        st = halo_row(&s->ts[0], ro, ro->y0 + j, ro->x0, ro->x0 + ro->nx, row);
-        for (int i = 0; i < ro->nx; i++)
-            if (row[i] < 0.0) row[i] = 0.0;
-    }
     if (st) { free(buf); return st; }
     info->id = object_id(s, o);
     info->kind = (int)o->kind;

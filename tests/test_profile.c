@@ -2160,6 +2160,89 @@ START_TEST(test_simd_identical_wing)
 }
 END_TEST
 
+/* The renderer's one-pass row of a split galaxy (wf_profile_wing_place, then
+ * wf_profile_add_wing_row per row) against the sum it replaces: the box's pixels as float,
+ * plus wf_profile_add_wing's wing, clipped at zero, added to what the row held. The same
+ * bits at every vector width, with rows the box does not reach, columns beyond it on both
+ * sides, and both sides of the clip; and what it refuses. */
+START_TEST(test_wing_row_is_box_plus_wing)
+{
+    wf_psf_image img;
+    wf_profile_accuracy acc;
+    ctx c;
+    double *psfpix = open_split(&c, &img, &acc);
+    ck_assert(wf_profile_work_tune(&c.work, acc.flux_fraction, acc.folding_threshold, acc.kvalue_accuracy, 1.0,
+                                   acc.knot_accuracy) == WF_OK);
+    static const int widths[] = {0, 2, 4, 8};
+    int tried = 0, clipped = 0, kept = 0;
+    for (int iw = 0; iw < 4; iw++) {
+        if (wf_profile_simd(widths[iw]) != widths[iw]) continue; /* not on this CPU */
+        tried++;
+        for (int k = 0; k < 3; k++) { /* the last: a box wider than the wing reaches */
+            static const double hd[] = {0.1, 0.4, 3.0};
+            wf_galaxy g = galaxy(50.0, 0.3, hd[k], 0.5 * hd[k], 0.2, -0.1);
+            wf_stamp b, box;
+            int core;
+            double x = 100.37 + k, y = 90.71;
+            ck_assert(wf_profile_galaxy_core(&c.work, &g, &c.psf, x, y, &b, &box, &core) == WF_OK);
+            ck_assert(core > 0);
+            wf_stamp bs = stamp_new(box.x0, box.y0, box.nx, box.ny);
+            ck_assert(wf_profile_draw_galaxy_core(&c.work, &g, &c.psf, x, y, &bs) == WF_OK);
+            float *bf = malloc(sizeof(float) * (size_t)box.nx * box.ny);
+            ck_assert_ptr_nonnull(bf);
+            for (int i = 0; i < box.nx * box.ny; i++) bf[i] = (float)bs.pix[i];
+            /* a footprint one column wider than the stamp each side and rows beyond the box */
+            int xa = b.x0 - 1, xb = b.x0 + b.nx + 1, w = xb - xa;
+            ck_assert(box.x0 > xa && box.x0 + box.nx < xb);
+            wf_stamp want = stamp_new(xa, b.y0 - 2, w, b.ny + 4);
+            double *got = malloc(sizeof(double) * (size_t)w * want.ny);
+            ck_assert_ptr_nonnull(got);
+            for (int i = 0; i < w * want.ny; i++) got[i] = want.pix[i] = 0.25 + 1e-3 * (i % 7);
+            wf_profile_wing_at at;
+            ck_assert(wf_profile_wing_place(&c.psf, core, g.flux, x, y, &at) == WF_OK);
+            if (k == 2) ck_assert_msg(box.nx > at.np && box.ny > at.np, "box %d x %d, wing %d", box.nx, box.ny, at.np);
+            double *d = malloc(sizeof(double) * (size_t)w);
+            ck_assert_ptr_nonnull(d);
+            for (int j = 0; j < want.ny; j++) {
+                int row = want.y0 + j, by = row - box.y0;
+                const float *brow = by >= 0 && by < box.ny ? bf + (size_t)by * box.nx : NULL;
+                for (int i = 0; i < w; i++) {
+                    int bx = xa + i - box.x0;
+                    d[i] = brow && bx >= 0 && bx < box.nx ? (double)brow[bx] : 0.0;
+                }
+                wf_stamp rs = {xa, row, w, 1, d, 0, 0, 0};
+                ck_assert(wf_profile_add_wing(&c.psf, core, g.flux, x, y, &rs) == WF_OK);
+                for (int i = 0; i < w; i++) {
+                    want.pix[(size_t)j * w + i] += d[i] < 0.0 ? 0.0 : d[i];
+                    clipped += d[i] < 0.0;
+                    kept += d[i] > 0.0;
+                }
+                ck_assert(wf_profile_add_wing_row(&at, row, xa, xb, brow, box.x0, box.x0 + box.nx,
+                                                  got + (size_t)j * w) == WF_OK);
+            }
+            ck_assert_msg(!memcmp(got, want.pix, sizeof(double) * (size_t)w * want.ny),
+                          "hlr %g, %d lanes: the row differs from box + wing, clipped", g.hlr_disk,
+                          widths[iw]);
+            /* refused: box columns outside the row's, a core the PSF does not have */
+            ck_assert_int_eq(wf_profile_add_wing_row(&at, b.y0, box.x0 + 1, xb, bf, box.x0,
+                                                     box.x0 + box.nx, got), WF_ERR_INPUT);
+            ck_assert_int_eq(wf_profile_wing_place(&c.psf, c.psf.ncore + 1, 1.0, x, y, &at),
+                             WF_ERR_INPUT);
+            free(d);
+            free(got);
+            free(want.pix);
+            free(bf);
+            free(bs.pix);
+        }
+    }
+    ck_assert(tried >= 2);
+    ck_assert(clipped > 10 && kept > 10); /* both sides of the clip */
+    wf_profile_simd(8);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
 /* FFT sides that do not divide psf_table_fft read the PSF table through bicubic
  * interpolation: its error, against the same draw with an exact table. */
 START_TEST(test_psf_table_interpolation)
@@ -2463,6 +2546,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_knots_smooth_bound);
     tcase_add_test(ind, test_simd_identical);
     tcase_add_test(ind, test_simd_identical_wing);
+    tcase_add_test(ind, test_wing_row_is_box_plus_wing);
     tcase_add_loop_test(ind, test_work_dense_first, 0, 2);
     suite_add_tcase(s, ind);
     TCase *stiff = tcase_create("stiff");
