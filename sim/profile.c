@@ -23,6 +23,7 @@
 #include <fftw3.h>
 #include <math.h>
 #include <pthread.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -211,29 +212,47 @@ wf_status wf_profile_work_init(wf_profile_work *w, const wf_profile_accuracy *ac
     w->sersic = wf_sersic4_table();
     w->nsizes = l.nsizes;
     memcpy(w->sizes, l.sizes, sizeof w->sizes);
-    /* the lock is taken per plan: a scene's set-up helper makes these while the main thread
-     * builds the PSF, whose few plans then wait for one of these at most, not all */
-    for (int i = 0; i < w->nsizes; i++) {
-        int n = w->sizes[i];
-        wf_fftw_lock();
-        w->plans[i] = fftw_plan_dft_c2r_2d(n, n, (fftw_complex *)w->fft, w->fft, FFTW_ESTIMATE);
-        wf_fftw_unlock();
-        if (!w->plans[i]) {
-            wf_profile_work_free(w);
-            return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", n);
-        }
-    }
+    /* the plans come with the first draw of each side (draw_plan) */
+    if ((uintptr_t)w->fft % 16)
+        return wf_error(WF_ERR_INTERNAL, "profile: FFT buffer not 16-byte aligned");
     return WF_OK;
 }
 
 void wf_profile_work_free(wf_profile_work *w)
 {
     if (!w) return;
-    wf_fftw_lock();
-    for (int i = 0; i < w->nsizes; i++)
-        if (w->plans[i]) fftw_destroy_plan((fftw_plan)w->plans[i]);
-    wf_fftw_unlock();
+    memset(w->plans, 0, sizeof w->plans); /* shared: they stay (draw_plan) */
     w->nsizes = 0;
+}
+
+/* The drawer's plans: one in-place n x n complex-to-real transform per side, made on first
+ * use and shared by every work of the process, as every work's buffer has rows of n + 2 and
+ * FFTW's alignment (16 bytes), all new-array execution asks. Planning costs up to ~4 ms a
+ * side even with FFTW_ESTIMATE (a 3 x 2^a side the most), per thread when each work made
+ * its own for the whole ladder; a scene uses a few sides. FFTW_ESTIMATE reads no array, so
+ * a plan may be made while the buffer holds a draw's input. Kept for the process's life. */
+static void *shared_plans[2 * 15];
+
+static int side_index(int n)
+{
+    int odd = n % 3 == 0, m = odd ? n / 3 : n, a = 0;
+    while (m > 1) m >>= 1, a++;
+    return 2 * a + odd;
+}
+
+static wf_status draw_plan(wf_profile_work *w, int mi)
+{
+    if (w->plans[mi]) return WF_OK;
+    int n = w->sizes[mi], ix = side_index(n);
+    if (ix < 0 || ix >= (int)(sizeof shared_plans / sizeof *shared_plans))
+        return wf_error(WF_ERR_INTERNAL, "profile: FFT side %d has no plan slot", n);
+    wf_fftw_lock();
+    if (!shared_plans[ix])
+        shared_plans[ix] = fftw_plan_dft_c2r_2d(n, n, (fftw_complex *)w->fft, w->fft, FFTW_ESTIMATE);
+    w->plans[mi] = shared_plans[ix];
+    wf_fftw_unlock();
+    if (!w->plans[mi]) return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", n);
+    return WF_OK;
 }
 
 /* ------------------------------------------------------------------------ the objects */
@@ -2316,6 +2335,8 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
             fold_pass(w, jb, psf, &gd, us, k0, nkb);
         }
     }
+    wf_status pst = draw_plan(w, mi);
+    if (pst) return pst;
     fftw_execute_dft_c2r((fftw_plan)w->plans[mi], (fftw_complex *)w->fft, w->fft);
 
     const double norm = 1.0 / ((double)gd.m * gd.m);

@@ -164,7 +164,8 @@ typedef struct wf_profile_work {
     wf_profile_accuracy acc;
     int nsizes;
     int sizes[48];         /* FFT sides, ascending (see wf_profile_work_init) */
-    void *plans[48];       /* fftw_plan: in-place complex-to-real, one per side */
+    void *plans[48];       /* fftw_plan: in-place complex-to-real, one per side, made on
+                              first use and shared by every work (not freed) */
     double *fft;           /* in-place buffer for the largest side */
     double *ex, *ey;       /* per-draw phase lines, cap_line entries: ex real parts then
                               imaginary ones cap_line further, ey complex interleaved */
@@ -194,7 +195,8 @@ typedef struct wf_profile_work {
 wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes, size_t *dense);
 wf_status wf_profile_work_init(wf_profile_work *work, const wf_profile_accuracy *acc,
                                wf_arena *arena);
-/* Destroys the FFTW plans; the arena memory is the caller's to release. */
+/* Forgets the work's plans (they are the process's); the arena memory is the caller's to
+ * release. */
 void wf_profile_work_free(wf_profile_work *work);
 /* Changes the per-object knobs between draws (e.g. looser for faint objects, a larger
  * flux_fraction for bright stars); the others fix the buffers and stay. */
