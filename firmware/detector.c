@@ -202,6 +202,61 @@ void wf_det_single_row(const wf_detector *det, const double *e, const double *q,
         single_row_body(det, e, q, z, n, out, sat, 0);
 }
 
+static inline __attribute__((always_inline)) void ramp_read_body(
+    const wf_detector *det, const double *restrict e, const double *restrict q,
+    const float *restrict z, int n, uint8_t r, double *restrict sum, uint8_t *restrict first,
+    int unit_gain)
+{
+    const double sigma = det->read_noise_e, gain = det->gain, bias = det->bias_adu;
+    const double fw = det->full_well, adc = det->adc_max;
+    const int rn = det->on.read_noise, quant = det->on.quantize, satur = det->on.saturation;
+    const double magic = 6755399441055744.0, big = 2251799813685248.0; /* as single_row_body */
+    for (int i = 0; i < n; i++) {
+        double v = e[i];
+        if (rn) v += sigma * (double)z[i];
+        double adu = (unit_gain ? v : v / gain) + bias;
+        if (quant) {
+            double rr = __builtin_copysign((adu + magic) - magic, adu);
+            adu = (adu > -big) & (adu < big) ? rr : adu;
+        }
+        if (satur) {
+            /* first[i] is 255 or an earlier resultant (the reads come in order), so the first
+             * one keeps the min; a mask, not a select, as single_row_body */
+            uint8_t clipped = (uint8_t)((q[i] >= fw) | (adu >= adc));
+            uint8_t cand = (uint8_t)(r | (uint8_t)(clipped - 1u)); /* r, else 255 */
+            first[i] = first[i] < cand ? first[i] : cand;
+            adu = adu >= adc ? adc : adu;
+            adu = adu < 0.0 ? 0.0 : adu;
+        }
+        sum[i] += adu;
+    }
+}
+
+WF_CLONES
+void wf_det_ramp_read_row(const wf_detector *det, const double *e, const double *q,
+                          const float *z, int n, uint8_t r, double *sum, uint8_t *first_sat)
+{
+    if (det->gain == 1.0)
+        ramp_read_body(det, e, q, z, n, r, sum, first_sat, 1);
+    else
+        ramp_read_body(det, e, q, z, n, r, sum, first_sat, 0);
+}
+
+WF_CLONES
+void wf_det_resultant_row(double *sum, int n, int nreads, uint16_t *out)
+{
+    const double magic = 6755399441055744.0, big = 2251799813685248.0;
+    for (int i = 0; i < n; i++) {
+        double v = sum[i] / nreads;
+        double rr = __builtin_copysign((v + magic) - magic, v); /* nearbyint, half to even */
+        v = (v > -big) & (v < big) ? rr : v;
+        v = v >= 0.0 ? v : 0.0; /* NaN too */
+        v = v > 65535.0 ? 65535.0 : v;
+        out[i] = (uint16_t)v;
+        sum[i] = 0.0;
+    }
+}
+
 double wf_det_saturation_adu(const wf_detector *det)
 {
     double fw = det->full_well;

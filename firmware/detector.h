@@ -90,6 +90,18 @@ void wf_det_measure_row(const wf_detector *det, const double *q, int n, double *
 void wf_det_single_row(const wf_detector *det, const double *e, const double *q,
                        const float *z, int n, float *out, uint8_t *sat);
 
+/* One read of an up-the-ramp row, as wf_det_single_row digitises (read noise, gain,
+ * quantization, ADC range) but in double: sum[x] += the read's ADU, and the resultant r
+ * recorded in first_sat[x] where it is still 255 and the pixel reached the full well (q) or
+ * the ADC ceiling (when saturation is on): r < 255, and never below an r of an earlier call
+ * for the same row (reads in order). The arrays must not overlap. */
+void wf_det_ramp_read_row(const wf_detector *det, const double *e, const double *q,
+                          const float *z, int n, uint8_t r, double *sum, uint8_t *first_sat);
+
+/* A resultant's row from its reads' ADU sums: out[x] = sum[x] / nreads rounded half to even
+ * into [0, 65535] (NaN: 0), and sum[x] = 0 for the next. */
+void wf_det_resultant_row(double *sum, int n, int nreads, uint16_t *out);
+
 /* Smallest ADU value that means saturated: the lower of the ADC ceiling and the full well
  * after nonlinearity and gain, plus the bias. */
 double wf_det_saturation_adu(const wf_detector *det);

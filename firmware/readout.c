@@ -7,6 +7,7 @@
 
 #include "firmware/cosmic.h"
 #include "hal/packet.h"
+#include "hal/simd.h"
 
 
 struct wf_readout {
@@ -33,6 +34,8 @@ struct wf_readout {
     double *row;                   /* one row after IPC */
     double *sum;                   /* tile rows, ADU summed over the resultant's reads */
     uint16_t *res_out;             /* [nres][tile_rows][ncols] */
+    double *counts;                /* ramp: one row's Poisson counts of a read */
+    uint8_t *slow;                 /* ramp: one row, 1 where poisson_word draws the count */
     float *single_out;             /* [tile_rows][ncols] */
     double *recip;                 /* single frame: reciprocity failure of 0 .. RECIP_TABLE-1 e- */
     int recip_ready;               /* recip filled (Poisson counts are whole numbers) */
@@ -128,7 +131,8 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     n += wf_arena_cost((size_t)cfg->ncols * sizeof(double));
     n += wf_arena_cost(tile * sizeof(double));
     if (cfg->mode == WF_MODE_RAMP)
-        n += wf_arena_cost(tile * sizeof(uint16_t) * (size_t)clock->ma.nresultants);
+        n += wf_arena_cost(tile * sizeof(uint16_t) * (size_t)clock->ma.nresultants) +
+             wf_arena_cost((size_t)cfg->ncols * sizeof(double)) + wf_arena_cost((size_t)cfg->ncols);
     else
         n += wf_arena_cost(tile * sizeof(float)) + single_arena_need(cfg);
     n += wf_arena_cost(tile);
@@ -217,6 +221,8 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     TAKE(ro->sum, tile, "resultant sums");
     if (cfg->mode == WF_MODE_RAMP) {
         TAKE(ro->res_out, tile * (size_t)clock->ma.nresultants, "resultant tile");
+        TAKE(ro->counts, cfg->ncols, "Poisson counts row");
+        TAKE(ro->slow, cfg->ncols, "Poisson slow-draw flags");
         ro->total_reads = wf_ma_total_reads(&clock->ma);
         for (int i = 0; i < WF_MA_MAX_READS; i++) ro->resultant_of_read[i] = -1;
         for (int r = 0; r < clock->ma.nresultants; r++)
@@ -346,6 +352,41 @@ static inline double poisson_word(uint32_t w, const uint32_t *w2, double mean, d
     return k;
 }
 
+/* poisson_word for a row of means below 10 by inversion (expm[x] = exp(-mean[x])), the
+ * same terms summed in the same order, without its data-dependent loop so that the row
+ * vectorises: k[x] gets the count where it is at most 6 (for the sky of a read, ~1 e-, a
+ * count beyond is one pixel in 10^4, and each term costs every pixel a division), else (and for a mean
+ * outside (0, 10), or a term that no longer moves the sum before the count is found)
+ * slow[x] = 1 for poisson_word to draw it. */
+WF_CLONES static void poisson_row_small(int n, const double *restrict mean,
+                                        const double *restrict expm, const uint32_t *restrict w,
+                                        double *restrict k, uint8_t *restrict slow)
+{
+    for (int x = 0; x < n; x++) {
+        const double m = mean[x], e = expm[x];
+        const double u = ((double)w[x] + 0.5) * (1.0 / 4294967296.0);
+        double p1 = e * m, p2 = p1 * m * 0.5;
+        double f0 = e, f1 = f0 + p1, f2 = f1 + p2;
+        /* the count is how many of the cumulative sums u exceeds, while they grow */
+        int c = (u > f0) + (u > f1) + (u > f2), odd = ((m > 0.0) == 0) | (m >= 10.0);
+        double p = p2, cdf = f2, next;
+        /* term j (written out: the vectoriser takes no inner loop) */
+#define SMALL_TERM(j)                                                                      \
+        p *= m / (double)(j);                                                              \
+        next = cdf + p;                                                                    \
+        odd |= (next == cdf) & (u > cdf); /* poisson_word stops there: let it */           \
+        cdf = next;                                                                        \
+        c += u > cdf;
+        SMALL_TERM(3)
+        SMALL_TERM(4)
+        SMALL_TERM(5)
+        SMALL_TERM(6)
+#undef SMALL_TERM
+        k[x] = (double)c;
+        slow[x] = (uint8_t)((c > 6) | odd);
+    }
+}
+
 /* Fills the first `blocks` noise blocks of row y for (read, purpose), word k of column x at
  * words[k * ncols + x], and for tile rows the normals from word 0. */
 static void row_noise(wf_readout *ro, int y, uint32_t read, wf_purpose purpose, int blocks, float *z)
@@ -433,6 +474,20 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
                 continue;
             }
             const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
+            if (frames == 1.0 && !ro->slope_any) { /* the common read: means known, exp too */
+                double *cnt = ro->counts;
+                uint8_t *slow = ro->slow;
+                poisson_row_small(nc, m, em, w1, cnt, slow);
+                for (int x = 0; x < nc; x++) {
+                    if (slow[x]) {
+                        more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x),
+                                         .read = (uint32_t)k, .purpose = WF_PURPOSE_PHOTON};
+                        cnt[x] = poisson_word(w1[x], &w2[x], m[x], em[x], &mn);
+                    }
+                    q[x] += cnt[x];
+                }
+                continue;
+            }
             for (int x = 0; x < nc; x++) {
                 more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)k,
                                  .purpose = WF_PURPOSE_PHOTON};
@@ -448,9 +503,11 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
         if (ro->cosmic_on)
             for (; next_dep < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[next_dep].read <= k; next_dep++)
                 ro->charge[ro->cosmic.deposits[next_dep].pixel] += ro->cosmic.deposits[next_dep].electrons;
-        if (d->on.saturation)
-            for (int i = 0; i < hn; i++)
-                if (ro->charge[i] > d->full_well) ro->charge[i] = d->full_well;
+        if (d->on.saturation) { /* a select, not a branch: the loop vectorises */
+            const double fw = d->full_well;
+            double *c = ro->charge;
+            for (int i = 0; i < hn; i++) c[i] = c[i] > fw ? fw : c[i];
+        }
         wf_det_measure_row(d, ro->charge, hn, ro->meas);
         int last_of_resultant = ro->clock.ma.read[ro->clock.ma.first[r + 1] - 1] == k;
         int nreads = ro->clock.ma.first[r + 1] - ro->clock.ma.first[r];
@@ -461,15 +518,8 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
             uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
             uint16_t *out = ro->res_out + (size_t)r * plane + (size_t)(y - y0) * nc;
             const float *z = ro->gauss + (size_t)(y - y0) * nc;
-            for (int x = 0; x < nc; x++) {
-                int clipped = d->on.saturation && q[x] >= d->full_well;
-                s[x] += digitise(d, v[x], d->read_noise_e, z[x], &clipped);
-                if (clipped && sat[x] == 255) sat[x] = (uint8_t)r;
-                if (last_of_resultant) {
-                    out[x] = to_u16(s[x] / nreads);
-                    s[x] = 0.0;
-                }
-            }
+            wf_det_ramp_read_row(d, v, q, z, nc, (uint8_t)r, s, sat);
+            if (last_of_resultant) wf_det_resultant_row(s, nc, nreads, out);
         }
     }
     return WF_OK;

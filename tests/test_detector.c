@@ -542,6 +542,69 @@ START_TEST(test_saturation_adu)
 }
 END_TEST
 
+/* An up-the-ramp read digitised a row at a time: each pixel as the chain defines it (read
+ * noise, gain, bias, half-to-even rounding, the ADC's [0, adc_max], a saturation flag where
+ * the charge reached the full well or the ADU the ceiling), added to the resultant's sum;
+ * the flag keeps the first resultant. Unit and other gains, odd lengths (vector tails). */
+START_TEST(test_ramp_read_row)
+{
+    enum { N = 37 };
+    wf_detector det;
+    wf_detector_defaults(&det);
+    det.adc_max = 65535.0;
+    for (int g = 0; g < 2; g++) {
+        det.gain = g ? 1.0 : 1.7;
+        double e[N], q[N], sum[N], want_sum[N];
+        float z[N];
+        uint8_t first[N], want_first[N];
+        for (int i = 0; i < N; i++) {
+            /* negative to beyond the ADC, half-ADU points, charges around the full well */
+            e[i] = -3000.0 + 4600.0 * i * det.gain + (i % 3 ? 0.5 * det.gain : 0.0);
+            q[i] = det.full_well * (0.9 + 0.01 * i);
+            z[i] = (float)(0.37 * (i % 5) - 0.8);
+            sum[i] = want_sum[i] = 10.0 * i;
+            first[i] = want_first[i] = i % 4 == 0 ? 1 : 255;
+        }
+        for (uint8_t r = 2; r < 4; r++) {
+            wf_det_ramp_read_row(&det, e, q, z, N, r, sum, first);
+            for (int i = 0; i < N; i++) {
+                double adu = (e[i] + det.read_noise_e * (double)z[i]) / det.gain + det.bias_adu;
+                adu = wf_det_quantize(adu);
+                int clipped = q[i] >= det.full_well || adu >= det.adc_max;
+                if (adu >= det.adc_max) adu = det.adc_max;
+                if (adu < 0.0) adu = 0.0;
+                want_sum[i] += adu;
+                if (clipped && want_first[i] == 255) want_first[i] = r;
+            }
+            for (int i = 0; i < N; i++) {
+                ck_assert_msg(sum[i] == want_sum[i], "gain %g, read %d, pixel %d: %.17g, want %.17g",
+                              det.gain, r, i, sum[i], want_sum[i]);
+                ck_assert_msg(first[i] == want_first[i], "pixel %d: first %u, want %u", i, first[i], want_first[i]);
+            }
+        }
+        int zero = 0, top = 0;
+        for (int i = 0; i < N; i++) zero += want_sum[i] == 10.0 * i, top += want_first[i] != 255;
+        ck_assert(zero > 0 && top > 5); /* both ends of the ADC reached */
+    }
+}
+END_TEST
+
+/* Resultants from their reads' sums: rounded half to even, clamped to 16 bits, NaN to 0,
+ * and the sums cleared. */
+START_TEST(test_resultant_row)
+{
+    double sum[] = {3.0, 5.0, 7.0, -1.0, 196605.0, 196606.5, 1e300, NAN, 4.5 * 3.0, 0.0, 7.5 * 3.0};
+    const uint16_t want[] = {1, 2, 2, 0, 65535, 65535, 65535, 0, 4, 0, 8};
+    enum { N = sizeof sum / sizeof sum[0] };
+    uint16_t out[N];
+    wf_det_resultant_row(sum, N, 3, out);
+    for (int i = 0; i < N; i++) {
+        ck_assert_msg(out[i] == want[i], "sum %d: %u, want %u", i, out[i], want[i]);
+        ck_assert(sum[i] == 0.0);
+    }
+}
+END_TEST
+
 static Suite *detector_suite(void)
 {
     Suite *s = suite_create("detector");
@@ -567,6 +630,8 @@ static Suite *detector_suite(void)
     tcase_add_test(cf, test_reciprocity_points);
     tcase_add_test(cf, test_quantize_half_even);
     tcase_add_test(cf, test_saturation_adu);
+    tcase_add_test(cf, test_ramp_read_row);
+    tcase_add_test(cf, test_resultant_row);
     suite_add_tcase(s, cf);
     return s;
 }

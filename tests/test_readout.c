@@ -503,6 +503,85 @@ START_TEST(direct_matches_per_read)
 }
 END_TEST
 
+/* Rates chosen per column so that a read's mean runs from 0 through the tiny to just below
+ * 10: the per-read Poisson draws of every count the row-at-a-time inversion finds itself and
+ * of those it leaves to the one-pixel path (counts above 6, a sum that stops growing). */
+static const double exact_means[] = {0.0, 1e-9, 1e-4, 0.05, 0.4, 1.1, 2.0, 3.3, 5.0, 7.5, 9.2, 9.999};
+enum { EXACT_NM = sizeof exact_means / sizeof exact_means[0] };
+
+static wf_status exact_fill(void *ctx, int y0, int y1, int ncols, float *rate)
+{
+    const double ft = *(const double *)ctx;
+    for (int y = y0; y < y1; y++)
+        for (int x = 0; x < ncols; x++)
+            rate[(size_t)(y - y0) * ncols + x] = (float)(exact_means[(x + 5 * y) % EXACT_NM] / ft);
+    return WF_OK;
+}
+
+/* Poisson by inversion, as SPEC's per-read sampling defines it: the smallest k whose
+ * cumulative probability reaches u = (w + 0.5) / 2^32, the terms p_k = p_(k-1) m / k summed
+ * in order (at most 200; a term that no longer changes the sum ends it). */
+static double inversion(uint32_t w, double m)
+{
+    if (!(m > 0.0)) return 0.0;
+    double u = ((double)w + 0.5) * (1.0 / 4294967296.0), e = exp(-m);
+    double p1 = e * m, p2 = p1 * m * 0.5, f0 = e, f1 = f0 + p1, f2 = f1 + p2;
+    if (u <= f2) return (double)((u > f0) + (u > f1));
+    double p = p2, cdf = f2, k = 2.0;
+    while (u > cdf && k < 200.0) {
+        k += 1.0;
+        p *= m / k;
+        if (cdf + p == cdf) break;
+        cdf += p;
+    }
+    return k;
+}
+
+/* Photon noise alone, one read per resultant, unit gain, no bias: each resultant is the
+ * charge collected so far, and must be the sum of the inversion draws from each pixel's
+ * stream (word 1 of the first block at each read), every pixel and read exactly. */
+START_TEST(per_read_counts_exact)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 67, 37); /* odd sizes: the rows' vector tails, a short tile */
+    const int counts[] = {1, 1, 1, 1, 1, 1, 1, 1};
+    ck_assert_int_eq(wf_ma_from_counts("ones", counts, 8, &clock.ma), WF_OK);
+    wf_detector *d = &cfg.det;
+    memset(&d->on, 0, sizeof d->on);
+    d->on.photon_noise = 1;
+    d->gain = 1.0;
+    d->bias_adu = 0.0;
+    double ft = clock.frame_time;
+    wf_scene_source src = {&ft, exact_fill, NULL, NULL};
+    size_t len;
+    unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
+    decoded dd;
+    decode(buf, len, &dd);
+    free(buf);
+    ck_assert_int_eq(dd.nres, 8);
+    wf_noise noise = {WF_NOISE_PHILOX, cfg.seed, cfg.exposure, cfg.sca};
+    long above6 = 0, zero = 0;
+    for (int y = 0; y < cfg.nrows; y++)
+        for (int x = 0; x < cfg.ncols; x++) {
+            uint32_t pix = (uint32_t)(y * cfg.ncols + x), w[4];
+            double m = (double)(float)(exact_means[(x + 5 * y) % EXACT_NM] / ft) * ft, q = 0.0;
+            for (int r = 0; r < 8; r++) {
+                wf_noise_block_row(&noise, pix, 1, (uint32_t)r, WF_PURPOSE_PHOTON, 0, &w[0], &w[1], &w[2], &w[3]);
+                double k = inversion(w[1], m);
+                above6 += k > 6.0;
+                zero += k == 0.0;
+                q += k;
+                uint16_t got = dd.res[((size_t)r * cfg.nrows + y) * cfg.ncols + x];
+                ck_assert_msg(got == (uint16_t)q, "pixel (%d, %d), read %d, mean %g: %u, want %g", x, y, r,
+                              m, got, q);
+            }
+        }
+    ck_assert_msg(above6 > 20 && zero > 100, "counts above 6: %ld, zeros: %ld", above6, zero);
+    free_decoded(&dd);
+}
+END_TEST
+
 /* A pixel that saturates within the ramp: resultants never decrease, never exceed the
  * saturation level, and the saturation map names the first resultant whose reads reached it
  * (here the 16-bit ADC, at 65535 ADU, comes before the full well). */
@@ -791,6 +870,7 @@ static Suite *suite(void)
     tcase_add_test(tc, arena_host_alloc_dense_part);
     tcase_add_test(tc, noiseless_flux_conserved);
     tcase_add_test(tc, direct_matches_per_read);
+    tcase_add_test(tc, per_read_counts_exact);
     tcase_add_test(tc, saturation_defined);
     tcase_add_test(tc, single_frame_closed_form);
     tcase_add_test(tc, cosmic_ray_count);
