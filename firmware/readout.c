@@ -36,6 +36,7 @@ struct wf_readout {
     uint16_t *res_out;             /* [nres][tile_rows][ncols] */
     double *counts;                /* ramp: one row's Poisson counts of a read */
     uint8_t *slow;                 /* ramp: one row, 1 where poisson_word draws the count */
+    uint32_t *thr;                 /* ramp per read: [7][halo block], wf_poisson_inversion_thresholds */
     float *single_out;             /* [tile_rows][ncols] */
     double *recip;                 /* single frame: reciprocity failure of 0 .. RECIP_TABLE-1 e- */
     int recip_ready;               /* recip filled (Poisson counts are whole numbers) */
@@ -132,7 +133,8 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     n += wf_arena_cost(tile * sizeof(double));
     if (cfg->mode == WF_MODE_RAMP)
         n += wf_arena_cost(tile * sizeof(uint16_t) * (size_t)clock->ma.nresultants) +
-             wf_arena_cost((size_t)cfg->ncols * sizeof(double)) + wf_arena_cost((size_t)cfg->ncols);
+             wf_arena_cost((size_t)cfg->ncols * sizeof(double)) + wf_arena_cost((size_t)cfg->ncols) +
+             (cfg->sampling == WF_SAMPLE_PER_READ ? wf_arena_cost(7 * halo * sizeof(uint32_t)) : 0);
     else
         n += wf_arena_cost(tile * sizeof(float)) + single_arena_need(cfg);
     n += wf_arena_cost(tile);
@@ -222,6 +224,7 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     if (cfg->mode == WF_MODE_RAMP) {
         TAKE(ro->res_out, tile * (size_t)clock->ma.nresultants, "resultant tile");
         TAKE(ro->counts, cfg->ncols, "Poisson counts row");
+        if (cfg->sampling == WF_SAMPLE_PER_READ) TAKE(ro->thr, 7 * halo, "Poisson inversion thresholds");
         TAKE(ro->slow, cfg->ncols, "Poisson slow-draw flags");
         ro->total_reads = wf_ma_total_reads(&clock->ma);
         for (int i = 0; i < WF_MA_MAX_READS; i++) ro->resultant_of_read[i] = -1;
@@ -352,38 +355,19 @@ static inline double poisson_word(uint32_t w, const uint32_t *w2, double mean, d
     return k;
 }
 
-/* poisson_word for a row of means below 10 by inversion (expm[x] = exp(-mean[x])), the
- * same terms summed in the same order, without its data-dependent loop so that the row
- * vectorises: k[x] gets the count where it is at most 6 (for the sky of a read, ~1 e-, a
- * count beyond is one pixel in 10^4, and each term costs every pixel a division), else (and for a mean
- * outside (0, 10), or a term that no longer moves the sum before the count is found)
- * slow[x] = 1 for poisson_word to draw it. */
-WF_CLONES static void poisson_row_small(int n, const double *restrict mean,
-                                        const double *restrict expm, const uint32_t *restrict w,
-                                        double *restrict k, uint8_t *restrict slow)
+/* The counts of a row whose thresholds are thr[j][x] (stride apart) and slow[x], from the
+ * words w: k[x] for poisson_word where flag[x] is 0, flag[x] = 1 where it must draw. */
+WF_CLONES static void poisson_row_small(int n, const uint32_t *restrict w,
+                                        const uint32_t *restrict thr, size_t stride,
+                                        const uint32_t *restrict slow, double *restrict k,
+                                        uint8_t *restrict flag)
 {
     for (int x = 0; x < n; x++) {
-        const double m = mean[x], e = expm[x];
-        const double u = ((double)w[x] + 0.5) * (1.0 / 4294967296.0);
-        double p1 = e * m, p2 = p1 * m * 0.5;
-        double f0 = e, f1 = f0 + p1, f2 = f1 + p2;
-        /* the count is how many of the cumulative sums u exceeds, while they grow */
-        int c = (u > f0) + (u > f1) + (u > f2), odd = ((m > 0.0) == 0) | (m >= 10.0);
-        double p = p2, cdf = f2, next;
-        /* term j (written out: the vectoriser takes no inner loop) */
-#define SMALL_TERM(j)                                                                      \
-        p *= m / (double)(j);                                                              \
-        next = cdf + p;                                                                    \
-        odd |= (next == cdf) & (u > cdf); /* poisson_word stops there: let it */           \
-        cdf = next;                                                                        \
-        c += u > cdf;
-        SMALL_TERM(3)
-        SMALL_TERM(4)
-        SMALL_TERM(5)
-        SMALL_TERM(6)
-#undef SMALL_TERM
+        const uint32_t v = w[x];
+        int c = (v >= thr[x]) + (v >= thr[stride + x]) + (v >= thr[2 * stride + x]) +
+                (v >= thr[3 * stride + x]) + (v >= thr[4 * stride + x]) + (v >= thr[5 * stride + x]);
         k[x] = (double)c;
-        slow[x] = (uint8_t)((c > 6) | odd);
+        flag[x] = (uint8_t)(v >= slow[x]);
     }
 }
 
@@ -447,6 +431,12 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
     const int nc = ro->cfg.ncols, rows = y1 - y0, hn = (h1 - h0) * nc;
     const size_t plane = (size_t)rows * nc;
     int next_dep = 0, prev_read = -1;
+    if (d->on.photon_noise && !ro->noise_off && !ro->slope_any)
+        for (int i = 0; i < hn; i++) {
+            uint32_t t[6];
+            wf_poisson_inversion_thresholds(ro->mean[i], ro->expm[i], t, &ro->thr[6 * (size_t)hn + i]);
+            for (int j = 0; j < 6; j++) ro->thr[(size_t)j * hn + i] = t[j];
+        }
     for (int k = 0; k < ro->total_reads; k++) {
         int r = ro->resultant_of_read[k];
         if (r < 0) continue; /* charge of skipped reads is drawn with the next digitised one */
@@ -474,10 +464,11 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
                 continue;
             }
             const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
-            if (frames == 1.0 && !ro->slope_any) { /* the common read: means known, exp too */
+            if (frames == 1.0 && !ro->slope_any) { /* the common read: the tile's thresholds */
                 double *cnt = ro->counts;
                 uint8_t *slow = ro->slow;
-                poisson_row_small(nc, m, em, w1, cnt, slow);
+                poisson_row_small(nc, w1, ro->thr + row0, (size_t)hn, ro->thr + 6 * (size_t)hn + row0,
+                                  cnt, slow);
                 for (int x = 0; x < nc; x++) {
                     if (slow[x]) {
                         more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x),

@@ -2,6 +2,7 @@
 #include "hal/philox.h"
 
 #include <math.h>
+#include <string.h>
 
 void wf_philox4x32(const uint32_t in[4], const uint32_t key_in[2], uint32_t out[4])
 {
@@ -171,6 +172,42 @@ double wf_rng_poisson(wf_rng *rng, double mean)
     return k;
 }
 
+/* The first word w with (w + 0.5) 2^-32 > c: w > c 2^32 - 0.5, i.e. w >= floor(c 2^32 - 0.5)
+ * + 1, where c 2^32 and c 2^32 - 0.5 are exact for c >= e^-10 (0.5 stays a multiple of their
+ * last place). A double: 2^32 or more when no word is. */
+static double first_word_above(double c) { return floor(ldexp(c, 32) - 0.5) + 1.0; }
+
+void wf_poisson_inversion_thresholds(double m, double e, uint32_t thr[6], uint32_t *slow)
+{
+    if (!(m > 0.0 && m < 10.0)) { /* not inversion's range: every word is the caller's */
+        memset(thr, 0, 6 * sizeof *thr);
+        *slow = 0;
+        return;
+    }
+    /* the sums as the readout's one-pixel inversion forms them (firmware/readout.c) */
+    double F[7];
+    int stop = 7; /* the first sum that did not grow: that inversion ends there */
+    double p1 = e * m, p2 = p1 * m * 0.5;
+    F[0] = e;
+    F[1] = F[0] + p1;
+    F[2] = F[1] + p2;
+    double p = p2, cdf = F[2];
+    for (int j = 3; j <= 6; j++) {
+        p *= m / (double)j;
+        double next = cdf + p;
+        if (next == cdf && stop == 7) stop = j;
+        cdf = next;
+        F[j] = cdf;
+    }
+    uint32_t T[7];
+    for (int j = 0; j < 7; j++) {
+        double first = first_word_above(F[j]); /* F >= e^-m > e^-10 */
+        T[j] = first >= 4294967295.0 ? UINT32_MAX : (uint32_t)first;
+    }
+    memcpy(thr, T, 6 * sizeof *thr);
+    *slow = T[stop < 7 ? stop - 1 : 6];
+}
+
 wf_status wf_poisson_table_init(wf_poisson_table *t, double mean)
 {
     if (!(mean > 0.0 && mean < 10.0))
@@ -189,11 +226,9 @@ wf_status wf_poisson_table_init(wf_poisson_table *t, double mean)
         t->cdf[n++] = next;
     }
     t->n = n;
-    /* (w + 0.5) 2^-32 > c  <=>  w > c 2^32 - 0.5  <=>  w >= floor(c 2^32 - 0.5) + 1; c 2^32 and
-     * c 2^32 - 0.5 are exact (c >= e^-10 keeps 0.5 a multiple of their last place) */
     t->nword = 0;
     for (int j = 0; j < n; j++) {
-        double first = floor(ldexp(t->cdf[j], 32) - 0.5) + 1.0;
+        double first = first_word_above(t->cdf[j]);
         if (first > 4294967295.0) break;
         t->word[t->nword++] = (uint32_t)first;
     }

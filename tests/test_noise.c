@@ -490,6 +490,73 @@ START_TEST(test_batch_matches_scalar)
 }
 END_TEST
 
+/* Poisson by inversion, written out: the smallest k whose cumulative sum (the terms summed
+ * in order, at most 200, a term that no longer moves the sum ending it) reaches u. */
+static int invert(uint32_t w, double m)
+{
+    double u = ((double)w + 0.5) * (1.0 / 4294967296.0), e = exp(-m);
+    double p1 = e * m, p2 = p1 * m * 0.5, f0 = e, f1 = f0 + p1, f2 = f1 + p2;
+    if (u <= f2) return (u > f0) + (u > f1);
+    double p = p2, cdf = f2;
+    int k = 2;
+    while (u > cdf && k < 200) {
+        k++;
+        p *= m / k;
+        if (cdf + p == cdf) break;
+        cdf += p;
+    }
+    return k;
+}
+
+/* The thresholds give inversion's count on both sides of every threshold (the words where
+ * the count changes), at the ends of the word range, and hand over exactly the words whose
+ * count is above 6; outside (0, 10) every word is handed over. */
+START_TEST(test_inversion_thresholds)
+{
+    const double means[] = {1e-12, 1e-6, 0.01, 0.3, 1.0, 1.1, 2.5, 4.0, 6.0, 9.0, 9.999999};
+    for (size_t i = 0; i < sizeof means / sizeof means[0]; i++) {
+        double m = means[i];
+        uint32_t thr[6], slow;
+        wf_poisson_inversion_thresholds(m, exp(-m), thr, &slow);
+        uint32_t words[32];
+        int nw = 0;
+        words[nw++] = 0;
+        words[nw++] = UINT32_MAX;
+        for (int j = 0; j < 6; j++) {
+            words[nw++] = thr[j];
+            if (thr[j] > 0) words[nw++] = thr[j] - 1;
+            if (thr[j] < UINT32_MAX) words[nw++] = thr[j] + 1;
+        }
+        if (slow > 0) words[nw++] = slow - 1;
+        words[nw++] = slow;
+        int handed = 0;
+        for (int k = 0; k < nw; k++) {
+            uint32_t w = words[k];
+            int want = invert(w, m);
+            if (w >= slow) {
+                handed++;
+                ck_assert_msg(want > 6 || w == UINT32_MAX, "mean %g, word %u: count %d handed over", m, w, want);
+                continue;
+            }
+            int got = 0;
+            for (int j = 0; j < 6; j++) got += w >= thr[j];
+            ck_assert_msg(got == want, "mean %g, word %u: %d, inversion %d", m, w, got, want);
+        }
+        ck_assert(handed >= 1); /* UINT32_MAX at least */
+        if (m >= 2.5) { /* a count of 7 is within the words: the hand-over starts there */
+            ck_assert_int_eq(invert(slow, m), 7);
+            ck_assert_int_eq(invert(slow - 1, m), 6);
+        }
+    }
+    const double outside[] = {0.0, -1.0, 10.0, 50.0, NAN};
+    for (size_t i = 0; i < sizeof outside / sizeof outside[0]; i++) {
+        uint32_t thr[6], slow = 1;
+        wf_poisson_inversion_thresholds(outside[i], exp(-outside[i]), thr, &slow);
+        ck_assert_uint_eq(slow, 0);
+    }
+}
+END_TEST
+
 static Suite *noise_suite(void)
 {
     Suite *s = suite_create("noise");
@@ -509,6 +576,7 @@ static Suite *noise_suite(void)
     tcase_add_loop_test(st, test_poisson_chi_square, 0,
                         (int)(sizeof gof_means / sizeof gof_means[0]));
     tcase_add_test(st, test_poisson_edge_cases);
+    tcase_add_test(st, test_inversion_thresholds);
     tcase_add_test(st, test_gauss_moments);
     tcase_add_test(st, test_norm_ppf);
     suite_add_tcase(s, st);
