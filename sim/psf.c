@@ -115,6 +115,9 @@ static void wavefront_nm(const wf_pupil *p, const wf_aberrations *ab, double *w,
         if (ab->z[j] != 0.0) *any = 1;
     if (!*any) return;
     double R = 0.5 * p->diam;
+    /* the terms' coefficients once, not at every sample (factorials cost more than a term) */
+    wf_zernike_term t[WF_ZERNIKE_MAX + 1];
+    for (int j = 4; j <= WF_ZERNIKE_MAX; j++) (void)wf_pupil_zernike_term(j, &t[j]);
     for (int b = 0; b < my; b++)
         for (int a = 0; a < mx; a++) {
             int i = p->i0 + a, jj = p->j0 + b;
@@ -123,9 +126,7 @@ static void wavefront_nm(const wf_pupil *p, const wf_aberrations *ab, double *w,
                 double x = (i - p->n / 2) * p->dx / R, y = (jj - p->n / 2) * p->dx / R;
                 for (int j = 4; j <= WF_ZERNIKE_MAX; j++) {
                     if (ab->z[j] == 0.0) continue;
-                    double z;
-                    wf_pupil_zernike(j, x, y, &z);
-                    sum += ab->z[j] * z;
+                    sum += ab->z[j] * wf_pupil_zernike_eval(&t[j], x, y);
                 }
             }
             w[(size_t)b * mx + a] = sum * ab->lambda_ref_nm;

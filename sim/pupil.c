@@ -340,29 +340,47 @@ static double factorial(int k)
     return f;
 }
 
-wf_status wf_pupil_zernike(int j, double x, double y, double *out)
+wf_status wf_pupil_zernike_term(int j, wf_zernike_term *t)
 {
     if (j < 1 || j > WF_ZERNIKE_MAX)
         return wf_error(WF_ERR_RANGE, "Zernike: Noll index %d is not 1..%d", j, WF_ZERNIKE_MAX);
     int n, m, is_sin;
     noll_nm(j, &n, &m, &is_sin);
+    t->m = m;
+    t->is_sin = is_sin;
+    t->ncoef = 0;
+    /* R_n^m(ρ) = ρ^m Σ_s c_s ρ^(n-m-2s), highest s (lowest power) first */
+    for (int s = (n - m) / 2; s >= 0; s--)
+        t->coef[t->ncoef++] = (s % 2 ? -1.0 : 1.0) * factorial(n - s) /
+                              (factorial(s) * factorial((n + m) / 2 - s) * factorial((n - m) / 2 - s));
+    t->norm = m == 0 ? sqrt(n + 1.0) : sqrt(2.0 * (n + 1.0));
+    return WF_OK;
+}
+
+double wf_pupil_zernike_eval(const wf_zernike_term *t, double x, double y)
+{
     double r2 = x * x + y * y;
-    /* R_n^m(ρ) = ρ^m Σ_s c_s ρ^(n-m-2s); ρ^m cos/sin(mφ) = Re/Im (x + iy)^m: no atan2. */
+    /* ρ^m cos/sin(mφ) = Re/Im (x + iy)^m: no atan2 */
     double radial = 0.0, p = 1.0; /* p = (ρ²)^((n-m)/2 - s) */
-    for (int s = (n - m) / 2; s >= 0; s--) {
-        double c = (s % 2 ? -1.0 : 1.0) * factorial(n - s) /
-                   (factorial(s) * factorial((n + m) / 2 - s) * factorial((n - m) / 2 - s));
-        radial += c * p;
+    for (int k = 0; k < t->ncoef; k++) {
+        radial += t->coef[k] * p;
         p *= r2;
     }
     double re = 1.0, im = 0.0;
-    for (int k = 0; k < m; k++) {
-        double t = re * x - im * y;
+    for (int k = 0; k < t->m; k++) {
+        double u = re * x - im * y;
         im = re * y + im * x;
-        re = t;
+        re = u;
     }
-    double norm = m == 0 ? sqrt(n + 1.0) : sqrt(2.0 * (n + 1.0));
-    *out = norm * radial * (is_sin ? im : re);
+    return t->norm * radial * (t->is_sin ? im : re);
+}
+
+wf_status wf_pupil_zernike(int j, double x, double y, double *out)
+{
+    wf_zernike_term t;
+    wf_status st = wf_pupil_zernike_term(j, &t);
+    if (st) return st;
+    *out = wf_pupil_zernike_eval(&t, x, y);
     return WF_OK;
 }
 

@@ -109,6 +109,17 @@ void wf_pupil_free(wf_pupil *p);
  * unit rms over the unit disc (Noll 1976; GalSim's convention: even j cos mφ, odd j sin mφ). */
 wf_status wf_pupil_zernike(int j, double x, double y, double *out);
 
+/* The same split for a wavefront's many samples: a term's radial coefficients and
+ * normalisation once (wf_pupil_zernike_term, WF_ERR_RANGE for j outside 1..22), then each
+ * sample (wf_pupil_zernike_eval, the same bits as wf_pupil_zernike). */
+typedef struct wf_zernike_term {
+    int m, is_sin, ncoef;
+    double coef[12]; /* c_s, the lowest power of ρ² first */
+    double norm;
+} wf_zernike_term;
+wf_status wf_pupil_zernike_term(int j, wf_zernike_term *t);
+double wf_pupil_zernike_eval(const wf_zernike_term *t, double x, double y);
+
 /* No aberrations (the no-data default). */
 void wf_pupil_aberrations_none(wf_aberrations *out);
 
