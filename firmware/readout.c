@@ -36,7 +36,8 @@ struct wf_readout {
     uint16_t *res_out;             /* [nres][tile_rows][ncols] */
     double *counts;                /* ramp: one row's Poisson counts of a read */
     uint8_t *slow;                 /* ramp: one row, 1 where poisson_word draws the count */
-    uint32_t *thr;                 /* ramp per read: [7][halo block], wf_poisson_inversion_thresholds */
+    uint32_t *thr;                 /* ramp per read: [7][halo block] in the packet buffer
+                                      (thresholds_bytes), wf_poisson_inversion_thresholds */
     float *single_out;             /* [tile_rows][ncols] */
     double *recip;                 /* single frame: reciprocity failure of 0 .. RECIP_TABLE-1 e- */
     int recip_ready;               /* recip filled (Poisson counts are whole numbers) */
@@ -74,6 +75,22 @@ static size_t tile_payload_max(const wf_readout_config *cfg, const wf_clock *clo
     size_t single = px * sizeof(float);
     size_t n = res > single ? res : single;
     return n > META_MIN_BYTES ? n : META_MIN_BYTES;
+}
+
+/* Up-the-ramp per-read sampling keeps a tile's Poisson thresholds (7 words per pixel of the
+ * halo block, wf_poisson_inversion_thresholds) in the packet buffer, idle until the tile is
+ * sent: the buffer is made large enough for them, rather than taking them beside it (at MA
+ * table 6 the resultant tile is the larger, so they cost nothing). */
+static size_t thresholds_bytes(const wf_readout_config *cfg)
+{
+    if (cfg->mode != WF_MODE_RAMP || cfg->sampling != WF_SAMPLE_PER_READ) return 0;
+    return 7 * (size_t)(cfg->tile_rows + 2) * (size_t)cfg->ncols * sizeof(uint32_t);
+}
+
+static size_t packet_buffer_raw(const wf_readout_config *cfg, const wf_clock *clock)
+{
+    size_t n = tile_payload_max(cfg, clock), t = thresholds_bytes(cfg);
+    return n > t ? n : t;
 }
 
 static int direct_blocks(const wf_ma_table *ma);
@@ -133,12 +150,11 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     n += wf_arena_cost(tile * sizeof(double));
     if (cfg->mode == WF_MODE_RAMP)
         n += wf_arena_cost(tile * sizeof(uint16_t) * (size_t)clock->ma.nresultants) +
-             wf_arena_cost((size_t)cfg->ncols * sizeof(double)) + wf_arena_cost((size_t)cfg->ncols) +
-             (cfg->sampling == WF_SAMPLE_PER_READ ? wf_arena_cost(7 * halo * sizeof(uint32_t)) : 0);
+             wf_arena_cost((size_t)cfg->ncols * sizeof(double)) + wf_arena_cost((size_t)cfg->ncols);
     else
         n += wf_arena_cost(tile * sizeof(float)) + single_arena_need(cfg);
     n += wf_arena_cost(tile);
-    n += wf_packer_arena_need(tile_payload_max(cfg, clock), cfg->compress);
+    n += wf_packer_arena_need(packet_buffer_raw(cfg, clock), cfg->compress);
     if (cfg->det.on.cosmic_rays && cfg->mode == WF_MODE_RAMP) {
         size_t cr;
         wf_cosmic_arena_need(&cfg->det, cfg->ncols, cfg->tile_rows, exposure_time(cfg, clock), &cr);
@@ -224,7 +240,6 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     if (cfg->mode == WF_MODE_RAMP) {
         TAKE(ro->res_out, tile * (size_t)clock->ma.nresultants, "resultant tile");
         TAKE(ro->counts, cfg->ncols, "Poisson counts row");
-        if (cfg->sampling == WF_SAMPLE_PER_READ) TAKE(ro->thr, 7 * halo, "Poisson inversion thresholds");
         TAKE(ro->slow, cfg->ncols, "Poisson slow-draw flags");
         ro->total_reads = wf_ma_total_reads(&clock->ma);
         for (int i = 0; i < WF_MA_MAX_READS; i++) ro->resultant_of_read[i] = -1;
@@ -236,7 +251,7 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
         if ((st = single_init(ro, arena))) return st;
     }
     TAKE(ro->sat, tile, "saturation map");
-    st = wf_packer_init(&ro->packer, arena, tile_payload_max(cfg, clock), cfg->compress);
+    st = wf_packer_init(&ro->packer, arena, packet_buffer_raw(cfg, clock), cfg->compress);
     if (st) return st;
     ro->cosmic_on = cfg->det.on.cosmic_rays && cfg->mode == WF_MODE_RAMP && cfg->det.cr_rate > 0;
     if (ro->cosmic_on) {
@@ -431,6 +446,11 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
     const int nc = ro->cfg.ncols, rows = y1 - y0, hn = (h1 - h0) * nc;
     const size_t plane = (size_t)rows * nc;
     int next_dep = 0, prev_read = -1;
+    size_t scratch;
+    ro->thr = wf_packer_scratch(&ro->packer, &scratch); /* no packet goes out until the tile's */
+    if (scratch < 7 * (size_t)hn * sizeof *ro->thr)
+        return wf_error(WF_ERR_INTERNAL, "readout: packet buffer of %zu bytes holds no %d-pixel "
+                        "thresholds", scratch, hn);
     if (d->on.photon_noise && !ro->noise_off && !ro->slope_any)
         for (int i = 0; i < hn; i++) {
             uint32_t t[6];

@@ -119,6 +119,12 @@ void wf_packer_close(wf_packer *pk)
     pk->z_ready = 0;
 }
 
+void *wf_packer_scratch(wf_packer *pk, size_t *bytes)
+{
+    *bytes = pk->cap;
+    return pk->buf;
+}
+
 wf_status wf_packer_send(wf_packer *pk, const wf_link *link, wf_packet_header *h,
                          const void *raw, size_t raw_len)
 {

@@ -64,6 +64,10 @@ void wf_packer_close(wf_packer *pk);
 wf_status wf_packer_send(wf_packer *pk, const wf_link *link, wf_packet_header *h,
                          const void *raw, size_t raw_len);
 
+/* The packet buffer as scratch: free between sends (a send copies or writes the packet
+ * before it returns), *bytes long (at least the max_raw of init), 64-byte aligned. */
+void *wf_packer_scratch(wf_packer *pk, size_t *bytes);
+
 /* Header (de)serialisation, exposed for tests and tools. */
 void wf_packet_header_write(const wf_packet_header *h, unsigned char out[WF_PACKET_HEADER_SIZE]);
 wf_status wf_packet_header_read(const unsigned char in[WF_PACKET_HEADER_SIZE], wf_packet_header *h);
