@@ -161,33 +161,54 @@ void wf_det_reciprocity_counts(const wf_detector *det, double exptime, const dou
         for (int i = 0; i < n; i++) q[i] = table[(int)q[i]];
 }
 
+/* The electronics after the charge, per pixel, shared by the single-frame and the ramp's
+ * rows: read noise, gain, bias, rounding (wf_det_quantize without its volatile: GCC never
+ * folds (x + c) - c unless told -fassociative-math, and a select keeps the row branch-free),
+ * the ADC's [0, adc_max]; *clipped where the full well (q) or the ceiling was reached
+ * (saturation on). The detector's numbers come in a local copy, so the loops' stores cannot
+ * alias them and they vectorise. */
+typedef struct adc_par {
+    double sigma, gain, bias, fw, adc;
+    int rn, quant, satur;
+} adc_par;
+
+static adc_par adc_par_of(const wf_detector *det)
+{
+    return (adc_par){det->read_noise_e, det->gain, det->bias_adu, det->full_well, det->adc_max,
+                     det->on.read_noise, det->on.quantize, det->on.saturation};
+}
+
+static inline __attribute__((always_inline)) double adc_lane(const adc_par *p, double v, double q,
+                                                             float z, int unit_gain, uint8_t *clipped)
+{
+    const double magic = 6755399441055744.0, big = 2251799813685248.0; /* 1.5 * 2^52, 2^51 */
+    if (p->rn) v += p->sigma * (double)z;
+    double adu = (unit_gain ? v : v / p->gain) + p->bias;
+    if (p->quant) {
+        double r = __builtin_copysign((adu + magic) - magic, adu);
+        adu = (adu > -big) & (adu < big) ? r : adu;
+    }
+    *clipped = 0;
+    if (p->satur) {
+        *clipped = (uint8_t)((q >= p->fw) | (adu >= p->adc));
+        adu = adu >= p->adc ? p->adc : adu;
+        adu = adu < 0.0 ? 0.0 : adu;
+    }
+    return adu;
+}
+
 /* The body of wf_det_single_row with the unit gain known at compile time: v / 1.0 is v, so
  * the division (the loop's costliest step) goes without changing a bit. */
 static inline __attribute__((always_inline)) void single_row_body(
     const wf_detector *det, const double *restrict e, const double *restrict q,
     const float *restrict z, int n, float *restrict out, uint8_t *restrict sat, int unit_gain)
 {
-    const double sigma = det->read_noise_e, gain = det->gain, bias = det->bias_adu;
-    const double fw = det->full_well, adc = det->adc_max;
-    const int rn = det->on.read_noise, quant = det->on.quantize, satur = det->on.saturation;
-    const double magic = 6755399441055744.0, big = 2251799813685248.0; /* 1.5 * 2^52, 2^51 */
+    const adc_par p = adc_par_of(det);
     for (int i = 0; i < n; i++) {
-        double v = e[i];
-        if (rn) v += sigma * (double)z[i];
-        double adu = (unit_gain ? v : v / gain) + bias;
-        if (quant) {
-            /* wf_det_quantize without its volatile: GCC never folds (x + c) - c unless told
-             * -fassociative-math, and a select keeps the row branch-free */
-            double r = __builtin_copysign((adu + magic) - magic, adu);
-            adu = (adu > -big) & (adu < big) ? r : adu;
-        }
-        if (satur) {
-            /* a mask, not a select: a select on the 8-bit store stops the vectoriser */
-            uint8_t clipped = (uint8_t)((q[i] >= fw) | (adu >= adc));
-            sat[i] = (uint8_t)(sat[i] & (uint8_t)(clipped - 1u));
-            adu = adu >= adc ? adc : adu;
-            adu = adu < 0.0 ? 0.0 : adu;
-        }
+        uint8_t clipped;
+        double adu = adc_lane(&p, e[i], q[i], z[i], unit_gain, &clipped);
+        /* a mask, not a select: a select on the 8-bit store stops the vectoriser */
+        if (p.satur) sat[i] = (uint8_t)(sat[i] & (uint8_t)(clipped - 1u));
         out[i] = (float)adu;
     }
 }
@@ -207,27 +228,14 @@ static inline __attribute__((always_inline)) void ramp_read_body(
     const float *restrict z, int n, uint8_t r, double *restrict sum, uint8_t *restrict first,
     int unit_gain)
 {
-    const double sigma = det->read_noise_e, gain = det->gain, bias = det->bias_adu;
-    const double fw = det->full_well, adc = det->adc_max;
-    const int rn = det->on.read_noise, quant = det->on.quantize, satur = det->on.saturation;
-    const double magic = 6755399441055744.0, big = 2251799813685248.0; /* as single_row_body */
+    const adc_par p = adc_par_of(det);
     for (int i = 0; i < n; i++) {
-        double v = e[i];
-        if (rn) v += sigma * (double)z[i];
-        double adu = (unit_gain ? v : v / gain) + bias;
-        if (quant) {
-            double rr = __builtin_copysign((adu + magic) - magic, adu);
-            adu = (adu > -big) & (adu < big) ? rr : adu;
-        }
-        if (satur) {
-            /* first[i] is 255 or an earlier resultant (the reads come in order), so the first
-             * one keeps the min; a mask, not a select, as single_row_body */
-            uint8_t clipped = (uint8_t)((q[i] >= fw) | (adu >= adc));
-            uint8_t cand = (uint8_t)(r | (uint8_t)(clipped - 1u)); /* r, else 255 */
-            first[i] = first[i] < cand ? first[i] : cand;
-            adu = adu >= adc ? adc : adu;
-            adu = adu < 0.0 ? 0.0 : adu;
-        }
+        uint8_t clipped;
+        double adu = adc_lane(&p, e[i], q[i], z[i], unit_gain, &clipped);
+        /* first[i] is 255 or an earlier resultant (the reads come in order), so the first
+         * one keeps the min; a mask, not a select, as single_row_body */
+        uint8_t cand = (uint8_t)(r | (uint8_t)(clipped - 1u)); /* r, else 255 */
+        if (p.satur) first[i] = first[i] < cand ? first[i] : cand;
         sum[i] += adu;
     }
 }

@@ -1779,36 +1779,51 @@ static void fold_pass(wf_profile_work *w, const job *jb, const wf_profile_psf *p
 /* stamp += flux x wing at (x, y): bilinear between the table's 1 / wing_os pixel samples.
  * The fractional position is the same for every pixel, so each row reads four contiguous
  * runs of the phase planes. */
-static void add_wing(const wf_profile_psf *psf, int core, double flux, double x, double y,
-                     wf_stamp *stamp)
+/* Where flux x core's wing falls for an object at (x, y): the four phase planes around its
+ * fine offset and the bilinear weights (wf_profile_wing_at). */
+static void wing_place(const wf_profile_psf *psf, int core, double flux, double x, double y,
+                       wf_profile_wing_at *at)
 {
     const int K = psf->wing_os, h = psf->wing_half, np = psf->wing_np;
-    const float *wing = psf->core[core - 1].wing;
-    const size_t plane = (size_t)np * np;
+    const long plane = (long)np * np;
     /* fine index of pixel i: K (i - x) + K h = K i + s */
     double sx = K * (h - x), sy = K * (h - y);
     double fx0 = floor(sx), fy0 = floor(sy), fx = sx - fx0, fy = sy - fy0;
     long ax = (long)fx0, ay = (long)fy0;
     int a0 = (int)(ax - floor_div_l(ax, K) * K), a1 = (int)(ax + 1 - floor_div_l(ax + 1, K) * K);
     int b0 = (int)(ay - floor_div_l(ay, K) * K), b1 = (int)(ay + 1 - floor_div_l(ay + 1, K) * K);
-    long ox0 = floor_div_l(ax, K), ox1 = floor_div_l(ax + 1, K);
-    long oy0 = floor_div_l(ay, K), oy1 = floor_div_l(ay + 1, K);
-    const double w00 = flux * (1.0 - fy) * (1.0 - fx), w01 = flux * (1.0 - fy) * fx;
-    const double w10 = flux * fy * (1.0 - fx), w11 = flux * fy * fx;
-    long i0 = (long)stamp->x0 > -ox0 ? (long)stamp->x0 : -ox0;
-    long i1 = (long)stamp->x0 + stamp->nx - 1 < np - 1 - ox1 ? (long)stamp->x0 + stamp->nx - 1
-                                                             : np - 1 - ox1;
+    *at = (wf_profile_wing_at){
+        .wing = psf->core[core - 1].wing,
+        .np = np,
+        .plane = {(b0 * K + a0) * plane, (b0 * K + a1) * plane, (b1 * K + a0) * plane,
+                  (b1 * K + a1) * plane},
+        .ox = {floor_div_l(ax, K), floor_div_l(ax + 1, K)},
+        .oy = {floor_div_l(ay, K), floor_div_l(ay + 1, K)},
+        .w = {flux * (1.0 - fy) * (1.0 - fx), flux * (1.0 - fy) * fx, flux * fy * (1.0 - fx),
+              flux * fy * fx},
+    };
+}
+
+static void add_wing(const wf_profile_psf *psf, int core, double flux, double x, double y,
+                     wf_stamp *stamp)
+{
+    wf_profile_wing_at at;
+    wing_place(psf, core, flux, x, y, &at);
+    const long np = at.np;
+    long i0 = (long)stamp->x0 > -at.ox[0] ? (long)stamp->x0 : -at.ox[0];
+    long i1 = (long)stamp->x0 + stamp->nx - 1 < np - 1 - at.ox[1] ? (long)stamp->x0 + stamp->nx - 1
+                                                                 : np - 1 - at.ox[1];
     if (i0 > i1) return;
     for (int yy = 0; yy < stamp->ny; yy++) {
-        long j = (long)stamp->y0 + yy, ny0 = j + oy0, ny1 = j + oy1;
+        long j = (long)stamp->y0 + yy, ny0 = j + at.oy[0], ny1 = j + at.oy[1];
         if (ny0 < 0 || ny1 > np - 1) continue;
         /* rows of the four phase planes from the column of pixel i0 on */
-        const float *r00 = wing + (size_t)(b0 * K + a0) * plane + (size_t)ny0 * np + (size_t)(i0 + ox0);
-        const float *r01 = wing + (size_t)(b0 * K + a1) * plane + (size_t)ny0 * np + (size_t)(i0 + ox1);
-        const float *r10 = wing + (size_t)(b1 * K + a0) * plane + (size_t)ny1 * np + (size_t)(i0 + ox0);
-        const float *r11 = wing + (size_t)(b1 * K + a1) * plane + (size_t)ny1 * np + (size_t)(i0 + ox1);
+        const float *r00 = at.wing + at.plane[0] + ny0 * np + (i0 + at.ox[0]);
+        const float *r01 = at.wing + at.plane[1] + ny0 * np + (i0 + at.ox[1]);
+        const float *r10 = at.wing + at.plane[2] + ny1 * np + (i0 + at.ox[0]);
+        const float *r11 = at.wing + at.plane[3] + ny1 * np + (i0 + at.ox[1]);
         double *dst = stamp->pix + (size_t)yy * stamp->nx + (size_t)(i0 - stamp->x0);
-        fold_k.wing(i1 - i0 + 1, w00, w01, w10, w11, r00, r01, r10, r11, dst);
+        fold_k.wing(i1 - i0 + 1, at.w[0], at.w[1], at.w[2], at.w[3], r00, r01, r10, r11, dst);
     }
 }
 
@@ -2453,21 +2468,8 @@ wf_status wf_profile_draw_galaxy_core(wf_profile_work *work, const wf_galaxy *g,
     return draw_galaxy(work, g, psf, x, y, stamp, 0);
 }
 
-wf_status wf_profile_add_wing(const wf_profile_psf *psf, int core, double flux, double x,
-                              double y, wf_stamp *stamp)
-{
-    wf_status st = check_stamp(stamp);
-    if (st || (st = check_position(x, y))) return st;
-    if (!psf || core < 1 || core > psf->ncore)
-        return wf_error(WF_ERR_INPUT, "profile: core %d: a wing needs a PSF split into that many "
-                        "cores (it has %d)", core, psf ? psf->ncore : 0);
-    (void)wf_profile_simd(-1); /* the kernels, once per process */
-    add_wing(psf, core, flux, x, y, stamp);
-    return WF_OK;
-}
-
-wf_status wf_profile_wing_place(const wf_profile_psf *psf, int core, double flux, double x,
-                                double y, wf_profile_wing_at *at)
+/* A wing at (x, y) from that core of the PSF; makes sure the kernels are chosen. */
+static wf_status check_wing(const wf_profile_psf *psf, int core, double x, double y)
 {
     wf_status st = check_position(x, y);
     if (st) return st;
@@ -2475,24 +2477,24 @@ wf_status wf_profile_wing_place(const wf_profile_psf *psf, int core, double flux
         return wf_error(WF_ERR_INPUT, "profile: core %d: a wing needs a PSF split into that many "
                         "cores (it has %d)", core, psf ? psf->ncore : 0);
     (void)wf_profile_simd(-1); /* the kernels, once per process */
-    /* as add_wing: fine index of pixel i is K i + s */
-    const int K = psf->wing_os, h = psf->wing_half, np = psf->wing_np;
-    const long plane = (long)np * np;
-    double sx = K * (h - x), sy = K * (h - y);
-    double fx0 = floor(sx), fy0 = floor(sy), fx = sx - fx0, fy = sy - fy0;
-    long ax = (long)fx0, ay = (long)fy0;
-    int a0 = (int)(ax - floor_div_l(ax, K) * K), a1 = (int)(ax + 1 - floor_div_l(ax + 1, K) * K);
-    int b0 = (int)(ay - floor_div_l(ay, K) * K), b1 = (int)(ay + 1 - floor_div_l(ay + 1, K) * K);
-    *at = (wf_profile_wing_at){
-        .wing = psf->core[core - 1].wing,
-        .np = np,
-        .plane = {(b0 * K + a0) * plane, (b0 * K + a1) * plane, (b1 * K + a0) * plane,
-                  (b1 * K + a1) * plane},
-        .ox = {floor_div_l(ax, K), floor_div_l(ax + 1, K)},
-        .oy = {floor_div_l(ay, K), floor_div_l(ay + 1, K)},
-        .w = {flux * (1.0 - fy) * (1.0 - fx), flux * (1.0 - fy) * fx, flux * fy * (1.0 - fx),
-              flux * fy * fx},
-    };
+    return WF_OK;
+}
+
+wf_status wf_profile_add_wing(const wf_profile_psf *psf, int core, double flux, double x,
+                              double y, wf_stamp *stamp)
+{
+    wf_status st = check_stamp(stamp);
+    if (st || (st = check_wing(psf, core, x, y))) return st;
+    add_wing(psf, core, flux, x, y, stamp);
+    return WF_OK;
+}
+
+wf_status wf_profile_wing_place(const wf_profile_psf *psf, int core, double flux, double x,
+                                double y, wf_profile_wing_at *at)
+{
+    wf_status st = check_wing(psf, core, x, y);
+    if (st) return st;
+    wing_place(psf, core, flux, x, y, at);
     return WF_OK;
 }
 

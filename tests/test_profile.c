@@ -1665,6 +1665,15 @@ static double *open_split(ctx *c, wf_psf_image *img, wf_profile_accuracy *acc)
     return pix;
 }
 
+/* open_split with the work's wing tolerance at 1 (the split PSF's wing drawn) */
+static double *open_split_wing(ctx *c, wf_psf_image *img, wf_profile_accuracy *acc)
+{
+    double *pix = open_split(c, img, acc);
+    ck_assert(wf_profile_work_tune(&c->work, acc->flux_fraction, acc->folding_threshold,
+                                   acc->kvalue_accuracy, 1.0, acc->knot_accuracy) == WF_OK);
+    return pix;
+}
+
 /* The tables' copies at the draws' steps hold the table's own samples, and a draw that reads
  * them gives the bits of one that gathers from the table itself. */
 static void assert_steps(const float *re, const float *im, int kr, const wf_profile_steps *s, const char *what)
@@ -2120,9 +2129,7 @@ START_TEST(test_simd_identical_wing)
     wf_psf_image img;
     wf_profile_accuracy acc;
     ctx c;
-    double *psfpix = open_split(&c, &img, &acc);
-    ck_assert(wf_profile_work_tune(&c.work, acc.flux_fraction, acc.folding_threshold, acc.kvalue_accuracy, 1.0,
-                                   acc.knot_accuracy) == WF_OK);
+    double *psfpix = open_split_wing(&c, &img, &acc);
     static const int widths[] = {0, 2, 4, 8};
     static const double hlr[] = {0.1, 0.4};
     double *ref[2] = {NULL, NULL};
@@ -2170,9 +2177,7 @@ START_TEST(test_wing_row_is_box_plus_wing)
     wf_psf_image img;
     wf_profile_accuracy acc;
     ctx c;
-    double *psfpix = open_split(&c, &img, &acc);
-    ck_assert(wf_profile_work_tune(&c.work, acc.flux_fraction, acc.folding_threshold, acc.kvalue_accuracy, 1.0,
-                                   acc.knot_accuracy) == WF_OK);
+    double *psfpix = open_split_wing(&c, &img, &acc);
     static const int widths[] = {0, 2, 4, 8};
     int tried = 0, clipped = 0, kept = 0;
     for (int iw = 0; iw < 4; iw++) {

@@ -120,6 +120,16 @@ static void decode(const unsigned char *buf, size_t len, decoded *d)
     fclose(f);
 }
 
+/* run_stream, decoded */
+static void run_decoded(const wf_readout_config *cfg, const wf_clock *clock,
+                        const wf_scene_source *scene, int threads, decoded *d)
+{
+    size_t len;
+    unsigned char *buf = run_stream(cfg, clock, scene, threads, &len);
+    decode(buf, len, d);
+    free(buf);
+}
+
 static void free_decoded(decoded *d)
 {
     free(d->res);
@@ -435,11 +445,8 @@ START_TEST(noiseless_flux_conserved)
     wf_scene_grid_source(&g, &src);
     for (int s = 0; s < 2; s++) {
         cfg.sampling = s ? WF_SAMPLE_DIRECT : WF_SAMPLE_PER_READ;
-        size_t len;
-        unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
         decoded dd;
-        decode(buf, len, &dd);
-        free(buf);
+        run_decoded(&cfg, &clock, &src, 1, &dd);
         double total = wf_scene_grid_total(&g);
         for (int r = 0; r < dd.nres; r++) {
             double sum = 0.0;
@@ -471,10 +478,7 @@ START_TEST(direct_matches_per_read)
     decoded dd[2];
     for (int s = 0; s < 2; s++) {
         cfg.sampling = s ? WF_SAMPLE_DIRECT : WF_SAMPLE_PER_READ;
-        size_t len;
-        unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
-        decode(buf, len, &dd[s]);
-        free(buf);
+        run_decoded(&cfg, &clock, &src, 1, &dd[s]);
     }
     size_t n = 128 * 128;
     for (int r = 0; r < dd[0].nres; r++) {
@@ -554,11 +558,8 @@ START_TEST(per_read_counts_exact)
     d->bias_adu = 0.0;
     double ft = clock.frame_time;
     wf_scene_source src = {&ft, exact_fill, NULL, NULL};
-    size_t len;
-    unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
     decoded dd;
-    decode(buf, len, &dd);
-    free(buf);
+    run_decoded(&cfg, &clock, &src, 1, &dd);
     ck_assert_int_eq(dd.nres, 8);
     wf_noise noise = {WF_NOISE_PHILOX, cfg.seed, cfg.exposure, cfg.sca};
     long above6 = 0, zero = 0;
@@ -595,11 +596,8 @@ START_TEST(saturation_defined)
     wf_scene_grid g = {16, 16, 500.0, 0.0, 1.0, 64}; /* flat 500 e-/s: the ADC clips after ~134 s */
     wf_scene_source src;
     wf_scene_grid_source(&g, &src);
-    size_t len;
-    unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
     decoded dd;
-    decode(buf, len, &dd);
-    free(buf);
+    run_decoded(&cfg, &clock, &src, 1, &dd);
     double rate = wf_det_reciprocity_rate(500.0, cfg.det.recip_alpha, cfg.det.recip_f0) + cfg.det.dark_current;
     double sat_adu = wf_det_saturation_adu(&cfg.det);
     /* charge at which the measured signal reaches the saturation level: invert q + beta q^2 */
@@ -643,11 +641,8 @@ START_TEST(single_frame_closed_form)
     wf_scene_grid g = {20, 20, 123.0, 0.0, 1.0, 64};
     wf_scene_source src;
     wf_scene_grid_source(&g, &src);
-    size_t len;
-    unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
     decoded dd;
-    decode(buf, len, &dd);
-    free(buf);
+    run_decoded(&cfg, &clock, &src, 1, &dd);
     double q = wf_det_reciprocity(123.0 * 139.8, 139.8, 0.0065, 1.0) + 0.015 * 139.8;
     double expect = nearbyint(wf_det_nonlinearity(q, -6e-7) + cfg.det.bias_adu);
     ck_assert_msg(fabs(dd.single[10 * 20 + 10] - expect) < 1e-9, "single frame %.3f vs %.3f",
@@ -672,11 +667,8 @@ START_TEST(cosmic_ray_count)
     wf_scene_grid g = {256, 256, 0.4, 0.0, 1.0, 64};
     wf_scene_source src;
     wf_scene_grid_source(&g, &src);
-    size_t len;
-    unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
     decoded dd;
-    decode(buf, len, &dd);
-    free(buf);
+    run_decoded(&cfg, &clock, &src, 1, &dd);
     double expect = wf_cosmic_expected_hits(&cfg.det, 256, 256, wf_clock_exposure_time(&clock));
     ck_assert_msg(fabs(dd.ncr - expect) < 5.0 * sqrt(expect), "%d hits, expected %.1f", dd.ncr, expect);
     for (int i = 1; i < dd.ncr; i++) ck_assert(dd.cr[i].id != dd.cr[i - 1].id);
@@ -748,11 +740,8 @@ static void check_linear(wf_sampling sampling)
     const double r0 = 50.0, g = 0.02; /* -49 e- at mid-time against a constant rate */
     linear_source ls = {r0, g};
     wf_scene_source src = {&ls, linear_rate, NULL, linear_slope};
-    size_t len;
-    unsigned char *buf = run_stream(&cfg, &clock, &src, 1, &len);
     decoded d;
-    decode(buf, len, &d);
-    free(buf);
+    run_decoded(&cfg, &clock, &src, 1, &d);
     double T = wf_clock_exposure_time(&clock), tm = 0.5 * T;
     double maxdev = 0, maxeffect = 0;
     for (int r = 0; r < clock.ma.nresultants; r++) {
@@ -775,15 +764,11 @@ static void check_linear(wf_sampling sampling)
     free_decoded(&d);
     /* slope 0: the same bytes as a constant source without fill_slope */
     ls.g = 0.0;
-    buf = run_stream(&cfg, &clock, &src, 1, &len);
-    decode(buf, len, &d);
-    free(buf);
+    run_decoded(&cfg, &clock, &src, 1, &d);
     wf_scene_source flat_src = {&ls, linear_rate, NULL, NULL};
     cfg.time_variable = 0;
     decoded e;
-    buf = run_stream(&cfg, &clock, &flat_src, 1, &len);
-    decode(buf, len, &e);
-    free(buf);
+    run_decoded(&cfg, &clock, &flat_src, 1, &e);
     assert_same(&d, &e, "zero slope");
     free_decoded(&d);
     free_decoded(&e);
