@@ -177,6 +177,26 @@ double wf_rng_poisson(wf_rng *rng, double mean)
  * last place). A double: 2^32 or more when no word is. */
 static double first_word_above(double c) { return floor(ldexp(c, 32) - 0.5) + 1.0; }
 
+/* Poisson(m) inversion's cumulative sums as the readout's one-pixel draw forms them
+ * (firmware/readout.c): F_0 = e = exp(-m), F_1 = F_0 + e m, F_2 = F_1 + e m^2 / 2, then
+ * F_k = F_(k-1) + p_k with p_k = p_(k-1) (m / k), up to cap sums (cap >= 3) or the first term
+ * that no longer changes the sum (that draw stops there). Returns how many were formed. */
+static int inversion_sums(double m, double e, double *F, int cap)
+{
+    double p1 = e * m, p = p1 * m * 0.5;
+    F[0] = e;
+    F[1] = F[0] + p1;
+    F[2] = F[1] + p;
+    int n = 3;
+    for (double k = 3.0; n < cap; k += 1.0) {
+        p *= m / k;
+        double next = F[n - 1] + p;
+        if (next == F[n - 1]) break;
+        F[n++] = next;
+    }
+    return n;
+}
+
 void wf_poisson_inversion_thresholds(double m, double e, uint32_t thr[6], uint32_t *slow)
 {
     if (!(m > 0.0 && m < 10.0)) { /* not inversion's range: every word is the caller's */
@@ -184,28 +204,16 @@ void wf_poisson_inversion_thresholds(double m, double e, uint32_t thr[6], uint32
         *slow = 0;
         return;
     }
-    /* the sums as the readout's one-pixel inversion forms them (firmware/readout.c) */
     double F[7];
-    int stop = 7; /* the first sum that did not grow: that inversion ends there */
-    double p1 = e * m, p2 = p1 * m * 0.5;
-    F[0] = e;
-    F[1] = F[0] + p1;
-    F[2] = F[1] + p2;
-    double p = p2, cdf = F[2];
-    for (int j = 3; j <= 6; j++) {
-        p *= m / (double)j;
-        double next = cdf + p;
-        if (next == cdf && stop == 7) stop = j;
-        cdf = next;
-        F[j] = cdf;
-    }
+    int n = inversion_sums(m, e, F, 7);
     uint32_t T[7];
     for (int j = 0; j < 7; j++) {
-        double first = first_word_above(F[j]); /* F >= e^-m > e^-10 */
+        /* past a sum that stopped growing the later ones equal it: its terms only shrink */
+        double first = first_word_above(F[j < n ? j : n - 1]); /* F >= e^-m > e^-10 */
         T[j] = first >= 4294967295.0 ? UINT32_MAX : (uint32_t)first;
     }
     memcpy(thr, T, 6 * sizeof *thr);
-    *slow = T[stop < 7 ? stop - 1 : 6];
+    *slow = T[n < 7 ? n - 1 : 6]; /* from there the one-pixel draw stops early, or counts on */
 }
 
 wf_status wf_poisson_table_init(wf_poisson_table *t, double mean)
@@ -213,18 +221,7 @@ wf_status wf_poisson_table_init(wf_poisson_table *t, double mean)
     if (!(mean > 0.0 && mean < 10.0))
         return wf_error(WF_ERR_RANGE, "noise: Poisson table for mean %g outside (0, 10)", mean);
     t->mean = mean;
-    /* The first three terms are summed as the readout's branch-free k <= 2 step does. */
-    double p1 = exp(-mean) * mean, p = p1 * mean * 0.5;
-    t->cdf[0] = exp(-mean);
-    t->cdf[1] = t->cdf[0] + p1;
-    t->cdf[2] = t->cdf[1] + p;
-    int n = 3;
-    for (double k = 3.0; n < WF_POISSON_TABLE_MAX; k += 1.0) {
-        p *= mean / k;
-        double next = t->cdf[n - 1] + p;
-        if (next == t->cdf[n - 1]) break;
-        t->cdf[n++] = next;
-    }
+    int n = inversion_sums(mean, exp(-mean), t->cdf, WF_POISSON_TABLE_MAX);
     t->n = n;
     t->nword = 0;
     for (int j = 0; j < n; j++) {

@@ -1827,33 +1827,36 @@ static void add_wing(const wf_profile_psf *psf, int core, double flux, double x,
     }
 }
 
-/* acc[i] += max(box[i], 0) for i in [lo, hi) within the box's columns [ca, cb) */
-static void box_clipped(const float *box, int ca, int cb, int lo, int hi, double *acc)
+/* acc[i - xa] += max(box[i - ca], 0) for the columns i in [lo, hi) within [ca, cb) */
+static void box_clipped(const float *box, int ca, int cb, int lo, int hi, int xa, double *acc)
 {
     if (lo < ca) lo = ca;
     if (hi > cb) hi = cb;
-    int i = lo;
+    if (lo >= hi) return;
+    const float *b = box + (lo - ca);
+    double *a = acc + (lo - xa);
+    int n = hi - lo, i = 0;
 #if defined(FOLD_SIMD) /* two at a time, a mask for the clip: the same bits */
     const fv2 zero = {0.0, 0.0};
-    for (; i + 2 <= hi; i += 2) {
-        ff2 b;
-        fv2 a;
-        VLOAD(b, box + (i - ca));
-        VLOAD(a, acc + i);
-        fv2 v = __builtin_convertvector(b, fv2);
-        a += (fv2)((fi2)v & ~(fi2)(v < zero));
-        VSTORE(acc + i, a);
+    for (; i + 2 <= n; i += 2) {
+        ff2 bv;
+        fv2 av;
+        VLOAD(bv, b + i);
+        VLOAD(av, a + i);
+        fv2 v = __builtin_convertvector(bv, fv2);
+        av += (fv2)((fi2)v & ~(fi2)(v < zero));
+        VSTORE(a + i, av);
     }
 #endif
-    for (; i < hi; i++) {
-        double v = (double)box[i - ca];
-        acc[i] += v < 0.0 ? 0.0 : v;
+    for (; i < n; i++) {
+        double v = (double)b[i];
+        a[i] += v < 0.0 ? 0.0 : v;
     }
 }
 
-/* add_wing's wing for one row j, summed with the box's pixels and clipped, into acc indexed
- * by column: the columns the wing table covers in one kernel, with or without box pixels,
- * the rest box only. */
+/* add_wing's wing for one row j, summed with the box's pixels and clipped, into acc[i - xa]
+ * for the columns i in [xa, xb): the columns the wing table covers in one kernel, with or
+ * without box pixels, the rest box only. */
 static void wing_row(const wf_profile_wing_at *at, int j, int xa, int xb, const float *box,
                      int ca, int cb, double *acc)
 {
@@ -1865,7 +1868,7 @@ static void wing_row(const wf_profile_wing_at *at, int j, int xa, int xb, const 
     long i1 = xb - 1 < np - 1 - at->ox[1] ? xb - 1 : np - 1 - at->ox[1];
     int wa = xa, wb = xa;
     if (i0 <= i1 && ny0 >= 0 && ny1 <= np - 1) wa = (int)i0, wb = (int)i1 + 1;
-    box_clipped(box, ca, cb, xa, wa, acc);
+    box_clipped(box, ca, cb, xa, wa, xa, acc);
     if (wa < wb) {
         /* the four phase planes' entries at column 0 (the columns before wa are never read) */
         const long e[4] = {at->plane[0] + ny0 * np + at->ox[0], at->plane[1] + ny0 * np + at->ox[1],
@@ -1876,12 +1879,12 @@ static void wing_row(const wf_profile_wing_at *at, int j, int xa, int xb, const 
         for (int seg = 0; seg < 3; seg++) {
             int lo = cut[seg], hi = cut[seg + 1];
             if (lo >= hi) continue;
-            const float *const r[4] = {at->wing + e[0] + lo, at->wing + e[1] + lo,
-                                       at->wing + e[2] + lo, at->wing + e[3] + lo};
-            fold_k.wingclip(hi - lo, at->w, r, seg == 1 ? box + (lo - ca) : NULL, acc + lo);
+            const float *const r[4] = {at->wing + (e[0] + lo), at->wing + (e[1] + lo),
+                                       at->wing + (e[2] + lo), at->wing + (e[3] + lo)};
+            fold_k.wingclip(hi - lo, at->w, r, seg == 1 ? box + (lo - ca) : NULL, acc + (lo - xa));
         }
     }
-    box_clipped(box, ca, cb, wb, xb, acc);
+    box_clipped(box, ca, cb, wb, xb, xa, acc);
 }
 
 /* Smallest FFT side in the ladder holding `need` pixels; with a PSF, sides up to the PSF
@@ -2504,7 +2507,7 @@ wf_status wf_profile_add_wing_row(const wf_profile_wing_at *at, int row, int xa,
     if (!at->wing || xb < xa || (box && (ca < xa || cb > xb || cb < ca)))
         return wf_error(WF_ERR_INPUT, "profile: wing row columns [%d, %d) with box columns "
                         "[%d, %d) not within them, or no wing placed", xa, xb, ca, cb);
-    wing_row(at, row, xa, xb, box, ca, cb, acc - xa);
+    wing_row(at, row, xa, xb, box, ca, cb, acc);
     return WF_OK;
 }
 

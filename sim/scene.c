@@ -790,9 +790,11 @@ wf_status wf_scene_draw_object(wf_scene *s, size_t k, wf_scene_object *info, int
         free(buf), free(bx);
         return wf_error(WF_ERR_NOMEM, "scene: a %d x %d stamp", ro->nx, ro->ny);
     }
-    wf_status st = draw_object(&s->ts[0], ro, ro->by0, ro->by0 + ro->bny, bx);
-    float *bf = (float *)bx; /* in place: each float is written after its double is read */
+    float *bf = malloc((size_t)ro->bnx * ro->bny * sizeof *bf);
+    wf_status st = bf ? draw_object(&s->ts[0], ro, ro->by0, ro->by0 + ro->bny, bx)
+                      : wf_error(WF_ERR_NOMEM, "scene: a %d x %d box", ro->bnx, ro->bny);
     for (size_t i = 0; i < (size_t)ro->bnx * ro->bny && !st; i++) bf[i] = (float)bx[i];
+    free(bx);
     if (!ro->halo) {
         for (int j = 0; j < ro->bny && !st; j++)
             for (int i = 0; i < ro->bnx; i++)
@@ -808,7 +810,7 @@ wf_status wf_scene_draw_object(wf_scene *s, size_t k, wf_scene_object *info, int
         st = halo_row(&s->ts[0], ro, ro->y0 + j, ro->x0, ro->x0 + ro->nx, box, ca, cb,
                       buf + (size_t)j * ro->nx);
     }
-    free(bx);
+    free(bf);
     if (st) { free(buf); return st; }
     info->id = object_id(s, o);
     info->kind = (int)o->kind;
