@@ -9,6 +9,7 @@
 #include <signal.h>
 #include <sys/mount.h>
 #include <sys/resource.h>
+#include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -117,6 +118,7 @@ static void write_product(fitsfile *f, const char *path, const pixels *p, int kn
 
 START_TEST(test_same_bytes_as_file_driver)
 {
+    wf_fitsdisk_uncached(_i == 0);
     pixels *p = malloc(sizeof *p);
     ck_assert_ptr_nonnull(p);
     fill(p);
@@ -159,6 +161,7 @@ END_TEST
  * TFLOAT) and elements outside the image, leaving the file as it was. */
 START_TEST(test_write32_large_tiles)
 {
+    wf_fitsdisk_uncached(_i == 0);
     enum { W = 1031, H = 700, T = 97 }; /* a tile: 400 kB; the image: 2.9 MB */
     float *img = malloc((size_t)W * H * sizeof *img), *copy = malloc((size_t)W * T * sizeof *img);
     ck_assert_ptr_nonnull(img);
@@ -270,6 +273,7 @@ static void scrambled_rows(fitsfile *f, float *img, int ny, int check)
 
 START_TEST(test_scrambled_rows)
 {
+    wf_fitsdisk_uncached(_i == 0);
     enum { NYS = 2000 }; /* 2.4 MB: far more than cfitsio's forty 2880-byte buffers */
     float *img = malloc((size_t)NX * NYS * sizeof *img);
     ck_assert_ptr_nonnull(img);
@@ -299,6 +303,7 @@ END_TEST
  * hole: the file is as long as with zeros written, and reads back the same zeros. */
 START_TEST(test_gap_is_a_hole)
 {
+    wf_fitsdisk_uncached(_i == 0);
     char path[4200];
     tmp_path(path, sizeof path, "holes.fits");
     fitsfile *f;
@@ -360,6 +365,132 @@ START_TEST(test_names_and_slots)
     fits_read_key_lng(f, "N", &n, NULL, &status);
     fits_close_file(f, &status);
     ck_assert_int_eq(n, 199);
+}
+END_TEST
+
+/* Writes of every size at every offset, overlapping, in random order, with reads between
+ * them while the file is open: with the page edges held back for the uncached path, the
+ * latest bytes must still win, and the file must be cfitsio's own driver's. */
+static void random_writes(fitsfile *f, float *model, const float *vals, int check)
+{
+    enum { W = 1031, H = 700 };
+    int status = 0;
+    long naxes[2] = {W, H};
+    fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+    fits_create_img(f, FLOAT_IMG, 2, naxes, &status); /* the first image is then a gap */
+    fits_movabs_hdu(f, 1, NULL, &status);
+    ck_assert_int_eq(status, 0);
+    const LONGLONG npix = (LONGLONG)W * H;
+    uint64_t x = 0x853c49e6748fea9bull;
+    float *back = malloc(200000 * sizeof *back);
+    ck_assert_ptr_nonnull(back);
+    for (int k = 0; k < 400; k++) {
+        x ^= x << 13; x ^= x >> 7; x ^= x << 17;
+        LONGLONG first = (LONGLONG)(x % (uint64_t)npix), n;
+        int size_class = (int)(x >> 40) % 4; /* a few pixels, a row or two, a page, a tile */
+        LONGLONG span = size_class == 0 ? 7 : size_class == 1 ? 2 * W : size_class == 2 ? 1500 : 200000;
+        n = 1 + (LONGLONG)((x >> 20) % (uint64_t)span);
+        if (first + n > npix) n = npix - first;
+        const float *v = vals + (k * 7919) % 100000; /* vals holds 300000 */
+        fits_write_img(f, TFLOAT, first + 1, n, (float *)v, &status);
+        ck_assert_int_eq(status, 0);
+        if (model) memcpy(model + first, v, (size_t)n * sizeof *v);
+        if (check && k % 16 == 5) {
+            LONGLONG r = (LONGLONG)((x >> 8) % (uint64_t)npix), m = npix - r < 150000 ? npix - r : 150000;
+            int anynul = 0;
+            fits_read_img(f, TFLOAT, r + 1, m, NULL, back, &anynul, &status);
+            ck_assert_int_eq(status, 0);
+            ck_assert(memcmp(back, model + r, (size_t)m * sizeof *back) == 0);
+        }
+    }
+    free(back);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+}
+
+START_TEST(test_random_writes)
+{
+    wf_fitsdisk_uncached(_i == 0);
+    float *vals = malloc(300000 * sizeof *vals), *model = calloc((size_t)1031 * 700, sizeof *model);
+    ck_assert_ptr_nonnull(vals);
+    ck_assert_ptr_nonnull(model);
+    for (int i = 0; i < 300000; i++) vals[i] = (float)i * 0.25f + 1.0f;
+    char a[4200], b[4200];
+    tmp_path(a, sizeof a, "random_file_driver.fits");
+    tmp_path(b, sizeof b, "random_wfdisk.fits");
+    fitsfile *f;
+    int status = 0;
+    ck_assert_int_eq(fits_create_diskfile(&f, a, &status), 0);
+    random_writes(f, NULL, vals, 0);
+    ck_assert_int_eq(wf_fitsdisk_create(&f, b, &status), 0);
+    random_writes(f, model, vals, 1);
+    size_t la = 0, lb = 0;
+    char *da = wf_test_slurp(a, &la), *db = wf_test_slurp(b, &lb);
+    ck_assert_ptr_nonnull(da);
+    ck_assert_ptr_nonnull(db);
+    ck_assert_uint_eq(la, lb);
+    ck_assert(memcmp(da, db, la) == 0);
+    free(da);
+    free(db);
+    free(vals);
+    free(model);
+}
+END_TEST
+
+/* Where the file system states how (statx), a large product's pixels go past the page
+ * cache; wf_fitsdisk_uncached(0) sends every byte through it. */
+START_TEST(test_uncached_path_taken)
+{
+    char probe[4200];
+    tmp_path(probe, sizeof probe, "probe");
+    FILE *pf = fopen(probe, "w"); /* only regular files state it */
+    ck_assert_ptr_nonnull(pf);
+    fclose(pf);
+    struct statx sx;
+    int stated = statx(AT_FDCWD, probe, 0, STATX_DIOALIGN, &sx) == 0 &&
+                 (sx.stx_mask & STATX_DIOALIGN) && sx.stx_dio_offset_align;
+    unlink(probe);
+    if (!stated) WF_SKIP("the test directory's file system states no direct-I/O alignment");
+    enum { W = 2048, H = 512 }; /* 4 MiB */
+    float *img = malloc((size_t)W * H * sizeof *img);
+    ck_assert_ptr_nonnull(img);
+    for (size_t i = 0; i < (size_t)W * H; i++) img[i] = (float)(i % 4099) - 7.5f;
+    for (int on = 1; on >= 0; on--) {
+        char path[4200];
+        tmp_path(path, sizeof path, on ? "uncached_on.fits" : "uncached_off.fits");
+        wf_fitsdisk_uncached(on);
+        long long u0, c0, u1, c1;
+        wf_fitsdisk_written(&u0, &c0);
+        fitsfile *f;
+        int status = 0;
+        long naxes[2] = {W, H};
+        ck_assert_int_eq(wf_fitsdisk_create(&f, path, &status), 0);
+        fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+        for (int y = 0; y < H; y += 64) {
+            long first[2] = {1, y + 1};
+            fits_write_pix(f, TFLOAT, first, 64L * W, img + (size_t)y * W, &status);
+        }
+        fits_close_file(f, &status);
+        ck_assert_int_eq(status, 0);
+        wf_fitsdisk_written(&u1, &c1);
+        long long bytes = (long long)W * H * 4;
+        if (on) {
+            ck_assert_int_ge(u1 - u0, bytes * 9 / 10);
+            ck_assert_int_lt(c1 - c0, bytes / 10);
+        } else {
+            ck_assert_int_eq(u1 - u0, 0);
+            ck_assert_int_ge(c1 - c0, bytes);
+        }
+        fitsfile *g;
+        float v = 0;
+        int anynul = 0;
+        ck_assert_int_eq(fits_open_diskfile(&g, path, READONLY, &status), 0);
+        fits_read_img(g, TFLOAT, (LONGLONG)W * H - 5, 1, NULL, &v, &anynul, &status);
+        fits_close_file(g, &status);
+        ck_assert_int_eq(status, 0);
+        ck_assert(v == img[(size_t)W * H - 6]);
+    }
+    free(img);
 }
 END_TEST
 
@@ -428,10 +559,12 @@ static Suite *suite(void)
 {
     Suite *s = suite_create("fitsdisk");
     TCase *tc = tcase_create("core");
-    tcase_add_test(tc, test_same_bytes_as_file_driver);
-    tcase_add_test(tc, test_write32_large_tiles);
-    tcase_add_test(tc, test_gap_is_a_hole);
-    tcase_add_test(tc, test_scrambled_rows);
+    tcase_add_loop_test(tc, test_same_bytes_as_file_driver, 0, 2);
+    tcase_add_loop_test(tc, test_write32_large_tiles, 0, 2);
+    tcase_add_loop_test(tc, test_gap_is_a_hole, 0, 2);
+    tcase_add_loop_test(tc, test_scrambled_rows, 0, 2);
+    tcase_add_loop_test(tc, test_random_writes, 0, 2);
+    tcase_add_test(tc, test_uncached_path_taken);
     tcase_add_test(tc, test_names_and_slots);
     tcase_add_test(tc, test_write_failure_reported);
     tcase_add_test(tc, test_full_disk_at_the_close);

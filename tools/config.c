@@ -115,6 +115,8 @@ static const key_desc keys[] = {
      FIELD(threads), .doc = "Readout instances run in parallel; products do not depend on it."},
     {.name = "run.quiet", .type = KT_BOOL, .unit = "", .def = "false", FIELD(quiet),
      .doc = "Do not report progress and files written on stderr."},
+    {.name = "run.uncached_writes", .type = KT_BOOL, .unit = "", .def = "true", FIELD(uncached_writes),
+     .doc = "Write products past the page cache (O_DIRECT) on file systems that state its alignment (ext4, xfs; not tmpfs): a single-frame SCA's 200 MB then cost the device's transfer, not a copy into fresh cache pages. false: through the page cache. The bytes written are the same."},
     {.name = "run.out", .type = KT_STRING, .unit = "", .def = "out", .nonempty = 1,
      FIELD(out_dir), .doc = "Directory that receives the products."},
 

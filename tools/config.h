@@ -21,6 +21,7 @@ typedef struct wf_config {
     char ma_table[WF_PATH_MAX];    /* readout.ma_table: "4", "6", "11" or a file [6] */
     int threads;                   /* run.threads [1] */
     int quiet;                     /* run.quiet [false] */
+    int uncached_writes;           /* run.uncached_writes [true] */
     char out_dir[WF_PATH_MAX];     /* run.out ["out"] */
     char filter[16];               /* exposure.filter [Y106] */
     /* Built-in grid scene (scene.*) until the renderer lands. */

@@ -13,6 +13,7 @@
 #include "hal/link.h"
 #include "hal/scene.h"
 #include "sim/catalog.h"
+#include "sim/fitsdisk.h"
 #include "sim/fitsout.h"
 #include "sim/scene.h"
 #include "sim/skyindex.h"
@@ -153,6 +154,7 @@ static int parse(int argc, char **argv, cli *c)
         else { fprintf(stderr, "wfisim: unexpected argument '%s'\n", a); return 2; }
     }
     if ((st = wf_config_finish(&c->cfg, &c->clock))) return fail("config", st);
+    wf_fitsdisk_uncached(c->cfg.uncached_writes);
     return 0;
 }
 
