@@ -333,8 +333,9 @@ static wf_status pixel_transform(const wf_psf_image *img, const wf_profile_accur
     size_t side_s = 2 * (size_t)kr_s + 1;
     double dkt = 2.0 * M_PI / (acc->psf_table_fft * acc->pixel_scale);
     double *raw;
-    wf_status st = wf_arena_calloc(arena, side_s * side_s * 2, sizeof(double), "PSF transform",
-                                   (void **)&raw);
+    /* every sample is written by either transform: not zeroed */
+    wf_status st = wf_arena_reserve(arena, side_s * side_s * 2 * sizeof(double), "PSF transform",
+                                    (void **)&raw);
     if (st) return st;
     int os = integer_oversampling(acc->pixel_scale, img->scale_arcsec);
     st = os ? transform_fft(img, os, acc->psf_table_fft, kr_s, arena, raw)
@@ -418,8 +419,8 @@ static wf_status core_pass(void *ctx, int task, int slot)
     wf_arena *arena = &j->slot[slot];
     size_t mark = wf_arena_mark(arena);
     double *tapered, *raw;
-    wf_status st = wf_arena_calloc(arena, (size_t)img->n * (size_t)img->n, sizeof(double), "PSF core image",
-                                   (void **)&tapered);
+    wf_status st = wf_arena_reserve(arena, (size_t)img->n * (size_t)img->n * sizeof(double),
+                                    "PSF core image", (void **)&tapered);
     if (!st) {
         for (int jj = 0; jj < img->n; jj++)
             for (int i = 0; i < img->n; i++) {
@@ -578,8 +579,9 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
 
     double *ee;
     size_t nee = ee_count(img);
-    if ((st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&j.re)) ||
-        (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF table", (void **)&j.im)) ||
+    /* the tables and wings are written whole (fill_table, wing_pass): not zeroed */
+    if ((st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF table", (void **)&j.re)) ||
+        (st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF table", (void **)&j.im)) ||
         (st = wf_arena_calloc(arena, nee, sizeof(double), "PSF encircled energy", (void **)&ee)) ||
         (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF envelope", (void **)&j.env)) ||
         (st = steps_alloc(arena, acc, kr, &psf->steps)))
@@ -587,10 +589,10 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
     for (int l = 0; l < ncore; l++) {
         wf_profile_core *co = &psf->core[l];
         co->radius = ldexp(acc->core_radius, -l);
-        if ((st = wf_arena_calloc(arena, (size_t)WING_OS * WING_OS * (size_t)j.g.np * (size_t)j.g.np,
-                                  sizeof(float), "PSF wing", (void **)&co->wing)) ||
-            (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table", (void **)&co->re)) ||
-            (st = wf_arena_calloc(arena, side * side, sizeof(float), "PSF core table", (void **)&co->im)) ||
+        if ((st = wf_arena_reserve(arena, (size_t)WING_OS * WING_OS * (size_t)j.g.np * (size_t)j.g.np * sizeof(float),
+                                   "PSF wing", (void **)&co->wing)) ||
+            (st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF core table", (void **)&co->re)) ||
+            (st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF core table", (void **)&co->im)) ||
             (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF core envelope",
                                   (void **)&co->env)) ||
             (st = steps_alloc(arena, acc, kr, &co->steps)))
