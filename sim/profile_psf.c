@@ -227,12 +227,25 @@ static wf_status transform_fft(const wf_psf_image *img, int os, int table_fft, i
     int np = os * table_fft;
     size_t rowlen = 2 * ((size_t)np / 2 + 1);
     double *buf;
-    wf_status st = wf_arena_calloc(arena, (size_t)np * rowlen, sizeof(double),
-                                   "PSF transform scratch", (void **)&buf);
+    wf_status st = wf_arena_reserve(arena, (size_t)np * rowlen * sizeof(double),
+                                    "PSF transform scratch", (void **)&buf);
     if (st) return st;
-    for (int j = 0; j < img->n; j++)
-        for (int i = 0; i < img->n; i++)
-            buf[(size_t)(j % np) * rowlen + (size_t)(i % np)] += img->pix[(size_t)j * img->n + i];
+    /* the image folded onto np x np: each row's first np samples set (0.0 + x, as the sum
+     * into zeros gives, -0 included), the rest added in the same order as a sum would */
+    const int n = img->n;
+    for (int j = 0; j < np; j++) {
+        double *row = buf + (size_t)j * rowlen;
+        const double *src = img->pix + (size_t)j * n;
+        int i = 0;
+        if (j < n)
+            for (; i < n && i < np; i++) row[i] = 0.0 + src[i];
+        for (; i < np; i++) row[i] = 0.0;
+        if (j < n)
+            for (i = np; i < n; i++) row[i % np] += src[i];
+    }
+    for (int j = np; j < n; j++)
+        for (int i = 0; i < n; i++)
+            buf[(size_t)(j % np) * rowlen + (size_t)(i % np)] += img->pix[(size_t)j * n + i];
     wf_fftw_lock();
     fftw_plan plan = fftw_plan_dft_r2c_2d(np, np, buf, (fftw_complex *)buf, FFTW_ESTIMATE);
     wf_fftw_unlock();
