@@ -49,6 +49,7 @@ void wf_profile_accuracy_default(wf_profile_accuracy *acc)
     acc->core_levels = 1;
     acc->wing_tolerance = 0.0;
     acc->knot_accuracy = WF_PROFILE_KNOT_ACCURACY;
+    acc->cut_tolerance = 0.0;
 }
 
 wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
@@ -81,6 +82,9 @@ wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
     if (!(acc->wing_tolerance >= 0.0 && acc->wing_tolerance < INFINITY))
         return wf_error(WF_ERR_RANGE, "profile: wing_tolerance %g is not a finite value >= 0",
                         acc->wing_tolerance);
+    if (!(acc->cut_tolerance >= 0.0 && acc->cut_tolerance < INFINITY))
+        return wf_error(WF_ERR_RANGE, "profile: cut_tolerance %g is not a finite value >= 0",
+                        acc->cut_tolerance);
     if (acc->psf_table_fft < 16 || acc->psf_table_fft > 4096 || acc->psf_table_fft % 2)
         return wf_error(WF_ERR_RANGE, "profile: psf_table_fft %d not an even number in "
                         "[16, 4096]", acc->psf_table_fft);
@@ -617,6 +621,45 @@ static double psf_kcut(const job *jb, const wf_sersic_table *t, const wf_profile
         if (g * psf->env[i] > tol) return (i + 1) * dkt;
     }
     return 0.0;
+}
+
+/* With a PSF and cut_tolerance tol > 0: the fine-grid radius (in steps dk of a box of side
+ * m) beyond which the modes left out of `part` move no pixel by more than tol. A pixel is
+ * the sum of the box's fine samples over m^2, so what the samples beyond radius J add is at
+ * most sum |object(k)| |PSF(k) pixel(k)| / m^2 over them; on the ring j <= |k| / dk < j + 1
+ * that is at most g(j dk) env(j dk), g the object's transform along its minor axis (the
+ * largest along the ring: both parts fall with |k|) and env the PSF's envelope, times the
+ * ring's lattice points, fewer than pi ((j + 1 + 1/sqrt 2)^2 - (j - 1/sqrt 2)^2). Summed
+ * from the band's edge `lim` inwards. Bicubic reads of the table (sides not dividing
+ * table_fft) may exceed the envelope by a little; the count's margin covers it. Far below
+ * the pointwise cut of kvalue_accuracy for faint objects: that bound counts every sample of
+ * the band at the threshold. */
+static int tail_cut(const job *jb, const wf_sersic_table *t, const wf_profile_psf *psf,
+                    double dk, int m, int lim, double tol, int part)
+{
+    const double dkt = 2.0 * M_PI / (psf->table_fft * psf->pixel_scale);
+    const double norm = 1.0 / ((double)m * m);
+    double tail = 0.0;
+    for (int j = lim; j >= 0; j--) {
+        double k = j * dk, q2 = (jb->shape.smin * k) * (jb->shape.smin * k), g;
+        int i = (int)(k / dkt);
+        double e = i > psf->kr ? 0.0 : psf->env[i];
+        if (part == 1) g = jb->fk;
+        else if (jb->fpoint > 0.0) g = jb->fpoint;
+        else {
+            g = 0.0;
+            if (jb->fb > 0.0) g += jb->fb * wf_sersic4_eval(t, jb->re * jb->re * q2);
+            if (jb->fd > 0.0) {
+                double s = 1.0 / (1.0 + jb->r0 * jb->r0 * q2);
+                g += jb->fd * s * sqrt(s);
+            }
+        }
+        double a = j + 1 + M_SQRT1_2, b = j - M_SQRT1_2;
+        if (b < 0.0) b = 0.0;
+        tail += M_PI * (a * a - b * b) * g * e * norm;
+        if (tail > tol) return j + 1;
+    }
+    return 0;
 }
 
 /* ------------------------------------------------------------------------ the draw */
@@ -1868,6 +1911,18 @@ static void wing_row(const wf_profile_wing_at *at, int j, int xa, int xb, const 
     long i1 = xb - 1 < np - 1 - at->ox[1] ? xb - 1 : np - 1 - at->ox[1];
     int wa = xa, wb = xa;
     if (i0 <= i1 && ny0 >= 0 && ny1 <= np - 1) wa = (int)i0, wb = (int)i1 + 1;
+    if (at->keep_negatives) { /* the box's pixels, then the wing's, as they are */
+        for (int i = ca > xa ? ca : xa; i < (cb < xb ? cb : xb); i++) acc[i - xa] += (double)box[i - ca];
+        if (wa < wb) {
+            const long c = wa;
+            fold_k.wing(wb - wa, at->w[0], at->w[1], at->w[2], at->w[3],
+                        at->wing + (at->plane[0] + ny0 * np + at->ox[0] + c),
+                        at->wing + (at->plane[1] + ny0 * np + at->ox[1] + c),
+                        at->wing + (at->plane[2] + ny1 * np + at->ox[0] + c),
+                        at->wing + (at->plane[3] + ny1 * np + at->ox[1] + c), acc + (wa - xa));
+        }
+        return;
+    }
     box_clipped(box, ca, cb, xa, wa, xa, acc);
     if (wa < wb) {
         /* the four phase planes' entries at column 0 (the columns before wa are never read) */
@@ -2166,12 +2221,18 @@ static wf_status draw_nopsf(wf_profile_work *w, const job *jb, double x, double 
 /* Negatives (ringing and rounding) set to zero, and stamp->sum and ->clipped: with masks,
  * two lanes at a time, since about half the far pixels of a faint object are slightly
  * negative and a branch would mispredict (the sums are diagnostics: their order is free). */
-static void clip_negatives(wf_stamp *stamp)
+static void clip_negatives(wf_stamp *stamp, int keep_negatives)
 {
     double *pix = stamp->pix;
     const size_t n = (size_t)stamp->nx * stamp->ny;
     double clipped = 0.0, sum = 0.0;
     size_t i = 0;
+    if (keep_negatives) { /* the renderer clips the sum of every object instead */
+        for (; i < n; i++) sum += pix[i];
+        stamp->sum = sum;
+        stamp->clipped = 0.0;
+        return;
+    }
 #if defined(__GNUC__)
     typedef double cd2 __attribute__((vector_size(16)));
     typedef long long cl2 __attribute__((vector_size(16)));
@@ -2303,7 +2364,22 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
     int us = (int)floor(ksmooth / gd.dk), uk = gd.nk ? (int)floor(kknots / gd.dk) : 0;
     if (us > lim) us = lim;
     if (uk > lim) uk = lim;
+    if (w->acc.cut_tolerance > 0.0) { /* half the tolerance each when there are knots */
+        double tol = (gd.nk ? 0.5 : 1.0) * w->acc.cut_tolerance;
+        int js = tail_cut(jb, t, psf, gd.dk, gd.m, us, tol, 0);
+        int keep = (int)floor(psf_kcut(jb, t, psf, WF_PROFILE_CUT_KEEP, 0) / gd.dk);
+        if (js < keep) js = keep;
+        if (js < us) us = js;
+        if (gd.nk) {
+            int jk = tail_cut(jb, t, psf, gd.dk, gd.m, uk, tol, 1);
+            keep = (int)floor(psf_kcut(jb, t, psf, WF_PROFILE_CUT_KEEP, 1) / gd.dk);
+            if (jk < keep) jk = keep;
+            if (jk < uk) uk = jk;
+        }
+    }
     gd.u = us > uk ? us : uk;
+    w->cut_last[0] = us;
+    w->cut_last[1] = uk;
 
     for (int v = 0; v <= gd.u; v++) w->rim[v] = (int)floor(sqrt((double)gd.u * gd.u - (double)v * v));
     gd.rim = w->rim;
@@ -2376,12 +2452,24 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
     }
     if (split && wing) add_wing(psf, split, jb->flux, x, y, stamp);
     if (clamped && jb->fpoint == 0.0 && (st = dewrap(w, jb, &gd, x, y, stamp, split))) return st;
-    clip_negatives(stamp);
+    clip_negatives(stamp, w->keep_negatives);
     stamp->fft = gd.m;
     return WF_OK;
 }
 
 void wf_profile_knot_method(wf_profile_work *work, int method) { work->knot_method = method; }
+
+void wf_profile_keep_negatives(wf_profile_work *work, int keep) { work->keep_negatives = keep != 0; }
+
+wf_status wf_profile_work_tune_cut(wf_profile_work *work, double cut_tolerance)
+{
+    wf_profile_accuracy acc = work->acc;
+    acc.cut_tolerance = cut_tolerance;
+    wf_status st = wf_profile_check_accuracy(&acc);
+    if (st) return st;
+    work->acc = acc;
+    return WF_OK;
+}
 
 wf_status wf_profile_work_tune(wf_profile_work *work, double flux_fraction,
                                double folding_threshold, double kvalue_accuracy,

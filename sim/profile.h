@@ -11,8 +11,9 @@
  *    samples the pixel-convolved image exactly although Roman's PSF is undersampled by
  *    0.11" pixels), and inverse-FFT'd once (FFTW). Flux, sub-pixel position and shear are
  *    exact; the errors are the light from beyond the FFT box that wraps in (knob
- *    folding_threshold), the Fourier modes dropped below kvalue_accuracy, and the knot
- *    lattice's interpolation (~1e-9 of the peak). Stamps do not depend on the CPU's vector
+ *    folding_threshold), the Fourier modes dropped below kvalue_accuracy (or beyond the
+ *    radius cut_tolerance allows), and the knot lattice's interpolation (~1e-9 of the
+ *    peak). Stamps do not depend on the CPU's vector
  *    width.
  *  - Without a PSF (psf NULL: tests, the GalSim no-PSF references), in real space: each
  *    pixel is the exact integral of the profile over it (polar fans around the cusp,
@@ -65,7 +66,15 @@ typedef struct wf_profile_accuracy {
                                  pixel) take the smallest such core [0: none] */
     double knot_accuracy;     /* the knot lattice's aliasing, e^-E: a pixel moves by ~10 e^-E
                                  of the knots' flux at most [e^-20 = 2.1e-9] */
+    double cut_tolerance;     /* with a PSF, > 0 also ends the Fourier sum where the modes left
+                                 out move no pixel by more than this (flux per pixel), from
+                                 the bound sum |object| env / M^2 over the fine samples beyond
+                                 the cut (WF_PROFILE_CUT_KEEP below) [0: kvalue_accuracy alone] */
 } wf_profile_accuracy;
+
+/* cut_tolerance never drops a mode above this fraction of the flux (object x PSF envelope):
+ * the faintest objects keep their shape instead of becoming the box's flat mean. */
+#define WF_PROFILE_CUT_KEEP 1e-2
 
 void wf_profile_accuracy_default(wf_profile_accuracy *acc);
 
@@ -183,6 +192,9 @@ typedef struct wf_profile_work {
     int knot_method;       /* WF_KNOTS_* (sim/profile_int.h) */
     int knot_last[3];      /* the last draw's knots: lattice step (0: none), its taps, and
                               the knots summed directly */
+    int cut_last[2];       /* the last draw's Fourier extent in fine-grid steps: the smooth
+                              part's (or point source's) and the knots' (0: none) */
+    int keep_negatives;    /* 1: draws leave negative ringing in (wf_profile_keep_negatives) */
     const struct wf_sersic_table *sersic;
 } wf_profile_work;
 #define WF_PROFILE_KNOT_BLOCK 16
@@ -203,6 +215,13 @@ void wf_profile_work_free(wf_profile_work *work);
 wf_status wf_profile_work_tune(wf_profile_work *work, double flux_fraction,
                                double folding_threshold, double kvalue_accuracy,
                                double wing_tolerance, double knot_accuracy);
+
+/* Sets acc.cut_tolerance for the draws that follow (a per-object knob, as those above). */
+wf_status wf_profile_work_tune_cut(wf_profile_work *work, double cut_tolerance);
+/* keep 1: draws leave negative ringing in their stamps (stamp->clipped 0), so that the
+ * Fourier cut adds no flux, for a renderer that sums objects and clips the sum at zero
+ * (sim/render.c); 0 (the default) sets it to zero. */
+void wf_profile_keep_negatives(wf_profile_work *work, int keep);
 
 /* Bytes wf_profile_psf_init keeps at most (*bytes) and the scratch each of its threads needs
  * while running (*scratch). */
@@ -231,7 +250,8 @@ wf_status wf_profile_point_bounds(const wf_profile_work *work, const wf_profile_
  * The object is centred at (x, y); the bounds may be anything within max_fft / 2 pixels of
  * it. The FFT side depends on the object and the knobs only, so a piece of a stamp (say
  * some of its rows) comes out bit-identical to the same pixels of the whole. Negative
- * ringing is set to zero and its magnitude returned in stamp->clipped. */
+ * ringing is set to zero and its magnitude returned in stamp->clipped (unless the work keeps
+ * negatives). */
 wf_status wf_profile_draw_galaxy(wf_profile_work *work, const wf_galaxy *g,
                                  const wf_profile_psf *psf, double x, double y,
                                  wf_stamp *stamp);
@@ -259,13 +279,15 @@ wf_status wf_profile_add_wing(const wf_profile_psf *psf, int core, double flux, 
  * object, not per row); wf_profile_add_wing_row then adds, for the columns i in [xa, xb) of
  * pixel row `row`, acc[i - xa] += max(b_i + wing, 0), b_i the box's pixel box[i - ca] for
  * i in [ca, cb) (within [xa, xb)) and 0 elsewhere or when box is NULL: the same bits as the
- * box row plus wf_profile_add_wing's, clipped and added. */
+ * box row plus wf_profile_add_wing's, clipped and added. With keep_negatives set (by the
+ * caller, after placing), acc[i - xa] += b_i, then += wing: no clip. */
 typedef struct wf_profile_wing_at {
     const float *wing; /* the core's phase planes */
     int np;
     long plane[4];     /* the four planes read, (b0, a0), (b0, a1), (b1, a0), (b1, a1) */
     long ox[2], oy[2]; /* wing column of pixel column i: i + ox (row: j + oy) */
     double w[4];       /* flux x the bilinear weights */
+    int keep_negatives; /* 0 from wf_profile_wing_place */
 } wf_profile_wing_at;
 wf_status wf_profile_wing_place(const wf_profile_psf *psf, int core, double flux, double x,
                                 double y, wf_profile_wing_at *at);

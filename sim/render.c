@@ -308,7 +308,9 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
             for (int x = xa; x < xb; x++) acc[x] += s[x];
         }
     }
-    for (size_t k = 0; k < rows * (size_t)ncols; k++) rate[k] = (float)r->acc[k];
+    /* the objects' draws keep their negative ringing (so that none adds flux); the sum,
+     * sky included, is clipped here */
+    for (size_t k = 0; k < rows * (size_t)ncols; k++) rate[k] = r->acc[k] > 0.0 ? (float)r->acc[k] : 0.0f;
     return WF_OK;
 }
 

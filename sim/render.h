@@ -9,7 +9,8 @@
  * rest of its light (over the whole footprint) added row by row by a halo function: a PSF
  * wing that is cheap to recompute costs no pool. The rate of a pixel is the sky plus the
  * objects in (first row, id) order, summed in double, so it does not depend on how the
- * rows are split into tiles. */
+ * rows are split into tiles, then clipped at zero: objects may hand over negative pixels (a
+ * draw's ringing kept, so that no object gains flux by its clipping). */
 #ifndef WF_RENDER_H
 #define WF_RENDER_H
 
@@ -40,8 +41,8 @@ typedef wf_status (*wf_sky_fn)(void *ctx, int y, int ncols, double *out);
 
 /* Adds a halo object's light of row y, columns [xa, xb) (within its footprint and the SCA),
  * into acc[x - xa]: per pixel the box's value (box[x - ca] for x in [ca, cb); box NULL: the
- * row has no box pixels) plus the halo, negatives set to zero. Called with the draw
- * function's ctx. */
+ * row has no box pixels) plus the halo (the sum is clipped at zero with the rest, so
+ * negatives may be left in). Called with the draw function's ctx. */
 typedef wf_status (*wf_halo_fn)(void *ctx, const wf_render_object *obj, int y, int xa, int xb,
                                 const float *box, int ca, int cb, double *acc);
 

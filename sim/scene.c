@@ -253,6 +253,7 @@ static wf_status draw_object(void *ctx, const wf_render_object *ro, int ya, int 
     wf_stamp st = {ro->bx0, ro->by0, ro->bnx, ro->bny, buf, 0, 0, 0};
     const wf_profile_accuracy *acc = &ts->scene->acc;
     wf_status s = wf_profile_work_tune(&ts->work, acc->flux_fraction, o->fold, o->kval, o->wing_tol, o->knot_acc);
+    if (!s) s = wf_profile_work_tune_cut(&ts->work, o->wing_tol);
     if (s) return s;
     s = o->kind != OBJ_GALAXY ? wf_profile_draw_point(&ts->work, o->wide ? &ts->scene->ppsf_wide : &ts->scene->ppsf,
                                                       o->flux, o->x, o->y, &st)
@@ -276,6 +277,7 @@ static wf_status halo_row(void *ctx, const wf_render_object *ro, int y, int xa, 
         ts->wing_obj = NULL;
         wf_status st = wf_profile_wing_place(&ts->scene->ppsf, ro->halo, o->g.flux, o->x, o->y, &ts->wing);
         if (st) return st;
+        ts->wing.keep_negatives = 1; /* as the box: the renderer clips the sum */
         ts->wing_obj = ro;
         ts->wing_key[0] = o->g.flux, ts->wing_key[1] = o->x, ts->wing_key[2] = o->y;
     }
@@ -482,6 +484,8 @@ static void *init_works(void *arg)
         }
         wf_arena_init(&ts->arena, ts->memory, wneed + 4096, "drawing arena");
         if ((st = wf_profile_work_init(&ts->work, &s->acc, &ts->arena))) break;
+        /* objects keep their ringing: the renderer clips the sum, so no draw adds flux */
+        wf_profile_keep_negatives(&ts->work, 1);
         ts->work_ready = 1;
     }
     j->st = st;
@@ -626,7 +630,9 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
      * box stays in the stamp, moved across the box, and moves no pixel by more than
      * fold x flux; the Fourier modes dropped below kvalue x flux move none by more than their
      * count over the box's M^2 pixels, modes x kvalue x flux, with modes = pi (kmax p / 2 pi)^2
-     * the fine-grid samples per box pixel out to the PSF's band (4.5 at Y106, 13 at R062); the
+     * the fine-grid samples per box pixel out to the PSF's band (4.5 at Y106, 13 at R062), and
+     * it moves further in where the sum over the modes beyond it bounds every pixel's change
+     * by the same tolerance (acc.cut_tolerance, sim/profile.c tail_cut); the
      * split PSF's wing moves none by more than 2 flux wing_max; the knot lattice's aliasing
      * none by more than WF_SCENE_KNOT_BOUND knot_accuracy x the knots' flux (measured <= 0.13
      * in tests/test_profile.c); knots drawn as their expectation, the smooth disk, none by

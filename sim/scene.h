@@ -101,7 +101,8 @@ wf_status wf_scene_source_for(wf_scene *scene, int t, wf_scene_source *out);
 void wf_scene_get_stats(const wf_scene *scene, wf_scene_stats *out);
 
 /* The stamp of drawn object k (0 <= k < count): bounds in SCA pixels (0-based) and pixels in
- * e-/s, as the renderer adds them; *pix is malloc'd for the caller. Also its catalog id,
+ * e-/s, as the renderer adds them (negative ringing left in: the renderer clips the sum of
+ * all objects and the sky); *pix is malloc'd for the caller. Also its catalog id,
  * kind (0 galaxy, 1 star, 2 supernova), position (0-based pixels), magnitude and flux. */
 typedef struct wf_scene_object {
     long long id;

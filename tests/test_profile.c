@@ -2167,6 +2167,85 @@ START_TEST(test_simd_identical_wing)
 }
 END_TEST
 
+/* acc.cut_tolerance T: the Fourier sum ends where the modes left out move no pixel by more
+ * than T (tail_cut's bound), and the cut moves no flux within the FFT box (its k = 0 mode
+ * stays; the work keeps negatives, as the scene's do). Against the same draw without the cut:
+ * faint to bright (T from 1e-5 to 1e-2 of the flux), small to large galaxies, with knots
+ * and without, the whole PSF and the split one. The cut must come in (the saving) for the
+ * loose tolerances and never leave the box with its mean alone. */
+START_TEST(test_cut_tolerance_bound)
+{
+    wf_psf_image img;
+    wf_profile_accuracy acc;
+    ctx c;
+    double *psfpix = open_split(&c, &img, &acc);
+    wf_profile_keep_negatives(&c.work, 1);
+    static const double hd[] = {0.1, 0.3, 1.0};
+    static const double tolf[] = {1e-5, 1e-4, 1e-3, 1e-2};
+    int engaged = 0, cases = 0;
+    double worst = 0.0; /* largest |pixel change| / T */
+    for (int split = 0; split < 2; split++)
+        for (int k = 0; k < 3; k++)
+            for (int kn = 0; kn < 2; kn++) {
+                wf_galaxy g = galaxy(40.0, 0.3, hd[k], 0.5 * hd[k], 0.2, -0.1);
+                if (kn) {
+                    g.n_knots = 20;
+                    g.knot_frac = 0.2;
+                    g.knot_seed = 11;
+                }
+                const double x = 100.37, y = 90.71;
+                ck_assert(wf_profile_work_tune(&c.work, acc.flux_fraction, acc.folding_threshold,
+                                               acc.kvalue_accuracy, split ? 1.0 : 0.0,
+                                               acc.knot_accuracy) == WF_OK);
+                ck_assert(wf_profile_work_tune_cut(&c.work, 0.0) == WF_OK);
+                wf_stamp b;
+                ck_assert(wf_profile_galaxy_bounds(&c.work, &g, &c.psf, x, y, &b, NULL) == WF_OK);
+                wf_stamp probe = stamp_new(b.x0, b.y0, b.nx, b.ny);
+                ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, x, y, &probe) == WF_OK);
+                /* the whole FFT box (and for a split galaxy its wing around it) */
+                int m = probe.fft;
+                wf_stamp ref = stamp_new((int)lround(x) - m / 2, (int)lround(y) - m / 2, m, m);
+                ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, x, y, &ref) == WF_OK);
+                ck_assert_int_eq(ref.fft, m);
+                const int u_ref = c.work.cut_last[0] > c.work.cut_last[1] ? c.work.cut_last[0] : c.work.cut_last[1];
+                for (int t = 0; t < 4; t++) {
+                    const double tol = tolf[t] * g.flux;
+                    ck_assert(wf_profile_work_tune_cut(&c.work, tol) == WF_OK);
+                    wf_stamp cut = stamp_new(ref.x0, ref.y0, m, m);
+                    ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, x, y, &cut) == WF_OK);
+                    ck_assert_int_eq(cut.fft, m);
+                    const int u = c.work.cut_last[0] > c.work.cut_last[1] ? c.work.cut_last[0] : c.work.cut_last[1];
+                    ck_assert_msg(u <= u_ref && c.work.cut_last[0] > 0, "extent %d against %d", u, u_ref);
+                    engaged += u < u_ref;
+                    double d = 0.0, sr = 0.0, sc = 0.0;
+                    for (int i = 0; i < m * m; i++) {
+                        d = fmax(d, fabs(cut.pix[i] - ref.pix[i]));
+                        sr += ref.pix[i];
+                        sc += cut.pix[i];
+                    }
+                    worst = fmax(worst, d / tol);
+                    ck_assert_msg(d <= tol * (1.0 + 1e-9) + 1e-12 * g.flux,
+                                  "split %d, hlr %g, knots %d, T %g: a pixel moved by %g", split,
+                                  hd[k], g.n_knots, tol, d);
+                    ck_assert_msg(fabs(sc - sr) <= 1e-9 * g.flux, "split %d, hlr %g, knots %d, "
+                                  "T %g: the box's flux moved by %g", split, hd[k], g.n_knots, tol, sc - sr);
+                    cases++;
+                    free(cut.pix);
+                }
+                ck_assert(wf_profile_work_tune_cut(&c.work, 0.0) == WF_OK);
+                free(ref.pix);
+                free(probe.pix);
+            }
+    printf("cut_tolerance: %d of %d draws cut further in, worst pixel change %.3g of T\n", engaged,
+           cases, worst);
+    ck_assert(engaged >= cases / 2);
+    ck_assert_int_eq(wf_profile_work_tune_cut(&c.work, -1.0), WF_ERR_RANGE);
+    ck_assert_int_eq(wf_profile_work_tune_cut(&c.work, NAN), WF_ERR_RANGE);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
 /* The renderer's one-pass row of a split galaxy (wf_profile_wing_place, then
  * wf_profile_add_wing_row per row) against the sum it replaces: the box's pixels as float,
  * plus wf_profile_add_wing's wing, clipped at zero, added to what the row held. The same
@@ -2179,7 +2258,7 @@ START_TEST(test_wing_row_is_box_plus_wing)
     ctx c;
     double *psfpix = open_split_wing(&c, &img, &acc);
     static const int widths[] = {0, 2, 4, 8};
-    int tried = 0, clipped = 0, kept = 0;
+    int tried = 0, clipped = 0, kept = 0, below = 0;
     for (int iw = 0; iw < 4; iw++) {
         if (wf_profile_simd(widths[iw]) != widths[iw]) continue; /* not on this CPU */
         tried++;
@@ -2228,6 +2307,28 @@ START_TEST(test_wing_row_is_box_plus_wing)
             ck_assert_msg(!memcmp(got, want.pix, sizeof(double) * (size_t)w * want.ny),
                           "hlr %g, %d lanes: the row differs from box + wing, clipped", g.hlr_disk,
                           widths[iw]);
+            /* keep_negatives: the box's pixels added, then wf_profile_add_wing's wing, nothing
+             * clipped (the renderer clips the sum of all objects) */
+            at.keep_negatives = 1;
+            for (int i = 0; i < w * want.ny; i++) got[i] = want.pix[i] = 0.25 + 1e-3 * (i % 7);
+            for (int j = 0; j < want.ny; j++) {
+                int row = want.y0 + j, by = row - box.y0;
+                const float *brow = by >= 0 && by < box.ny ? bf + (size_t)by * box.nx : NULL;
+                double *wr = want.pix + (size_t)j * w;
+                for (int i = 0; i < w; i++) {
+                    int bx = xa + i - box.x0;
+                    if (brow && bx >= 0 && bx < box.nx) wr[i] += (double)brow[bx];
+                }
+                wf_stamp rs = {xa, row, w, 1, wr, 0, 0, 0};
+                ck_assert(wf_profile_add_wing(&c.psf, core, g.flux, x, y, &rs) == WF_OK);
+                for (int i = 0; i < w; i++) below += wr[i] < 0.25 + 1e-3 * ((j * w + i) % 7);
+                ck_assert(wf_profile_add_wing_row(&at, row, xa, xb, brow, box.x0, box.x0 + box.nx,
+                                                  got + (size_t)j * w) == WF_OK);
+            }
+            ck_assert_msg(!memcmp(got, want.pix, sizeof(double) * (size_t)w * want.ny),
+                          "hlr %g, %d lanes: the unclipped row differs from box + wing", g.hlr_disk,
+                          widths[iw]);
+            at.keep_negatives = 0;
             /* refused: box columns outside the row's, a core the PSF does not have */
             ck_assert_int_eq(wf_profile_add_wing_row(&at, b.y0, box.x0 + 1, xb, bf, box.x0,
                                                      box.x0 + box.nx, got), WF_ERR_INPUT);
@@ -2242,6 +2343,7 @@ START_TEST(test_wing_row_is_box_plus_wing)
     }
     ck_assert(tried >= 2);
     ck_assert(clipped > 10 && kept > 10); /* both sides of the clip */
+    ck_assert(below > 10);                /* and the unclipped rows kept the negatives */
     wf_profile_simd(8);
     ctx_close(&c);
     free(psfpix);
@@ -2552,6 +2654,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_simd_identical);
     tcase_add_test(ind, test_simd_identical_wing);
     tcase_add_test(ind, test_wing_row_is_box_plus_wing);
+    tcase_add_test(ind, test_cut_tolerance_bound);
     tcase_add_loop_test(ind, test_work_dense_first, 0, 2);
     suite_add_tcase(s, ind);
     TCase *stiff = tcase_create("stiff");

@@ -215,6 +215,45 @@ START_TEST(halo_clipped)
 }
 END_TEST
 
+/* Objects may hand over negative pixels (the scene's draws keep their ringing, so that
+ * none adds flux): the renderer adds them as they are and clips only the sum, sky
+ * included, at zero. A positive and a negative object overlapping on a sky of 1. */
+static wf_status draw_const(void *ctx, const wf_render_object *o, int ya, int yb, double *out)
+{
+    (void)ctx;
+    const double v = *(const double *)o->data;
+    for (size_t i = 0; i < (size_t)(yb - ya) * o->bnx; i++) out[i] = v;
+    return WF_OK;
+}
+
+START_TEST(negatives_clipped_in_the_sum)
+{
+    enum { W = 30, H = 20 };
+    static double val[2] = {5.0, -3.0};
+    wf_render_object o[2] = {{1, 2, 3, 12, 10, &val[0], 0.0, 0, 0, 0, 0, 0},
+                             {2, 8, 6, 15, 9, &val[1], 0.0, 0, 0, 0, 0, 0}};
+    wf_renderer_config cfg = {W, H, 1.0, NULL, NULL, 1u << 20, 0, NULL};
+    wf_renderer *r;
+    ck_assert_int_eq(wf_renderer_create(&cfg, o, 2, draw_const, NULL, &r), WF_OK);
+    wf_scene_source src;
+    wf_renderer_source(r, &src);
+    float img[W * H];
+    ck_assert_int_eq(wf_scene_fill(&src, 0, H, W, img), WF_OK);
+    int seen[3] = {0, 0, 0};
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            double want = 1.0;
+            for (int k = 0; k < 2; k++)
+                if (x >= o[k].x0 && x < o[k].x0 + o[k].nx && y >= o[k].y0 && y < o[k].y0 + o[k].ny) want += val[k];
+            seen[want == 3.0 ? 0 : want < 0.0 ? 1 : 2]++;
+            if (want < 0.0) want = 0.0;
+            ck_assert_msg(img[y * W + x] == (float)want, "pixel (%d, %d): %g, expected %g", x, y, img[y * W + x], want);
+        }
+    ck_assert(seen[0] > 0 && seen[1] > 0); /* the overlap (1 + 5 - 3) and the clipped part */
+    wf_renderer_destroy(r);
+}
+END_TEST
+
 START_TEST(flux_conserved_and_off_sca_skipped)
 {
     enum { N = 300, W = 100, H = 90 };
@@ -347,6 +386,7 @@ static Suite *suite(void)
     tcase_add_test(tc, pool_kept_near_live_stamps);
     tcase_add_test(tc, halo_objects);
     tcase_add_test(tc, halo_clipped);
+    tcase_add_test(tc, negatives_clipped_in_the_sum);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -159,7 +159,8 @@ END_TEST
  * Against the same scene with tau = 0 (galaxies with the disk's largest knot share): no
  * pixel of any object moves by more than the five bounds together (5 tau sigma), compared
  * over both stamps (a smooth disk's stamp may differ from the knots'); faint objects do
- * change (cheaper boxes, smooth knots), a bright one barely (its knot lattice alone loosens);
+ * change (cheaper boxes, smooth knots), a bright one barely (its knot lattice and its Fourier
+ * cut's tail loosen);
  * tau = 0 with a split PSF is the unsplit scene bit for bit. */
 START_TEST(noise_tolerance_bounds)
 {
@@ -232,9 +233,11 @@ START_TEST(noise_tolerance_bounds)
         printf("noise tolerance: object %d: worst pixel moved by %.3g sky sigma\n", k, worst / sigma);
         ck_assert_msg(worst <= 5.0 * tau * sigma, "object %d: %g sigma", k, worst / sigma);
         if (worst > 0.0) changed++;
-        /* magnitude 18: too bright for any knob but the knot lattice's accuracy, whose
-         * measured error is ~1/100 of its bound */
-        if (k == 0) ck_assert_msg(worst <= 0.01 * tau * sigma, "the magnitude-18 galaxy moved by %g sigma", worst / sigma);
+        /* magnitude 18: too bright for any knob but the knot lattice's accuracy (measured
+         * ~1/100 of its bound) and the Fourier cut's tail bound (acc.cut_tolerance, whose
+         * bound adds every dropped mode at its envelope: measured 1/7 of it at most in
+         * tests/test_profile.c, 0.016 sigma here) */
+        if (k == 0) ck_assert_msg(worst <= 0.1 * tau * sigma, "the magnitude-18 galaxy moved by %g sigma", worst / sigma);
         for (int m = 0; m < 3; m++) free(pix[m][k]);
     }
     ck_assert_msg(changed >= 3, "only %d faint objects took the looser knobs", changed);
