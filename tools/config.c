@@ -213,7 +213,7 @@ static const key_desc keys[] = {
      .doc = "Faint objects are drawn with looser knobs where the error bound of each stays below this many times "
             "the sky noise of one pixel over the exposure: light wrapping into the Fourier box (at most 5% of "
             "the object, never stricter than the default 0.5%), Fourier modes dropped (below at most 1e-3 of "
-            "the object), the knot lattice's aliasing (up to 1e-2 of the knots' flux), knots drawn as the smooth disk "
+            "the object, and beyond where the sum of those left out stays within it), the knot lattice's aliasing (up to 1e-2 of the knots' flux), knots drawn as the smooth disk "
             "(when the knots' flux times the PSF's brightest pixel is within it), and the PSF wing placed "
             "without the object's own blur (psf.core_radius). 0: the same knobs for every object. Errors and "
             "costs: docs/ACCURACY.md."},
