@@ -180,6 +180,8 @@ static void steps_fill(const float *re, const float *im, int kr, wf_profile_step
     }
 }
 
+static size_t transform_fft_bytes(int n, int np, int kr); /* below, with transform_fft */
+
 wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy *acc,
                               size_t *bytes, size_t *scratch)
 {
@@ -210,9 +212,7 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
     }
     int os = integer_oversampling(acc->pixel_scale, img->scale_arcsec);
     if (os) {
-        size_t np = (size_t)os * (size_t)acc->psf_table_fft;
-        *scratch += wf_arena_cost(np * 2 * (np / 2 + 1) * sizeof(double)) +
-                    wf_arena_cost(side * 2 * sizeof(double)); /* and its phase line */
+        *scratch += transform_fft_bytes(img->n, os * acc->psf_table_fft, kr);
     } else {
         *scratch += wf_arena_cost((size_t)img->n * side * 2 * sizeof(double)) +
                     wf_arena_cost(side * 2 * sizeof(double));
@@ -220,47 +220,106 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
     return WF_OK;
 }
 
-/* Raw transform R[v][u] (complex, side x side, centred) by one FFT of the folded image. */
+/* Raw transform R[v][u] (complex, side x side, centred) of the image folded onto np x np,
+ * np = os table_fft. Only |u|, |v| <= kr of the np^2 frequencies are wanted (kr ~ np / 6 at
+ * Y106) and only the image's n rows can be nonzero (n < np), so the 2-D transform is taken
+ * as its two passes, pruned: each nonzero row's r2c, of which u = 0..kr is kept, then the
+ * kept columns' c2c, of which |v| <= kr is kept; RB rows and CB columns at a time, so the
+ * scratch is the kept rows (n (kr + 1) complex) and two small blocks instead of the full
+ * np^2 plane (19 MB at Y106, fresh memory for every thread slot). */
+enum { TRANSFORM_RB = 16, TRANSFORM_CB = 16 };
+
+static size_t transform_fft_bytes(int n, int np, int kr)
+{
+    size_t nz = (size_t)(n < np ? n : np), half = (size_t)np / 2 + 1;
+    return wf_arena_cost(nz * ((size_t)kr + 1) * 2 * sizeof(double)) +
+           wf_arena_cost((size_t)TRANSFORM_RB * 2 * half * sizeof(double)) +
+           wf_arena_cost((size_t)np * TRANSFORM_CB * 2 * sizeof(double)) +
+           wf_arena_cost((2 * (size_t)kr + 1) * 2 * sizeof(double));
+}
+
 static wf_status transform_fft(const wf_psf_image *img, int os, int table_fft, int kr,
                                wf_arena *arena, double *out)
 {
-    int np = os * table_fft;
-    size_t rowlen = 2 * ((size_t)np / 2 + 1);
-    double *buf;
-    wf_status st = wf_arena_reserve(arena, (size_t)np * rowlen * sizeof(double),
-                                    "PSF transform scratch", (void **)&buf);
-    if (st) return st;
-    /* the image folded onto np x np: each row's first np samples set (0.0 + x, as the sum
-     * into zeros gives, -0 included), the rest added in the same order as a sum would */
-    const int n = img->n;
-    for (int j = 0; j < np; j++) {
-        double *row = buf + (size_t)j * rowlen;
-        const double *src = img->pix + (size_t)j * n;
-        int i = 0;
-        if (j < n)
-            for (; i < n && i < np; i++) row[i] = 0.0 + src[i];
-        for (; i < np; i++) row[i] = 0.0;
-        if (j < n)
-            for (i = np; i < n; i++) row[i % np] += src[i];
-    }
-    for (int j = np; j < n; j++)
-        for (int i = 0; i < n; i++)
-            buf[(size_t)(j % np) * rowlen + (size_t)(i % np)] += img->pix[(size_t)j * n + i];
+    const int np = os * table_fft, n = img->n, nz = n < np ? n : np;
+    const size_t half = (size_t)np / 2 + 1, rowlen = 2 * half, ku = (size_t)kr + 1;
+    if (kr > np / 2 - 1) return wf_error(WF_ERR_INTERNAL, "profile: PSF window %d beyond %d / 2", kr, np);
+    double *a, *rows, *cols;
+    wf_status st;
+    if ((st = wf_arena_reserve(arena, (size_t)nz * ku * 2 * sizeof(double), "PSF transform rows", (void **)&a)) ||
+        (st = wf_arena_reserve(arena, (size_t)TRANSFORM_RB * rowlen * sizeof(double), "PSF transform row block",
+                               (void **)&rows)) ||
+        (st = wf_arena_reserve(arena, (size_t)np * TRANSFORM_CB * 2 * sizeof(double), "PSF transform column block",
+                               (void **)&cols)))
+        return st;
+    const int len[1] = {np};
     wf_fftw_lock();
-    fftw_plan plan = fftw_plan_dft_r2c_2d(np, np, buf, (fftw_complex *)buf, FFTW_ESTIMATE);
+    fftw_plan pr = fftw_plan_many_dft_r2c(1, len, TRANSFORM_RB, rows, NULL, 1, (int)rowlen, (fftw_complex *)rows,
+                                          NULL, 1, (int)half, FFTW_ESTIMATE);
+    fftw_plan pc = fftw_plan_many_dft(1, len, TRANSFORM_CB, (fftw_complex *)cols, NULL, TRANSFORM_CB, 1,
+                                      (fftw_complex *)cols, NULL, TRANSFORM_CB, 1, FFTW_FORWARD, FFTW_ESTIMATE);
     wf_fftw_unlock();
-    if (!plan) return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", np);
-    fftw_execute(plan);
+    if (!pr || !pc) {
+        wf_fftw_lock();
+        if (pr) fftw_destroy_plan(pr);
+        if (pc) fftw_destroy_plan(pc);
+        wf_fftw_unlock();
+        return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan %d-point transforms", np);
+    }
+    /* rows: image row j and its images j + np, j + 2 np, ... folded onto row j mod np */
+    for (int j0 = 0; j0 < nz; j0 += TRANSFORM_RB) {
+        for (int r = 0; r < TRANSFORM_RB; r++) {
+            double *row = rows + (size_t)r * rowlen;
+            for (int i = 0; i < np; i++) row[i] = 0.0;
+            for (int jj = j0 + r; jj < n && j0 + r < nz; jj += np) {
+                const double *src = img->pix + (size_t)jj * n;
+                int i = 0;
+                for (; i < n && i < np; i++) row[i] += src[i];
+                for (; i < n; i++) row[i % np] += src[i];
+            }
+        }
+        fftw_execute(pr);
+        for (int r = 0; r < TRANSFORM_RB && j0 + r < nz; r++)
+            memcpy(a + (size_t)(j0 + r) * ku * 2, rows + (size_t)r * rowlen, ku * 2 * sizeof(double));
+    }
+    /* columns u = 0..kr: rows v with |v| <= kr, into out at (v, u) and, by F(-u, -v) =
+     * conj F(u, v), at (-v, -u) */
+    const size_t side = 2 * (size_t)kr + 1;
+    for (int u0 = 0; u0 <= kr; u0 += TRANSFORM_CB) {
+        for (int v = 0; v < np; v++)
+            for (int c = 0; c < TRANSFORM_CB; c++) {
+                double *o = cols + 2 * ((size_t)v * TRANSFORM_CB + (size_t)c);
+                int u = u0 + c;
+                if (v < nz && u <= kr) {
+                    o[0] = a[2 * ((size_t)v * ku + (size_t)u)];
+                    o[1] = a[2 * ((size_t)v * ku + (size_t)u) + 1];
+                } else
+                    o[0] = o[1] = 0.0;
+            }
+        fftw_execute(pc);
+        for (int c = 0; c < TRANSFORM_CB && u0 + c <= kr; c++) {
+            int u = u0 + c;
+            for (int v = -kr; v <= kr; v++) {
+                const double *f = cols + 2 * ((size_t)((v % np + np) % np) * TRANSFORM_CB + (size_t)c);
+                double *o = out + 2 * ((size_t)(v + kr) * side + (size_t)(u + kr));
+                o[0] = f[0];
+                o[1] = f[1];
+                if (u > 0) {
+                    double *m = out + 2 * ((size_t)(-v + kr) * side + (size_t)(-u + kr));
+                    m[0] = f[0];
+                    m[1] = -f[1];
+                }
+            }
+        }
+    }
     wf_fftw_lock();
-    fftw_destroy_plan(plan);
+    fftw_destroy_plan(pr);
+    fftw_destroy_plan(pc);
     wf_fftw_unlock();
     /* The DFT puts sample i at i * scale; the image centre c = (n-1)/2 is the PSF's origin,
      * so multiply by exp(+i k c scale). k = m dk_t and scale = pixel / os, so the phase per
      * step is 2 pi c / (os table_fft) = 2 pi c / np. */
     double c = 0.5 * (img->n - 1);
-    size_t side = 2 * (size_t)kr + 1;
-    const fftw_complex *f = (const fftw_complex *)buf;
-    size_t half = (size_t)np / 2 + 1;
     /* the phase is separable, e^{i a (u + v)}: one line of it (the tables are built for
      * every core, and side^2 sincos calls would cost more than the FFT) */
     double *line;
@@ -274,19 +333,10 @@ static wf_status transform_fft(const wf_psf_image *img, int os, int table_fft, i
     for (int v = -kr; v <= kr; v++) {
         const double pvr = line[2 * (v + kr)], pvi = line[2 * (v + kr) + 1];
         for (int u = -kr; u <= kr; u++) {
-            /* Hermitian: only u >= 0 is stored; F(-u, -v) = conj F(u, v) */
-            int uu = u, vv = v;
-            double sgn = 1.0;
-            if (uu < 0) {
-                uu = -uu;
-                vv = -vv;
-                sgn = -1.0;
-            }
-            size_t row = (size_t)((vv % np + np) % np);
-            double re = f[row * half + (size_t)uu][0], im = sgn * f[row * half + (size_t)uu][1];
+            double *o = out + 2 * ((size_t)(v + kr) * side + (size_t)(u + kr));
+            const double re = o[0], im = o[1];
             const double pur = line[2 * (u + kr)], pui = line[2 * (u + kr) + 1];
             double cr = pur * pvr - pui * pvi, ci = pur * pvi + pui * pvr;
-            double *o = out + 2 * ((size_t)(v + kr) * side + (size_t)(u + kr));
             o[0] = re * cr - im * ci;
             o[1] = re * ci + im * cr;
         }

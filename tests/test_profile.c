@@ -2448,6 +2448,23 @@ START_TEST(test_psf_any_sampling)
     printf("PSF sampled at 0.11/3.7\" (direct DFT, %.0f ms to prepare) vs 0.11/4\": worst "
            "pixel %.2e of the peak\n", ms, worst / peak);
     ck_assert_msg(worst / peak < 1e-6, "sampling-dependent result: %.3g", worst / peak);
+    /* an image wider than the transform's period (psf_table_fft 16: 64 samples at 0.11/4",
+     * the image 96): folded onto it, as the direct DFT's samples of the same transform */
+    ctx_close(&ca);
+    ctx_close(&cb);
+    acc.psf_table_fft = 16;
+    ctx_open(&ca, &acc, &a);
+    ctx_open(&cb, &acc, &b);
+    ck_assert(wf_profile_draw_galaxy(&ca.work, &g, &ca.psf, 20.3, 19.9, &s1) == WF_OK);
+    ck_assert(wf_profile_draw_galaxy(&cb.work, &g, &cb.psf, 20.3, 19.9, &s2) == WF_OK);
+    worst = peak = 0;
+    for (int i = 0; i < 41 * 41; i++) {
+        worst = fmax(worst, fabs(s1.pix[i] - s2.pix[i]));
+        peak = fmax(peak, s1.pix[i]);
+    }
+    printf("PSF image folded onto a 16-pixel period: worst pixel %.2e of the peak against the "
+           "direct DFT\n", worst / peak);
+    ck_assert_msg(worst / peak < 1e-6, "folded transform differs: %.3g", worst / peak);
     free(s1.pix);
     free(s2.pix);
     ctx_close(&ca);
