@@ -602,11 +602,11 @@ wf_status wf_profile_point_bounds(const wf_profile_work *work, const wf_profile_
 /* With a PSF: |k| beyond which |object(k)| |PSF(k) pixel(k)| stays below kvalue_accuracy
  * of the flux, from the PSF's envelope ring by ring; `part` 0 is the smooth galaxy (or the
  * point source), 1 the knots. */
-static double psf_kcut(const job *jb, const wf_sersic_table *t, const wf_profile_psf *psf,
-                       double kvalue, int part)
+static double psf_kcut_from(const job *jb, const wf_sersic_table *t, const wf_profile_psf *psf,
+                            double kvalue, int part, int from)
 {
     double dkt = 2.0 * M_PI / (psf->table_fft * psf->pixel_scale), tol = kvalue * jb->flux;
-    for (int i = psf->kr; i >= 0; i--) {
+    for (int i = from < psf->kr ? from : psf->kr; i >= 0; i--) {
         double g, k = i * dkt, q2 = (jb->shape.smin * k) * (jb->shape.smin * k);
         if (part == 1) g = jb->fk;
         else if (jb->fpoint > 0.0) g = jb->fpoint;
@@ -621,6 +621,14 @@ static double psf_kcut(const job *jb, const wf_sersic_table *t, const wf_profile
         if (g * psf->env[i] > tol) return (i + 1) * dkt;
     }
     return 0.0;
+}
+
+/* From the table's edge; psf_kcut_from may start at a ring known to lie beyond the cut (one
+ * whose value exceeds a smaller kvalue: both factors fall with |k|). */
+static double psf_kcut(const job *jb, const wf_sersic_table *t, const wf_profile_psf *psf,
+                       double kvalue, int part)
+{
+    return psf_kcut_from(jb, t, psf, kvalue, part, psf->kr);
 }
 
 /* With a PSF and cut_tolerance tol > 0: the fine-grid radius (in steps dk of a box of side
@@ -2348,8 +2356,11 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
 
     /* Fourier extent: the PSF's band (or the no-PSF cap), and the smooth profile's own */
     double kband = fmin(psf->kmax, WF_PSF_BAND_NYQ * M_PI / p);
-    double ksmooth = fmin(kband, psf_kcut(jb, t, psf, w->acc.kvalue_accuracy, 0));
-    double kknots = gd.nk ? fmin(kband, psf_kcut(jb, t, psf, w->acc.kvalue_accuracy, 1)) : 0.0;
+    const double dkt = 2.0 * M_PI / (psf->table_fft * psf->pixel_scale);
+    const double kcs = psf_kcut(jb, t, psf, w->acc.kvalue_accuracy, 0);
+    const double kck = gd.nk ? psf_kcut(jb, t, psf, w->acc.kvalue_accuracy, 1) : 0.0;
+    double ksmooth = fmin(kband, kcs);
+    double kknots = gd.nk ? fmin(kband, kck) : 0.0;
     int lim;
     if (psf->table_fft % gd.m == 0) {
         gd.mode = MODE_EXACT;
@@ -2366,15 +2377,22 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
     if (uk > lim) uk = lim;
     if (w->acc.cut_tolerance > 0.0) { /* half the tolerance each when there are knots */
         double tol = (gd.nk ? 0.5 : 1.0) * w->acc.cut_tolerance;
+        /* the floor's search starts at the pointwise cut's ring when kvalue_accuracy <=
+         * WF_PROFILE_CUT_KEEP (nothing beyond it is above the floor then) */
+        const int above = w->acc.kvalue_accuracy <= WF_PROFILE_CUT_KEEP;
         int js = tail_cut(jb, t, psf, gd.dk, gd.m, us, tol, 0);
-        int keep = (int)floor(psf_kcut(jb, t, psf, WF_PROFILE_CUT_KEEP, 0) / gd.dk);
-        if (js < keep) js = keep;
-        if (js < us) us = js;
+        if (js < us) {
+            int from = above ? (int)lround(kcs / dkt) : psf->kr;
+            int keep = (int)floor(psf_kcut_from(jb, t, psf, WF_PROFILE_CUT_KEEP, 0, from) / gd.dk);
+            us = js > keep ? js : keep < us ? keep : us;
+        }
         if (gd.nk) {
             int jk = tail_cut(jb, t, psf, gd.dk, gd.m, uk, tol, 1);
-            keep = (int)floor(psf_kcut(jb, t, psf, WF_PROFILE_CUT_KEEP, 1) / gd.dk);
-            if (jk < keep) jk = keep;
-            if (jk < uk) uk = jk;
+            if (jk < uk) {
+                int from = above ? (int)lround(kck / dkt) : psf->kr;
+                int keep = (int)floor(psf_kcut_from(jb, t, psf, WF_PROFILE_CUT_KEEP, 1, from) / gd.dk);
+                uk = jk > keep ? jk : keep < uk ? keep : uk;
+            }
         }
     }
     gd.u = us > uk ? us : uk;
