@@ -599,6 +599,21 @@ wf_status wf_profile_point_bounds(const wf_profile_work *work, const wf_profile_
 
 /* ------------------------------------------------------------------------ Fourier cut */
 
+/* |object(k)| along its minor axis (the largest on the ring |k|: both parts fall with |k|);
+ * `part` 0 is the smooth galaxy (or the point source), 1 the knots. */
+static inline double minor_kvalue(const job *jb, const wf_sersic_table *t, double k, int part)
+{
+    if (part == 1) return jb->fk;
+    if (jb->fpoint > 0.0) return jb->fpoint;
+    double g = 0.0, q2 = (jb->shape.smin * k) * (jb->shape.smin * k);
+    if (jb->fb > 0.0) g += jb->fb * wf_sersic4_eval(t, jb->re * jb->re * q2);
+    if (jb->fd > 0.0) {
+        double s = 1.0 / (1.0 + jb->r0 * jb->r0 * q2);
+        g += jb->fd * s * sqrt(s);
+    }
+    return g;
+}
+
 /* With a PSF: |k| beyond which |object(k)| |PSF(k) pixel(k)| stays below kvalue_accuracy
  * of the flux, from the PSF's envelope ring by ring; `part` 0 is the smooth galaxy (or the
  * point source), 1 the knots. */
@@ -607,18 +622,7 @@ static double psf_kcut_from(const job *jb, const wf_sersic_table *t, const wf_pr
 {
     double dkt = 2.0 * M_PI / (psf->table_fft * psf->pixel_scale), tol = kvalue * jb->flux;
     for (int i = from < psf->kr ? from : psf->kr; i >= 0; i--) {
-        double g, k = i * dkt, q2 = (jb->shape.smin * k) * (jb->shape.smin * k);
-        if (part == 1) g = jb->fk;
-        else if (jb->fpoint > 0.0) g = jb->fpoint;
-        else {
-            g = 0.0;
-            if (jb->fb > 0.0) g += jb->fb * wf_sersic4_eval(t, jb->re * jb->re * q2);
-            if (jb->fd > 0.0) {
-                double s = 1.0 / (1.0 + jb->r0 * jb->r0 * q2);
-                g += jb->fd * s * sqrt(s);
-            }
-        }
-        if (g * psf->env[i] > tol) return (i + 1) * dkt;
+        if (minor_kvalue(jb, t, i * dkt, part) * psf->env[i] > tol) return (i + 1) * dkt;
     }
     return 0.0;
 }
@@ -649,19 +653,9 @@ static int tail_cut(const job *jb, const wf_sersic_table *t, const wf_profile_ps
     const double norm = 1.0 / ((double)m * m);
     double tail = 0.0;
     for (int j = lim; j >= 0; j--) {
-        double k = j * dk, q2 = (jb->shape.smin * k) * (jb->shape.smin * k), g;
+        double k = j * dk, g = minor_kvalue(jb, t, k, part);
         int i = (int)(k / dkt);
         double e = i > psf->kr ? 0.0 : psf->env[i];
-        if (part == 1) g = jb->fk;
-        else if (jb->fpoint > 0.0) g = jb->fpoint;
-        else {
-            g = 0.0;
-            if (jb->fb > 0.0) g += jb->fb * wf_sersic4_eval(t, jb->re * jb->re * q2);
-            if (jb->fd > 0.0) {
-                double s = 1.0 / (1.0 + jb->r0 * jb->r0 * q2);
-                g += jb->fd * s * sqrt(s);
-            }
-        }
         double a = j + 1 + M_SQRT1_2, b = j - M_SQRT1_2;
         if (b < 0.0) b = 0.0;
         tail += M_PI * (a * a - b * b) * g * e * norm;
