@@ -229,6 +229,11 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
  * np^2 plane (19 MB at Y106, fresh memory for every thread slot). */
 enum { TRANSFORM_RB = 16, TRANSFORM_CB = 16 };
 
+/* The image's samples [i0, i1) x [j0, j1) (columns x rows) outside which it is zero. */
+typedef struct support {
+    int i0, i1, j0, j1;
+} support;
+
 static size_t transform_fft_bytes(int n, int np, int kr)
 {
     size_t nz = (size_t)(n < np ? n : np), half = (size_t)np / 2 + 1;
@@ -238,10 +243,13 @@ static size_t transform_fft_bytes(int n, int np, int kr)
            wf_arena_cost((2 * (size_t)kr + 1) * 2 * sizeof(double));
 }
 
-static wf_status transform_fft(const wf_psf_image *img, int os, int table_fft, int kr,
+static wf_status transform_fft(const wf_psf_image *img, const support *sp, int os, int table_fft, int kr,
                                wf_arena *arena, double *out)
 {
     const int np = os * table_fft, n = img->n, nz = n < np ? n : np;
+    /* only the support's samples are read; an image no wider than the period folds no rows,
+     * so a block of rows outside the support is zero, and so are its transforms */
+    const int fold = n > np, j0s = fold ? 0 : sp->j0, j1s = fold ? nz : sp->j1;
     const size_t half = (size_t)np / 2 + 1, rowlen = 2 * half, ku = (size_t)kr + 1;
     if (kr > np / 2 - 1) return wf_error(WF_ERR_INTERNAL, "profile: PSF window %d beyond %d / 2", kr, np);
     double *a, *rows, *cols;
@@ -268,14 +276,20 @@ static wf_status transform_fft(const wf_psf_image *img, int os, int table_fft, i
     }
     /* rows: image row j and its images j + np, j + 2 np, ... folded onto row j mod np */
     for (int j0 = 0; j0 < nz; j0 += TRANSFORM_RB) {
+        if (j0 + TRANSFORM_RB <= j0s || j0 >= j1s) {
+            for (int r = 0; r < TRANSFORM_RB && j0 + r < nz; r++)
+                memset(a + (size_t)(j0 + r) * ku * 2, 0, ku * 2 * sizeof(double));
+            continue;
+        }
         for (int r = 0; r < TRANSFORM_RB; r++) {
             double *row = rows + (size_t)r * rowlen;
             for (int i = 0; i < np; i++) row[i] = 0.0;
             for (int jj = j0 + r; jj < n && j0 + r < nz; jj += np) {
+                if (jj < sp->j0 || jj >= sp->j1) continue;
                 const double *src = img->pix + (size_t)jj * n;
-                int i = 0;
-                for (; i < n && i < np; i++) row[i] += src[i];
-                for (; i < n; i++) row[i % np] += src[i];
+                int i = sp->i0;
+                for (; i < sp->i1 && i < np; i++) row[i] += src[i];
+                for (; i < sp->i1; i++) row[i % np] += src[i];
             }
         }
         fftw_execute(pr);
@@ -345,8 +359,8 @@ static wf_status transform_fft(const wf_psf_image *img, int os, int table_fft, i
 }
 
 /* The same by a direct separable DFT: any sampling, O(n^2 side + n side^2). */
-static wf_status transform_direct(const wf_psf_image *img, double dkt, int kr, wf_arena *arena,
-                                  double *out)
+static wf_status transform_direct(const wf_psf_image *img, const support *sp, double dkt, int kr,
+                                  wf_arena *arena, double *out)
 {
     int n = img->n;
     size_t side = 2 * (size_t)kr + 1;
@@ -357,13 +371,13 @@ static wf_status transform_direct(const wf_psf_image *img, double dkt, int kr, w
     st = wf_arena_calloc(arena, side * 2, sizeof(double), "PSF DFT phases", (void **)&ph);
     if (st) return st;
     double c = 0.5 * (n - 1), s = img->scale_arcsec;
-    for (int i = 0; i < n; i++) {
+    for (int i = sp->i0; i < sp->i1; i++) {
         for (int u = -kr; u <= kr; u++) {
             double p = -u * dkt * (i - c) * s;
             ph[2 * (u + kr)] = cos(p);
             ph[2 * (u + kr) + 1] = sin(p);
         }
-        for (int j = 0; j < n; j++) {
+        for (int j = sp->j0; j < sp->j1; j++) {
             double w = img->pix[(size_t)j * n + i];
             if (w == 0.0) continue;
             double *row = a + (size_t)j * side * 2;
@@ -374,7 +388,7 @@ static wf_status transform_direct(const wf_psf_image *img, double dkt, int kr, w
         }
     }
     memset(out, 0, side * side * 2 * sizeof(double));
-    for (int j = 0; j < n; j++) {
+    for (int j = sp->j0; j < sp->j1; j++) {
         const double *row = a + (size_t)j * side * 2;
         for (int v = -kr; v <= kr; v++) {
             double p = -v * dkt * (j - c) * s;
@@ -389,8 +403,9 @@ static wf_status transform_direct(const wf_psf_image *img, double dkt, int kr, w
     return WF_OK;
 }
 
-/* The raw transform times the pixel's, in scratch at the arena's top: side_s^2 complex. */
-static wf_status pixel_transform(const wf_psf_image *img, const wf_profile_accuracy *acc,
+/* The raw transform times the pixel's, in scratch at the arena's top: side_s^2 complex. Only
+ * the samples in `sp` are read (the image is zero beyond it); NULL: the whole image. */
+static wf_status pixel_transform(const wf_psf_image *img, const support *sp, const wf_profile_accuracy *acc,
                                  int kr_s, wf_arena *arena, double **out)
 {
     size_t side_s = 2 * (size_t)kr_s + 1;
@@ -401,8 +416,10 @@ static wf_status pixel_transform(const wf_psf_image *img, const wf_profile_accur
                                     (void **)&raw);
     if (st) return st;
     int os = integer_oversampling(acc->pixel_scale, img->scale_arcsec);
-    st = os ? transform_fft(img, os, acc->psf_table_fft, kr_s, arena, raw)
-            : transform_direct(img, dkt, kr_s, arena, raw);
+    const support whole = {0, img->n, 0, img->n};
+    if (!sp) sp = &whole;
+    st = os ? transform_fft(img, sp, os, acc->psf_table_fft, kr_s, arena, raw)
+            : transform_direct(img, sp, dkt, kr_s, arena, raw);
     if (st) return st;
     double p = acc->pixel_scale, *sx;
     if ((st = wf_arena_calloc(arena, side_s, sizeof(double), "PSF pixel line", (void **)&sx))) return st;
@@ -485,8 +502,13 @@ static wf_status core_pass(void *ctx, int task, int slot)
     wf_status st = wf_arena_reserve(arena, (size_t)img->n * (size_t)img->n * sizeof(double),
                                     "PSF core image", (void **)&tapered);
     if (!st) {
-        for (int jj = 0; jj < img->n; jj++)
-            for (int i = 0; i < img->n; i++) {
+        /* the taper ends at the core's radius: the samples within it, a square of ~2 rc / scale
+         * (148 of 256 at Y106 for 2"), are all the transform reads; the rest would add zeros */
+        const int lo = (int)ceil(j->c - co->radius / img->scale_arcsec) - 1;
+        const int hi = (int)floor(j->c + co->radius / img->scale_arcsec) + 2;
+        const support sp = {lo < 0 ? 0 : lo, hi > img->n ? img->n : hi, lo < 0 ? 0 : lo, hi > img->n ? img->n : hi};
+        for (int jj = sp.j0; jj < sp.j1; jj++)
+            for (int i = sp.i0; i < sp.i1; i++) {
                 double r = rad(i - j->c, jj - j->c) * img->scale_arcsec;
                 size_t at = (size_t)jj * img->n + i;
                 tapered[at] = img->pix[at] * core_taper(r, co->radius);
@@ -496,7 +518,7 @@ static wf_status core_pass(void *ctx, int task, int slot)
         src.pix = tapered;
         /* only the table's window: the band, found from the whole image's transform, is
          * known by now (each sample is computed as in the full plane, so the same bits) */
-        if (!(st = pixel_transform(&src, j->acc, j->kr, arena, &raw))) fill_table(j, task + 1, raw, j->kr);
+        if (!(st = pixel_transform(&src, &sp, j->acc, j->kr, arena, &raw))) fill_table(j, task + 1, raw, j->kr);
     }
     wf_arena_release(arena, mark);
     return st;
@@ -631,7 +653,7 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         if (kb < kw) kw = (int)kb;
     }
     const size_t side_w = 2 * (size_t)kw + 1;
-    if ((st = pixel_transform(img, acc, kw, &slots[0], &raw))) goto out;
+    if ((st = pixel_transform(img, NULL, acc, kw, &slots[0], &raw))) goto out;
     int kr = 0;
     double kmax = 0.0;
     for (int v = -kw; v <= kw; v++)

@@ -1665,6 +1665,70 @@ START_TEST(test_psf_tables_threads)
 }
 END_TEST
 
+/* A core's table is the transform of the image times its taper T(r) (sim/profile.h: 1 within
+ * 2/3 of the radius, a raised cosine to 0 at it), which the tables read only within the
+ * core's square: the core's flux and its table at low |k| (the pixel's sinc included, below
+ * the band's taper) against sums over every sample of the image; the whole image's table
+ * first, to pin the convention T(k) = sum w e^{-i k (x - c)}. */
+START_TEST(test_core_tables_from_the_whole_image)
+{
+    wf_psf_image img;
+    double *pix = halo_psf(256, 0.07, 0.8, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    acc.core_radius = 2.0;
+    acc.core_levels = 3;
+    size_t keep, scratch;
+    ck_assert(wf_profile_psf_need(&img, &acc, &keep, &scratch) == WF_OK);
+    void *mem = malloc(keep + scratch + 4096);
+    wf_arena ar;
+    wf_arena_init(&ar, mem, keep + scratch + 4096, "PSF");
+    wf_profile_psf psf;
+    ck_assert_msg(wf_profile_psf_init(&psf, &img, &acc, &ar, 1) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(psf.ncore, 3);
+    static const int ks[][2] = {{0, 0}, {1, 0}, {0, 2}, {3, -1}, {-2, 5}};
+    enum { NK = sizeof ks / sizeof *ks };
+    const double c = 0.5 * (img.n - 1), h = img.scale_arcsec, p = acc.pixel_scale;
+    const double dkt = 2.0 * M_PI / (acc.psf_table_fft * p);
+    const size_t side = 2 * (size_t)psf.kr + 1;
+    double total = 0;
+    for (int i = 0; i < img.n * img.n; i++) total += pix[i];
+    for (int l = -1; l < psf.ncore; l++) {
+        const double R = l < 0 ? INFINITY : ldexp(acc.core_radius, -l), r1 = 2.0 * R / 3.0;
+        double flux = 0, tr[NK] = {0}, ti[NK] = {0};
+        for (int j = 0; j < img.n; j++)
+            for (int i = 0; i < img.n; i++) {
+                double r = hypot(i - c, j - c) * h;
+                double t = r <= r1 ? 1.0 : r >= R ? 0.0 : 0.5 * (1.0 + cos(M_PI * (r - r1) / (R - r1)));
+                double w = pix[(size_t)j * img.n + i] * t;
+                flux += w;
+                for (int q = 0; q < NK; q++) {
+                    double ph = -(ks[q][0] * (i - c) + ks[q][1] * (j - c)) * h * dkt;
+                    tr[q] += w * cos(ph);
+                    ti[q] += w * sin(ph);
+                }
+            }
+        const float *re = l < 0 ? psf.re : psf.core[l].re, *im = l < 0 ? psf.im : psf.core[l].im;
+        if (l >= 0)
+            ck_assert_msg(fabs(psf.core[l].flux - flux / total) < 1e-12, "core %d: flux %.15g, the image's %.15g",
+                          l, psf.core[l].flux, flux / total);
+        for (int q = 0; q < NK; q++) {
+            int u = ks[q][0], v = ks[q][1];
+            double sx = u ? sin(0.5 * u * dkt * p) / (0.5 * u * dkt * p) : 1.0;
+            double sy = v ? sin(0.5 * v * dkt * p) / (0.5 * v * dkt * p) : 1.0;
+            size_t at = (size_t)(v + psf.kr) * side + (size_t)(u + psf.kr);
+            double er = re[at] - tr[q] * sx * sy, ei = im[at] - ti[q] * sx * sy;
+            ck_assert_msg(hypot(er, ei) < 1e-6 * flux,
+                          "%s %d: table at (%d, %d) is %.9g%+.9gi, the image's %.9g%+.9gi",
+                          l < 0 ? "whole image" : "core", l, u, v, re[at], im[at], tr[q] * sx * sy,
+                          ti[q] * sx * sy);
+        }
+    }
+    free(mem);
+    free(pix);
+}
+END_TEST
+
 /* A work and a PSF split as the scene splits it (cores of 2", 1", 0.5") over a PSF with a
  * halo; returns the PSF image's pixels, for the caller to free. */
 static double *open_split(ctx *c, wf_psf_image *img, wf_profile_accuracy *acc)
@@ -2658,6 +2722,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_core_wing);
     tcase_add_test(ind, test_core_levels);
     tcase_add_test(ind, test_psf_tables_threads);
+    tcase_add_test(ind, test_core_tables_from_the_whole_image);
     tcase_add_test(ind, test_psf_table_steps);
     tcase_add_test(ind, test_psf_table_interpolation);
     tcase_add_test(ind, test_psf_any_sampling);
