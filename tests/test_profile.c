@@ -1625,16 +1625,24 @@ static void assert_same_psf(const wf_profile_psf *a, const wf_profile_psf *b, in
     }
 }
 
+/* The halo PSF with the scene's cores (2", 1", 0.5") and the arena sizes its tables need;
+ * returns the image's pixels, for the caller to free. */
+static double *halo_split(wf_psf_image *img, wf_profile_accuracy *acc, size_t *keep, size_t *scratch)
+{
+    double *pix = halo_psf(256, 0.07, 0.8, img);
+    wf_profile_accuracy_default(acc);
+    acc->core_radius = 2.0;
+    acc->core_levels = 3;
+    ck_assert(wf_profile_psf_need(img, acc, keep, scratch) == WF_OK);
+    return pix;
+}
+
 START_TEST(test_psf_tables_threads)
 {
     wf_psf_image img;
-    double *psfpix = halo_psf(256, 0.07, 0.8, &img);
     wf_profile_accuracy acc;
-    wf_profile_accuracy_default(&acc);
-    acc.core_radius = 2.0;
-    acc.core_levels = 3;
     size_t keep, scratch;
-    ck_assert(wf_profile_psf_need(&img, &acc, &keep, &scratch) == WF_OK);
+    double *psfpix = halo_split(&img, &acc, &keep, &scratch);
     wf_profile_psf ref;
     void *rmem = malloc(keep + scratch + 4096);
     wf_arena rar;
@@ -1673,13 +1681,9 @@ END_TEST
 START_TEST(test_core_tables_from_the_whole_image)
 {
     wf_psf_image img;
-    double *pix = halo_psf(256, 0.07, 0.8, &img);
     wf_profile_accuracy acc;
-    wf_profile_accuracy_default(&acc);
-    acc.core_radius = 2.0;
-    acc.core_levels = 3;
     size_t keep, scratch;
-    ck_assert(wf_profile_psf_need(&img, &acc, &keep, &scratch) == WF_OK);
+    double *pix = halo_split(&img, &acc, &keep, &scratch);
     void *mem = malloc(keep + scratch + 4096);
     wf_arena ar;
     wf_arena_init(&ar, mem, keep + scratch + 4096, "PSF");
