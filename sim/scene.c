@@ -277,7 +277,7 @@ static wf_status halo_row(void *ctx, const wf_render_object *ro, int y, int xa, 
         ts->wing_obj = NULL;
         wf_status st = wf_profile_wing_place(&ts->scene->ppsf, ro->halo, o->g.flux, o->x, o->y, &ts->wing);
         if (st) return st;
-        ts->wing.keep_negatives = 1; /* as the box: the renderer clips the sum */
+        ts->wing.keep_negatives = ts->work.keep_negatives; /* as the box: the renderer clips the sum */
         ts->wing_obj = ro;
         ts->wing_key[0] = o->g.flux, ts->wing_key[1] = o->x, ts->wing_key[2] = o->y;
     }
