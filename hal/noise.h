@@ -68,6 +68,13 @@ void wf_noise_block_row(const wf_noise *noise, uint32_t pixel0, int n, uint32_t 
                         wf_purpose purpose, uint32_t block, uint32_t *w0, uint32_t *w1,
                         uint32_t *w2, uint32_t *w3);
 
+/* Blocks block0 .. block0 + n - 1 of the stream of (pixel, read, purpose): word j of block
+ * block0 + b in wj[b], the words wf_rng_u32 gives after wf_rng_seek(block0), for a stream
+ * that takes many at once. WF_ERR_RANGE when the blocks pass the stream's 65536. */
+wf_status wf_noise_stream_blocks(const wf_noise *noise, uint32_t pixel, uint32_t read,
+                                 wf_purpose purpose, uint32_t block0, int n, uint32_t *w0,
+                                 uint32_t *w1, uint32_t *w2, uint32_t *w3);
+
 /* Standard normals from 32-bit words: wf_norm_ppf((w + 0.5) / 2^32), rounded to float. */
 void wf_norm_from_u32(const uint32_t *w, int n, float *out);
 

@@ -113,18 +113,20 @@ WF_INLINE double vlog1p(double x)
 
 /* ---- Philox row batches --------------------------------------------------------------------- */
 
-/* Philox4x32-10 on n counters {pixel, c1, c2, c3}, pixel = pix[i] or, when pix is NULL,
- * pixel0 + i. The SIMD variants keep 16 (8) 32-bit lanes in one register and take each
+/* Philox4x32-10 on n counters {pixel, c1, c2, c3 + i step3}, pixel = pix[i] or, when pix is
+ * NULL, pixel0 + i (step3 0) or pixel0 (step3 1: the lanes are one stream's blocks). The
+ * SIMD variants keep 16 (8) 32-bit lanes in one register and take each
  * 32x32 -> 64-bit product as even lanes and odd lanes (vpmuludq), then blend the halves back:
  * the compiler's own vectorisation of wf_philox_rounds widens every lane to 64 bits and
  * spends more on shuffles than on the multiplies. Integer arithmetic: the same words as the
  * scalar rounds, whichever variant runs. */
 static void philox_span_scalar(uint32_t key0, uint32_t key1, const uint32_t *pix, uint32_t pixel0,
-                               uint32_t c1in, uint32_t c2in, uint32_t c3in, int i, int n,
-                               uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3)
+                               uint32_t c1in, uint32_t c2in, uint32_t c3in, uint32_t step3, int i,
+                               int n, uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3)
 {
     for (; i < n; i++) {
-        uint32_t c0 = pix ? pix[i] : pixel0 + (uint32_t)i, c1 = c1in, c2 = c2in, c3 = c3in;
+        uint32_t c0 = pix ? pix[i] : pixel0 + (step3 ? 0u : (uint32_t)i), c1 = c1in, c2 = c2in,
+                 c3 = c3in + step3 * (uint32_t)i;
         wf_philox_rounds(&c0, &c1, &c2, &c3, key0, key1);
         w0[i] = c0;
         w1[i] = c1;
@@ -138,7 +140,7 @@ static void philox_span_scalar(uint32_t key0, uint32_t key1, const uint32_t *pix
 
 __attribute__((target("avx512f")))
 static void philox_span_avx512(uint32_t key0, uint32_t key1, const uint32_t *pix, uint32_t pixel0,
-                               uint32_t c1in, uint32_t c2in, uint32_t c3in, int n,
+                               uint32_t c1in, uint32_t c2in, uint32_t c3in, uint32_t step3, int n,
                                uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3)
 {
     const __m512i m0 = _mm512_set1_epi64(0xD2511F53), m1 = _mm512_set1_epi64(0xCD9E8D57);
@@ -146,10 +148,12 @@ static void philox_span_avx512(uint32_t key0, uint32_t key1, const uint32_t *pix
     const __mmask16 odd = 0xAAAA;
     int i = 0;
     for (; i + 16 <= n; i += 16) {
-        __m512i a = pix ? _mm512_loadu_si512((const void *)(pix + i))
-                        : _mm512_add_epi32(_mm512_set1_epi32((int)(pixel0 + (uint32_t)i)), lane);
+        __m512i a = pix     ? _mm512_loadu_si512((const void *)(pix + i))
+                    : step3 ? _mm512_set1_epi32((int)pixel0)
+                            : _mm512_add_epi32(_mm512_set1_epi32((int)(pixel0 + (uint32_t)i)), lane);
         __m512i b = _mm512_set1_epi32((int)c1in), c = _mm512_set1_epi32((int)c2in),
-                d = _mm512_set1_epi32((int)c3in);
+                d = step3 ? _mm512_add_epi32(_mm512_set1_epi32((int)(c3in + (uint32_t)i)), lane)
+                          : _mm512_set1_epi32((int)c3in);
         uint32_t k0 = key0, k1 = key1;
         for (int r = 0; r < 10; r++) {
             __m512i pe0 = _mm512_mul_epu32(a, m0), po0 = _mm512_mul_epu32(_mm512_srli_epi64(a, 32), m0);
@@ -170,22 +174,24 @@ static void philox_span_avx512(uint32_t key0, uint32_t key1, const uint32_t *pix
         _mm512_storeu_si512((void *)(w2 + i), c);
         _mm512_storeu_si512((void *)(w3 + i), d);
     }
-    philox_span_scalar(key0, key1, pix, pixel0, c1in, c2in, c3in, i, n, w0, w1, w2, w3);
+    philox_span_scalar(key0, key1, pix, pixel0, c1in, c2in, c3in, step3, i, n, w0, w1, w2, w3);
 }
 
 __attribute__((target("avx2")))
 static void philox_span_avx2(uint32_t key0, uint32_t key1, const uint32_t *pix, uint32_t pixel0,
-                             uint32_t c1in, uint32_t c2in, uint32_t c3in, int n,
+                             uint32_t c1in, uint32_t c2in, uint32_t c3in, uint32_t step3, int n,
                              uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3)
 {
     const __m256i m0 = _mm256_set1_epi64x(0xD2511F53), m1 = _mm256_set1_epi64x(0xCD9E8D57);
     const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     int i = 0;
     for (; i + 8 <= n; i += 8) {
-        __m256i a = pix ? _mm256_loadu_si256((const __m256i *)(pix + i))
-                        : _mm256_add_epi32(_mm256_set1_epi32((int)(pixel0 + (uint32_t)i)), lane);
+        __m256i a = pix     ? _mm256_loadu_si256((const __m256i *)(pix + i))
+                    : step3 ? _mm256_set1_epi32((int)pixel0)
+                            : _mm256_add_epi32(_mm256_set1_epi32((int)(pixel0 + (uint32_t)i)), lane);
         __m256i b = _mm256_set1_epi32((int)c1in), c = _mm256_set1_epi32((int)c2in),
-                d = _mm256_set1_epi32((int)c3in);
+                d = step3 ? _mm256_add_epi32(_mm256_set1_epi32((int)(c3in + (uint32_t)i)), lane)
+                          : _mm256_set1_epi32((int)c3in);
         uint32_t k0 = key0, k1 = key1;
         for (int r = 0; r < 10; r++) {
             __m256i pe0 = _mm256_mul_epu32(a, m0), po0 = _mm256_mul_epu32(_mm256_srli_epi64(a, 32), m0);
@@ -206,13 +212,13 @@ static void philox_span_avx2(uint32_t key0, uint32_t key1, const uint32_t *pix, 
         _mm256_storeu_si256((__m256i *)(w2 + i), c);
         _mm256_storeu_si256((__m256i *)(w3 + i), d);
     }
-    philox_span_scalar(key0, key1, pix, pixel0, c1in, c2in, c3in, i, n, w0, w1, w2, w3);
+    philox_span_scalar(key0, key1, pix, pixel0, c1in, c2in, c3in, step3, i, n, w0, w1, w2, w3);
 }
 #endif
 
 static void philox_span(const wf_noise *noise, const uint32_t *pix, uint32_t pixel0, int n,
-                        uint32_t read, wf_purpose purpose, uint32_t block, uint32_t *w0,
-                        uint32_t *w1, uint32_t *w2, uint32_t *w3)
+                        uint32_t read, wf_purpose purpose, uint32_t block, uint32_t step3,
+                        uint32_t *w0, uint32_t *w1, uint32_t *w2, uint32_t *w3)
 {
     const uint32_t key0 = (uint32_t)noise->seed, key1 = (uint32_t)(noise->seed >> 32);
     const uint32_t c2 = noise->exposure;
@@ -220,29 +226,40 @@ static void philox_span(const wf_noise *noise, const uint32_t *pix, uint32_t pix
                         (block & 0xffffu);
 #ifdef WF_PHILOX_SIMD
     if (__builtin_cpu_supports("avx512f")) {
-        philox_span_avx512(key0, key1, pix, pixel0, read, c2, c3, n, w0, w1, w2, w3);
+        philox_span_avx512(key0, key1, pix, pixel0, read, c2, c3, step3, n, w0, w1, w2, w3);
         return;
     }
     if (__builtin_cpu_supports("avx2")) {
-        philox_span_avx2(key0, key1, pix, pixel0, read, c2, c3, n, w0, w1, w2, w3);
+        philox_span_avx2(key0, key1, pix, pixel0, read, c2, c3, step3, n, w0, w1, w2, w3);
         return;
     }
 #endif
-    philox_span_scalar(key0, key1, pix, pixel0, read, c2, c3, 0, n, w0, w1, w2, w3);
+    philox_span_scalar(key0, key1, pix, pixel0, read, c2, c3, step3, 0, n, w0, w1, w2, w3);
 }
 
 void wf_noise_block_row(const wf_noise *noise, uint32_t pixel0, int n, uint32_t read,
                         wf_purpose purpose, uint32_t block, uint32_t *w0, uint32_t *w1,
                         uint32_t *w2, uint32_t *w3)
 {
-    philox_span(noise, NULL, pixel0, n, read, purpose, block, w0, w1, w2, w3);
+    philox_span(noise, NULL, pixel0, n, read, purpose, block, 0, w0, w1, w2, w3);
 }
 
 void wf_noise_block_list(const wf_noise *noise, const uint32_t *pixel, int n, uint32_t read,
                          wf_purpose purpose, uint32_t block, uint32_t *w0, uint32_t *w1,
                          uint32_t *w2, uint32_t *w3)
 {
-    philox_span(noise, pixel, 0, n, read, purpose, block, w0, w1, w2, w3);
+    philox_span(noise, pixel, 0, n, read, purpose, block, 0, w0, w1, w2, w3);
+}
+
+wf_status wf_noise_stream_blocks(const wf_noise *noise, uint32_t pixel, uint32_t read,
+                                 wf_purpose purpose, uint32_t block0, int n, uint32_t *w0,
+                                 uint32_t *w1, uint32_t *w2, uint32_t *w3)
+{
+    /* the block index has 16 bits: past them wf_rng_u32 wraps, and a span would carry */
+    if (n < 0 || block0 > 65536u || (uint32_t)n > 65536u - block0)
+        return wf_error(WF_ERR_RANGE, "noise: blocks %u + %d of a stream pass its 65536", block0, n);
+    philox_span(noise, NULL, pixel, n, read, purpose, block0, 1, w0, w1, w2, w3);
+    return WF_OK;
 }
 
 /* The tails (p < 0.02425 or p > 0.97575, ~5% of words) of wf_norm_from_u32: wf_norm_ppf's

@@ -320,12 +320,20 @@ static wf_status galaxy_job(wf_profile_work *w, const wf_galaxy *g, job *jb)
         jb->fk = disk * g->knot_frac;
         jb->fknot = jb->fk / jb->nk;
         const double(*a)[2] = jb->shape.a;
+        double r2max = 0.0; /* squares, and one root: hypot only where they overflow */
         for (int j = 0; j < jb->nk; j++) {
             double x = w->knot_pos[2 * j], y = w->knot_pos[2 * j + 1];
-            w->knot_pos[2 * j] = a[0][0] * x + a[0][1] * y;
-            w->knot_pos[2 * j + 1] = a[1][0] * x + a[1][1] * y;
-            double r = hypot(w->knot_pos[2 * j], w->knot_pos[2 * j + 1]);
-            if (r > jb->knot_rmax) jb->knot_rmax = r;
+            double sx = a[0][0] * x + a[0][1] * y, sy = a[1][0] * x + a[1][1] * y;
+            w->knot_pos[2 * j] = sx;
+            w->knot_pos[2 * j + 1] = sy;
+            double r2 = sx * sx + sy * sy;
+            if (r2 > r2max) r2max = r2;
+        }
+        jb->knot_rmax = sqrt(r2max);
+        if (isinf(r2max)) {
+            double r = 0.0;
+            for (int j = 0; j < jb->nk; j++) r = fmax(r, hypot(w->knot_pos[2 * j], w->knot_pos[2 * j + 1]));
+            jb->knot_rmax = r;
         }
         jb->knots = w->knot_pos;
     }

@@ -490,6 +490,31 @@ START_TEST(test_batch_matches_scalar)
 }
 END_TEST
 
+/* A stream's blocks in lanes are the words wf_rng_u32 gives in turn, from any block on, for
+ * lengths that leave SIMD tails; the stream's end is refused, not wrapped. */
+START_TEST(test_stream_blocks_match_scalar)
+{
+    wf_noise noise = {WF_NOISE_PHILOX, 0xfedcba9876543210ULL, 3, 11};
+    enum { N = 61 };
+    uint32_t w[4][N];
+    const uint32_t starts[] = {0u, 1u, 7u, 65536u - N};
+    for (int s0 = 0; s0 < 4; s0++)
+        for (int n = 0; n <= N; n += 15) {
+            ck_assert(wf_noise_stream_blocks(&noise, 4321u, 2u, WF_PURPOSE_SCENE, starts[s0], n,
+                                             w[0], w[1], w[2], w[3]) == WF_OK);
+            wf_rng rng;
+            wf_rng_init(&rng, &noise, 4321u, 2u, WF_PURPOSE_SCENE);
+            wf_rng_seek(&rng, starts[s0]);
+            for (int b = 0; b < n; b++)
+                for (int k = 0; k < 4; k++) ck_assert_uint_eq(w[k][b], wf_rng_u32(&rng));
+        }
+    ck_assert(wf_noise_stream_blocks(&noise, 1u, 0u, WF_PURPOSE_SCENE, 65536u - 3u, 4, w[0], w[1],
+                                     w[2], w[3]) == WF_ERR_RANGE);
+    ck_assert(wf_noise_stream_blocks(&noise, 1u, 0u, WF_PURPOSE_SCENE, 0u, -1, w[0], w[1], w[2],
+                                     w[3]) == WF_ERR_RANGE);
+}
+END_TEST
+
 /* Poisson by inversion, written out: the smallest k whose cumulative sum (the terms summed
  * in order, at most 200, a term that no longer moves the sum ending it) reaches u. */
 static int invert(uint32_t w, double m)
@@ -563,6 +588,7 @@ static Suite *noise_suite(void)
     TCase *tc = tcase_create("philox");
     tcase_add_test(tc, test_philox_kat);
     tcase_add_test(tc, test_batch_matches_scalar);
+    tcase_add_test(tc, test_stream_blocks_match_scalar);
     tcase_add_test(tc, test_stream_layout);
     tcase_add_test(tc, test_streams_distinct_and_repeatable);
     suite_add_tcase(s, tc);

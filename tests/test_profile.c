@@ -45,6 +45,7 @@
 #include <time.h>
 
 #include "hal/arena.h"
+#include "hal/noise.h"
 #include "sim/profile.h"
 #include "sim/profile_int.h"
 #include "tests/testutil.h"
@@ -793,6 +794,40 @@ START_TEST(test_knots_follow_disk)
     free(r);
     free(phi);
     free(xy);
+}
+END_TEST
+
+/* The knots are the stream's construction written out: u1, u2, u3 from wf_rng_uniform53 in
+ * turn, radius -r0 ln(u1 u2), angle 2 pi u3 through libm. The drawer's own quarter-turn
+ * series may differ from libm by an ulp or two of the angle's sine and cosine (and the 2 pi u
+ * product by half an ulp), so positions agree to 1e-15 of the radius; lengths that end a
+ * chunk anywhere (1, 127, 128, 129, 1024 knots) and several ids take every word offset. */
+START_TEST(test_knots_from_their_stream)
+{
+    const int lengths[] = {1, 2, 127, 128, 129, WF_PROFILE_MAX_KNOTS};
+    static double xy[2 * WF_PROFILE_MAX_KNOTS];
+    const double hlr = 0.4, r0 = hlr / wf_sersic4_table()->b1;
+    double worst = 0.0;
+    for (int li = 0; li < 6; li++)
+        for (unsigned id = 7; id < 10; id++) {
+            wf_galaxy g = galaxy(1, 0, hlr, 0, 0, 0);
+            g.id = id;
+            g.knot_seed = 0xabcdef0123ull + id;
+            g.n_knots = lengths[li];
+            g.knot_frac = 0.2;
+            ck_assert(wf_profile_knots(&g, xy) == WF_OK);
+            wf_noise stream = {.kind = WF_NOISE_PHILOX, .seed = g.knot_seed};
+            wf_rng rng;
+            wf_rng_init(&rng, &stream, id, 0, WF_PURPOSE_SCENE);
+            for (int j = 0; j < g.n_knots; j++) {
+                double u1 = wf_rng_uniform53(&rng), u2 = wf_rng_uniform53(&rng);
+                double phi = 2.0 * M_PI * wf_rng_uniform53(&rng), r = -r0 * log(u1 * u2);
+                double dx = fabs(xy[2 * j] - r * cos(phi)), dy = fabs(xy[2 * j + 1] - r * sin(phi));
+                worst = fmax(worst, fmax(dx, dy) / r);
+            }
+        }
+    printf("knots: worst position difference from libm's %.3g of the radius\n", worst);
+    ck_assert_msg(worst < 1e-15, "knot positions off their stream by %.3g of the radius", worst);
 }
 END_TEST
 
@@ -2706,6 +2741,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_sersic_transform);
     tcase_add_test(ind, test_knots_follow_disk);
     tcase_add_test(ind, test_knots_reproducible);
+    tcase_add_test(ind, test_knots_from_their_stream);
     tcase_add_test(ind, test_radius_search);
     tcase_add_test(ind, test_flux_exact_pixels);
     tcase_add_test(ind, test_flux_with_psf);
