@@ -2279,6 +2279,51 @@ START_TEST(test_simd_identical_wing)
 }
 END_TEST
 
+/* A stamp's sum and clipped light, against sums written out (long double) over the same
+ * pixels: kept (keep_negatives) the stamp is untouched and sums as it is; clipped, each pixel
+ * is max(v, 0), clipped is the light of the negatives, and the clipped stamp sums to the kept
+ * one's sum plus clipped. A tiny bulge rings, so negatives are there to clip; stamps of odd
+ * sizes leave the eight lanes a tail. */
+START_TEST(test_stamp_sum_and_clip)
+{
+    wf_psf_image img;
+    wf_profile_accuracy acc;
+    ctx c;
+    double *psfpix = open_split(&c, &img, &acc);
+    static const int side[] = {13, 29, 63};
+    int negatives = 0, tail = 0; /* and of those in the lanes' tail */
+    for (int k = 0; k < 3; k++) {
+        wf_galaxy g = galaxy(100.0, 0.8, 0.02, 0.005, 0.3, 0.1);
+        wf_stamp kept = stamp_new(0, 0, side[k], side[k] + 2), cut = stamp_new(0, 0, side[k], side[k] + 2);
+        const double x = 2.27, y = 1.61; /* far from the last pixels, where it rings */
+        wf_profile_keep_negatives(&c.work, 1);
+        ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, x, y, &kept) == WF_OK);
+        wf_profile_keep_negatives(&c.work, 0);
+        ck_assert(wf_profile_draw_galaxy(&c.work, &g, &c.psf, x, y, &cut) == WF_OK);
+        long double all = 0.0L, neg = 0.0L, pos = 0.0L;
+        const int n = kept.nx * kept.ny;
+        for (int i = 0; i < n; i++) {
+            double v = kept.pix[i];
+            all += v;
+            if (v < 0.0) neg -= v, negatives++, tail += i >= n - n % 8;
+            ck_assert(cut.pix[i] == (v < 0.0 ? 0.0 : v));
+            pos += cut.pix[i];
+        }
+        ck_assert(kept.clipped == 0.0);
+        ck_assert_msg(fabsl(kept.sum - all) <= 1e-13L * g.flux, "kept sum %.17g vs %.17Lg", kept.sum, all);
+        ck_assert_msg(fabsl(cut.clipped - neg) <= 1e-13L * g.flux, "clipped %.17g vs %.17Lg", cut.clipped, neg);
+        ck_assert_msg(fabsl(cut.sum - pos) <= 1e-13L * g.flux, "clipped sum %.17g vs %.17Lg", cut.sum, pos);
+        ck_assert(fabs(cut.sum - (kept.sum + cut.clipped)) <= 1e-12 * g.flux);
+        free(kept.pix);
+        free(cut.pix);
+    }
+    printf("stamp sums: %d negative pixels, %d in the tail of the lanes\n", negatives, tail);
+    ck_assert_msg(negatives > 0 && tail > 0, "no negative pixels (%d, %d in the tail): the clip was not exercised", negatives, tail);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
 /* acc.cut_tolerance T: the Fourier sum ends where the modes left out move no pixel by more
  * than T (tail_cut's bound), and the cut moves no flux within the FFT box (its k = 0 mode
  * stays; the work keeps negatives, as the scene's do). Against the same draw without the cut:
@@ -2742,6 +2787,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_knots_follow_disk);
     tcase_add_test(ind, test_knots_reproducible);
     tcase_add_test(ind, test_knots_from_their_stream);
+    tcase_add_test(ind, test_stamp_sum_and_clip);
     tcase_add_test(ind, test_radius_search);
     tcase_add_test(ind, test_flux_exact_pixels);
     tcase_add_test(ind, test_flux_with_psf);
