@@ -261,11 +261,13 @@ static wf_status transform_fft(const wf_psf_image *img, const support *sp, int o
                                (void **)&cols)))
         return st;
     const int len[1] = {np};
+    /* no buffered passes, whose buffers each execution allocates (as the draws' plans,
+     * sim/profile.c's draw_plan_flags) */
     wf_fftw_lock();
     fftw_plan pr = fftw_plan_many_dft_r2c(1, len, TRANSFORM_RB, rows, NULL, 1, (int)rowlen, (fftw_complex *)rows,
-                                          NULL, 1, (int)half, FFTW_ESTIMATE);
+                                          NULL, 1, (int)half, FFTW_ESTIMATE | FFTW_NO_BUFFERING);
     fftw_plan pc = fftw_plan_many_dft(1, len, TRANSFORM_CB, (fftw_complex *)cols, NULL, TRANSFORM_CB, 1,
-                                      (fftw_complex *)cols, NULL, TRANSFORM_CB, 1, FFTW_FORWARD, FFTW_ESTIMATE);
+                                      (fftw_complex *)cols, NULL, TRANSFORM_CB, 1, FFTW_FORWARD, FFTW_ESTIMATE | FFTW_NO_BUFFERING);
     wf_fftw_unlock();
     if (!pr || !pc) {
         wf_fftw_lock();
@@ -550,7 +552,7 @@ static wf_status wing_pass(void *ctx, int task, int slot)
             bb[1] = (double)j->im[at] - (double)co->im[at];
         }
     wf_fftw_lock();
-    fftw_plan plan = fftw_plan_dft_c2r_2d(g->nfft, g->nfft, (fftw_complex *)buf, buf, FFTW_ESTIMATE);
+    fftw_plan plan = fftw_plan_dft_c2r_2d(g->nfft, g->nfft, (fftw_complex *)buf, buf, FFTW_ESTIMATE | FFTW_NO_BUFFERING);
     wf_fftw_unlock();
     if (!plan) {
         wf_arena_release(arena, mark);
