@@ -63,6 +63,12 @@ typedef struct thread_state {
     wf_profile_wing_at wing;
 } thread_state;
 
+typedef struct works_job {
+    wf_scene *s;
+    wf_status st;
+    char message[512];
+} works_job;
+
 struct wf_scene {
     wf_scene_setup setup;
     object_plan *plans;      /* while building: per object */
@@ -97,6 +103,16 @@ struct wf_scene {
     thread_state *ts;
     const wf_catalog *gal, *stars;
     wf_scene_stats stats;
+    /* from wf_scene_prepare to wf_scene_populate: the optics (the wide PSF is built from
+     * them only once the objects say it is needed) and the helper making the works */
+    wf_psf_optics optics;
+    double lams[WF_PSF_MAX_LAMBDAS], ws[WF_PSF_MAX_LAMBDAS];
+    int nl;
+    double band_limit;
+    works_job works;
+    pthread_t works_thread;
+    int works_running, prepared;
+    double t0;
 };
 
 void wf_scene_setup_default(wf_scene_setup *s)
@@ -460,14 +476,8 @@ static wf_status plan_range(void *ctx, int task, int slot)
 }
 
 /* The drawing works, one per thread. They depend only on the accuracy knobs, so with more
- * than one thread they are made on a helper thread while the sky and the PSF are built (the
- * first work also fills the Sersic table and FFTW's planner: ~40 ms of a serial set-up). */
-typedef struct works_job {
-    wf_scene *s;
-    wf_status st;
-    char message[512];
-} works_job;
-
+ * than one thread they are made on a helper thread (works_job) while the sky and the PSF are
+ * built (the first work also fills the Sersic table: ~40 ms of a serial set-up). */
 static void *init_works(void *arg)
 {
     works_job *j = arg;
@@ -500,22 +510,20 @@ static wf_status plan_objects(wf_scene *s)
     return wf_parallel_for(s->setup.threads, s->setup.threads, plan_range, s);
 }
 
-wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
-                          const wf_catalog *stars, wf_scene **out)
+wf_status wf_scene_prepare(const wf_scene_setup *setup, wf_scene **out)
 {
     *out = NULL;
     double t0 = now();
     wf_scene *s = calloc(1, sizeof *s);
     if (!s) return wf_error(WF_ERR_NOMEM, "scene: out of memory");
     s->setup = *setup;
-    s->gal = gal;
-    s->stars = stars;
+    s->setup.sne = NULL; /* wf_scene_populate's */
+    s->setup.nsne = 0;
+    s->t0 = t0;
     const char *data = setup->data_dir[0] ? setup->data_dir : NULL;
     wf_status st;
     wf_sky_model *sky = NULL;
-    works_job works = {s, WF_OK, ""};
-    pthread_t works_thread;
-    int works_running = 0;
+    s->works = (works_job){s, WF_OK, ""};
     if (setup->threads < 1) { st = wf_error(WF_ERR_RANGE, "scene: %d threads", setup->threads); goto bad; }
     wf_profile_accuracy_default(&s->acc);
     s->acc.flux_fraction = setup->flux_fraction;
@@ -529,7 +537,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
      * count; the helper can then fail only for memory or FFTW */
     size_t work_bytes;
     if ((st = wf_profile_work_need(&s->acc, &work_bytes, NULL))) goto bad;
-    works_running = setup->threads > 1 && pthread_create(&works_thread, NULL, init_works, &works) == 0;
+    s->works_running = setup->threads > 1 && pthread_create(&s->works_thread, NULL, init_works, &s->works) == 0;
     if ((st = wf_filter_parse(setup->filter, &s->filter))) goto bad;
     if ((st = wf_wcs_focal_plane(data, &s->fp))) goto bad;
     if ((st = wf_wcs_for_sca(&s->fp, setup->ra, setup->dec, setup->pa, setup->sca, &s->wcs))) goto bad;
@@ -619,11 +627,37 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     wf_arena_init(&s->psf_arena, s->psf_memory, pbytes, "scene PSF arena");
     if ((st = wf_profile_psf_init(&s->ppsf, &s->psf_image, &s->acc, &s->psf_arena, pt))) goto bad;
     release_tail(&s->psf_arena);
+    s->optics = optics;
+    memcpy(s->lams, lams, sizeof lams);
+    memcpy(s->ws, ws, sizeof ws);
+    s->nl = nl;
+    s->band_limit = band_limit;
+    free(sky);
+    s->prepared = 1;
+    *out = s;
+    return WF_OK;
+bad:
+    free(sky);
+    wf_scene_destroy(s);
+    return st;
+}
+
+wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog *stars,
+                            const wf_scene_sn *sne, size_t nsne)
+{
+    if (!s || !s->prepared) return wf_error(WF_ERR_INTERNAL, "scene: populate needs a prepared scene, once");
+    s->prepared = 0;
+    s->gal = gal;
+    s->stars = stars;
+    s->setup.sne = sne;
+    s->setup.nsne = nsne;
+    const wf_scene_setup *setup = &s->setup;
+    wf_status st;
     /* objects */
     size_t cap = 0;
     if ((st = add_objects(s, gal, OBJ_GALAXY, &cap)) || (st = add_objects(s, stars, OBJ_STAR, &cap)) ||
         (st = add_sne(s, &cap)))
-        goto bad;
+        return st;
     /* a wide stamp reaches at most half the wide PSF image (2 psf_size / oversample pixels) */
     const double reach = 2.0 * setup->psf_size / setup->psf_oversample + 1.0;
     /* Per-object knobs from the noise (docs/ACCURACY.md): light wrapping into the Fourier
@@ -644,12 +678,12 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
      * no noise to hide in. */
     if (!(setup->noise_tolerance >= 0.0 && setup->noise_tolerance < INFINITY)) {
         st = wf_error(WF_ERR_RANGE, "scene: noise_tolerance %g is not a finite value >= 0", setup->noise_tolerance);
-        goto bad;
+        return st;
     }
     if (setup->noise_tolerance > 0.0 && !(setup->exptime > 0.0 && setup->exptime < INFINITY)) {
         st = wf_error(WF_ERR_RANGE, "scene: noise_tolerance %g needs a positive exposure time (%g s)",
                       setup->noise_tolerance, setup->exptime);
-        goto bad;
+        return st;
     }
     const double kp = s->ppsf.kmax * s->acc.pixel_scale / (2.0 * M_PI), modes = M_PI * kp * kp;
     const double sky_sigma = setup->sky_on && s->stats.sky_min > 0.0 ? sqrt(s->stats.sky_min * setup->exptime) : 0.0;
@@ -676,28 +710,25 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
             s->stats.bright++;
         }
     }
-    if (s->stats.bright && (st = build_wide_psf(s, &optics, lams, ws, nl, band_limit))) goto bad;
+    if (s->stats.bright && (st = build_wide_psf(s, &s->optics, s->lams, s->ws, s->nl, s->band_limit))) return st;
     if (!(s->robj = malloc((s->nobj ? s->nobj : 1) * sizeof *s->robj))) {
         st = wf_error(WF_ERR_NOMEM, "scene: out of memory");
-        goto bad;
+        return st;
     }
     /* each thread: drawing work from its own arena (made by now on the helper thread, if
      * any), and a renderer */
-    if (works_running) pthread_join(works_thread, NULL);
-    else init_works(&works);
-    works_running = 0;
-    if (works.st) {
-        st = wf_error(works.st, "%s", works.message);
-        goto bad;
-    }
+    if (s->works_running) pthread_join(s->works_thread, NULL);
+    else init_works(&s->works);
+    s->works_running = 0;
+    if (s->works.st) return wf_error(s->works.st, "%s", s->works.message);
     /* Each object's stamp bounds and, for a galaxy, whether it takes the split PSF and its
      * box: independent per object, so planned by the threads in parallel (each with its own
      * drawing work), then gathered in order. */
     if (!(s->plans = calloc(s->nobj ? s->nobj : 1, sizeof *s->plans))) {
         st = wf_error(WF_ERR_NOMEM, "scene: out of memory");
-        goto bad;
+        return st;
     }
-    if ((st = plan_objects(s))) goto bad;
+    if ((st = plan_objects(s))) return st;
     long kept = 0;
     for (size_t i = 0; i < s->nobj; i++) {
         object *o = &s->obj[i];
@@ -708,7 +739,7 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
         double rel = o->kind == OBJ_SN ? setup->sne[o->row].dlnf_dt : 0.0;
         if (!isfinite(rel)) {
             st = wf_error(WF_ERR_RANGE, "scene: supernova %lld: flux slope is not finite", object_id(s, o));
-            goto bad;
+            return st;
         }
         s->robj[kept++] = (wf_render_object){id * 4u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o, rel, pl->split,
                                              box.x0, box.y0, box.nx, box.ny};
@@ -725,26 +756,31 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
     wf_renderer_config rc = {setup->ncols, setup->nrows, 0.0, sky_row, s, setup->pool_bytes, 0, halo_row};
     s->nrobj = (size_t)kept;
     for (int t = 0; t < setup->threads; t++)
-        if ((st = wf_renderer_create(&rc, s->robj, (size_t)kept, draw_object, &s->ts[t], &s->ts[t].renderer))) goto bad;
-    free(sky);
+        if ((st = wf_renderer_create(&rc, s->robj, (size_t)kept, draw_object, &s->ts[t], &s->ts[t].renderer))) return st;
 #ifdef __GLIBC__
     /* the set-up's large transients (pupil, PSF build) are free but still resident; hand
      * them back before the rendering fills its own buffers */
     malloc_trim(0);
 #endif
-    s->stats.build_seconds = now() - t0;
-    *out = s;
+    s->stats.build_seconds = now() - s->t0;
     return WF_OK;
-bad:
-    if (works_running) pthread_join(works_thread, NULL); /* it writes into s->ts */
-    free(sky);
-    wf_scene_destroy(s);
+}
+
+wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
+                          const wf_catalog *stars, wf_scene **out)
+{
+    wf_status st = wf_scene_prepare(setup, out);
+    if (!st && (st = wf_scene_populate(*out, gal, stars, setup->sne, setup->nsne))) {
+        wf_scene_destroy(*out);
+        *out = NULL;
+    }
     return st;
 }
 
 void wf_scene_destroy(wf_scene *s)
 {
     if (!s) return;
+    if (s->works_running) pthread_join(s->works_thread, NULL); /* it writes into s->ts */
     if (s->ts)
         for (int t = 0; t < s->setup.threads; t++) {
             wf_renderer_destroy(s->ts[t].renderer);

@@ -93,6 +93,15 @@ void wf_scene_setup_default(wf_scene_setup *s);
  * of the setup's filter. */
 wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
                           const wf_catalog *stars, wf_scene **out);
+
+/* wf_scene_create in two steps, so that the catalogs can be read while the optics are built:
+ * prepare does everything that needs no object (WCS, bandpass, sky, the PSF and its tables;
+ * setup->sne is not read), populate adds the objects and makes the renderers. The same
+ * scene, bit for bit. populate once per prepared scene; after either fails, only
+ * wf_scene_destroy. */
+wf_status wf_scene_prepare(const wf_scene_setup *setup, wf_scene **out);
+wf_status wf_scene_populate(wf_scene *scene, const wf_catalog *gal, const wf_catalog *stars,
+                            const wf_scene_sn *sne, size_t nsne);
 void wf_scene_destroy(wf_scene *scene);
 
 /* Scene source for readout thread t (0 <= t < setup.threads). */

@@ -341,10 +341,49 @@ START_TEST(catalog_file_on_the_command_line)
     size_t n;
     char *msg = wf_test_slurp(err, &n);
     ck_assert_msg(msg && strstr(msg, "gal.csv") && strstr(msg, "column"), "message: %s", msg ? msg : "");
-    free(msg);
     char bad[4300];
     snprintf(bad, sizeof bad, "%s/bad/" FITS, d);
     ck_assert(!exists(bad));
+    /* with two threads the catalog is read while the optics are built: the same message as
+     * one thread's, also when the data folder is missing too (the first failure in the
+     * order one thread meets them) */
+    for (int both = 0; both < 2; both++) {
+        char *m[2] = {NULL, NULL};
+        for (int th = 1; th <= 2; th++) {
+            ck_assert_int_ne(wf_test_run("%s expose --quiet --catalog %s --set readout.ncols=64 --set readout.nrows=64 "
+                                         "--threads %d %s --out %s/bad 2>%s/err2.txt", bin, path, th,
+                                         both ? "--set paths.data=/nonexistent/wfisim-data" : "", d, d), 0);
+            snprintf(err, sizeof err, "%s/err2.txt", d);
+            m[th - 1] = wf_test_slurp(err, &n);
+            ck_assert(!exists(bad));
+        }
+        ck_assert_msg(m[0] && m[1] && strcmp(m[0], m[1]) == 0, "%s: one thread\n%s\ntwo threads\n%s",
+                      both ? "no data folder" : "bad catalog", m[0] ? m[0] : "", m[1] ? m[1] : "");
+        if (!both) ck_assert(strcmp(m[0], msg) == 0);
+        free(m[0]);
+        free(m[1]);
+    }
+    free(msg);
+    /* the data folder alone: the optics' failure is reported, on two threads as on one */
+    f = fopen(path, "w");
+    fprintf(f, "id,ra,dec,z,mag_Y106,hlr_disk,hlr_bulge,bulge_frac,knot_frac,e1,e2,pa\n1,71.0,-53.0,0.7,21.5,0.4,0.2,0.2,0.1,0.1,0.05,10\n");
+    fclose(f);
+    char *m1 = NULL;
+    for (int th = 1; th <= 2; th++) {
+        ck_assert_int_ne(wf_test_run("%s expose --quiet --catalog %s --set readout.ncols=64 --set readout.nrows=64 "
+                                     "--threads %d --set paths.data=/nonexistent/wfisim-data --out %s/bad 2>%s/err3.txt",
+                                     bin, path, th, d, d), 0);
+        snprintf(err, sizeof err, "%s/err3.txt", d);
+        char *m = wf_test_slurp(err, &n);
+        ck_assert_msg(m && strstr(m, "/nonexistent/wfisim-data"), "threads %d: message %s", th, m ? m : "");
+        if (th == 1) m1 = m;
+        else {
+            ck_assert_msg(strcmp(m, m1) == 0, "two threads: %s against %s", m, m1);
+            free(m);
+        }
+        ck_assert(!exists(bad));
+    }
+    free(m1);
 }
 END_TEST
 

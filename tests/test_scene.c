@@ -309,6 +309,66 @@ START_TEST(setup_threads)
 }
 END_TEST
 
+/* wf_scene_prepare then wf_scene_populate make wf_scene_create's scene, bit for bit, on one
+ * thread and three (the works' helper running across the two steps); a second populate is
+ * refused; a scene prepared and never populated, or whose populate failed, is destroyed
+ * cleanly (the sanitizers' run checks the helper is joined and nothing leaks). */
+START_TEST(prepare_then_populate)
+{
+    wf_scene_setup ss;
+    setup_small(&ss);
+    ss.sky_on = 1;
+    const double x[3] = {60, 128.3, 200}, y[3] = {70, 128.6, 190}, mag[3] = {19, 20, 21};
+    char path[4200];
+    snprintf(path, sizeof path, "%s/gal2.csv", wf_test_tmpdir());
+    write_catalog(path, &ss, 1, 0.2, 3, x, y, mag);
+    wf_catalog gal;
+    ck_assert_msg(wf_catalog_read_galaxies(path, &gal) == WF_OK, "%s", wf_error_message());
+    for (int th = 1; th <= 3; th += 2) {
+        ss.threads = th;
+        wf_scene *one = NULL, *two = NULL;
+        ck_assert_msg(wf_scene_create(&ss, &gal, NULL, &one) == WF_OK, "%s", wf_error_message());
+        ck_assert_msg(wf_scene_prepare(&ss, &two) == WF_OK, "%s", wf_error_message());
+        ck_assert_msg(wf_scene_populate(two, &gal, NULL, NULL, 0) == WF_OK, "%s", wf_error_message());
+        ck_assert_int_ne(wf_scene_populate(two, &gal, NULL, NULL, 0), WF_OK);
+        float *a = render(one), *b = render(two);
+        ck_assert(memcmp(a, b, (size_t)W * H * sizeof *a) == 0);
+        wf_scene_stats sa, sb;
+        wf_scene_get_stats(one, &sa);
+        wf_scene_get_stats(two, &sb);
+        ck_assert_int_eq(sa.galaxies, 3);
+        ck_assert_int_eq(sb.galaxies, 3);
+        double total = 0;
+        for (int i = 0; i < W * H; i++) total += a[i];
+        ck_assert(total > 0);
+        free(a);
+        free(b);
+        wf_scene_destroy(one);
+        wf_scene_destroy(two);
+        /* prepared and dropped */
+        ck_assert_msg(wf_scene_prepare(&ss, &two) == WF_OK, "%s", wf_error_message());
+        wf_scene_destroy(two);
+    }
+    /* a populate that fails (a supernova whose flux slope is not finite) leaves a scene that
+     * destroys cleanly */
+    wf_scene_sn sn = {0};
+    sn.id = 9;
+    wf_wcs w;
+    wf_focal_plane fp;
+    wf_wcs_focal_plane(NULL, &fp);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, ss.ra, ss.dec, ss.pa, ss.sca, &w), WF_OK);
+    ck_assert_int_eq(wf_wcs_pix2world(&w, 100.0, 100.0, &sn.ra, &sn.dec), WF_OK);
+    sn.mag = 22.0;
+    sn.dlnf_dt = NAN;
+    wf_scene *bad = NULL;
+    ck_assert_msg(wf_scene_prepare(&ss, &bad) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_ne(wf_scene_populate(bad, &gal, NULL, &sn, 1), WF_OK);
+    ck_assert_msg(strstr(wf_error_message(), "slope") != NULL, "message: %s", wf_error_message());
+    wf_scene_destroy(bad);
+    wf_catalog_free(&gal);
+}
+END_TEST
+
 START_TEST(empty_scene_is_sky)
 {
     wf_scene_setup ss;
@@ -494,6 +554,7 @@ static Suite *suite(void)
     tcase_add_test(tc, bright_star_wide_psf);
     tcase_add_test(tc, empty_scene_is_sky);
     tcase_add_test(tc, setup_threads);
+    tcase_add_test(tc, prepare_then_populate);
     tcase_add_test(tc, noise_tolerance_bounds);
     suite_add_tcase(s, tc);
     return s;
