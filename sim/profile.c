@@ -30,6 +30,7 @@
 #include "hal/simd.h"
 #include "sim/profile.h"
 #include "sim/profile_int.h"
+#include "sim/trig.h"
 #include "sim/fftw_lock.h"
 
 /* The knot lattice (see "knot lattice" below): most kernel taps per axis, coarsest step. */
@@ -698,32 +699,59 @@ typedef struct grid {
     double lat_exp;      /* the knot lattice's E = -ln(knot_accuracy) */
 } grid;
 
-/* e^{-i u theta} (-1)^u (alt) or e^{-i u theta} for u = lo .. hi into re[(u - lo) st],
- * im[(u - lo) st], re-anchored every 32 steps so that the recurrence's rounding stays
- * ~1e-15. */
-static void phase_range(double theta, int lo, int hi, double *re, double *im, size_t st,
-                        int alt)
+/* wf_profile_phase_lines (sim/profile_int.h). The step's and the anchors' sines and cosines
+ * are taken together in SIMD lanes (sim/trig.h): one at a time through libm they were ~1.3 M
+ * calls over GalSim's scene, most of them two or three per knot. */
+#define PHASE_ANGLES 512
+void wf_profile_phase_lines(int n, const double *theta, int lo, int hi, double *re0, size_t line,
+                            size_t imoff, size_t st, int alt)
 {
-    double sr = cos(theta), si = sin(theta); /* step e^{-i theta}, times -1 with alt */
-    if (alt) sr = -sr;
-    else si = -si;
-    for (int u0 = lo; u0 <= hi; u0 += 32) {
-        double a = -u0 * theta, sg = alt && (u0 & 1) ? -1.0 : 1.0;
-        double cr = sg * cos(a), ci = sg * sin(a);
-        int u1 = u0 + 32 <= hi ? u0 + 32 : hi + 1;
-        for (int u = u0; u < u1; u++) {
-            re[(size_t)(u - lo) * st] = cr;
-            im[(size_t)(u - lo) * st] = ci;
-            double nr = cr * sr - ci * si;
-            ci = cr * si + ci * sr;
-            cr = nr;
+    const int nb = (hi - lo) / 32 + 1, per = 1 + nb; /* angles per line: the step, the anchors */
+    if (per > PHASE_ANGLES) { /* lines longer than the buffer in pieces: the same anchors */
+        const int span = 32 * (PHASE_ANGLES - 1);
+        for (int l = lo; l <= hi; l += span)
+            wf_profile_phase_lines(n, theta, l, hi - l >= span ? l + span - 1 : hi, re0 + (size_t)(l - lo) * st,
+                                   line, imoff, st, alt);
+        return;
+    }
+    const int chunk = PHASE_ANGLES / per;
+    double ang[PHASE_ANGLES], cs[PHASE_ANGLES], sn[PHASE_ANGLES];
+    for (int j0 = 0; j0 < n; j0 += chunk) {
+        const int m = n - j0 < chunk ? n - j0 : chunk;
+        for (int j = 0; j < m; j++) {
+            double th = theta[j0 + j];
+            ang[j * per] = th;
+            for (int b = 0; b < nb; b++) {
+                int u0 = lo + 32 * b;
+                ang[j * per + 1 + b] = -u0 * th;
+            }
+        }
+        wf_trig_sincos(ang, m * per, cs, sn);
+        for (int j = 0; j < m; j++) {
+            double *re = re0 + (size_t)(j0 + j) * line, *im = re + imoff;
+            double sr = cs[j * per], si = sn[j * per]; /* step e^{-i theta}, times -1 with alt */
+            if (alt) sr = -sr;
+            else si = -si;
+            for (int b = 0; b < nb; b++) {
+                int u0 = lo + 32 * b;
+                double sg = alt && (u0 & 1) ? -1.0 : 1.0;
+                double cr = sg * cs[j * per + 1 + b], ci = sg * sn[j * per + 1 + b];
+                int u1 = u0 + 32 <= hi ? u0 + 32 : hi + 1;
+                for (int u = u0; u < u1; u++) {
+                    re[(size_t)(u - lo) * st] = cr;
+                    im[(size_t)(u - lo) * st] = ci;
+                    double nr = cr * sr - ci * si;
+                    ci = cr * si + ci * sr;
+                    cr = nr;
+                }
+            }
         }
     }
 }
 
 static void phase_line_to(double theta, int n, double *re, double *im, size_t st)
 {
-    phase_range(theta, -n, n, re, im, st, 1);
+    wf_profile_phase_lines(1, &theta, -n, n, re, 0, (size_t)(im - re), st, 1);
 }
 
 /* The same, complex interleaved into out[2 (u + n)]. */
@@ -960,18 +988,20 @@ static void lat_build(wf_profile_work *w, const job *jb, grid *gd, lattice *l)
     size_t room = (size_t)WF_PROFILE_KNOT_BLOCK * (size_t)w->cap_line / ks;
     int per = room > (size_t)WF_PROFILE_MAX_KNOTS ? WF_PROFILE_MAX_KNOTS : (int)room;
     double ckr[WF_PROFILE_MAX_KNOTS], cki[WF_PROFILE_MAX_KNOTS], wk[WF_PROFILE_MAX_KNOTS];
+    double thx[WF_PROFILE_MAX_KNOTS], thy[WF_PROFILE_MAX_KNOTS];
     const double half = 0.5 * wd * delta, norm = jb->fknot / ((double)wd * wd);
     for (int k0 = 0; k0 < l->nk; k0 += per) {
         int nkb = l->nk - k0 < per ? l->nk - k0 : per;
         for (int j = 0; j < nkb; j++) {
             const double *kp = l->pos + 2 * (size_t)(k0 + j);
             double x = kp[0] + gd->dx, y = kp[1] + gd->dy;
-            double *lx = w->kx + 2 * (size_t)j * ks, *ly = w->ky + 2 * (size_t)j * ks;
-            phase_range(delta * x, -nh, nh, lx, lx + ks, 1, 0);
-            phase_range(delta * y, 0, mh, ly, ly + ks, 1, 0);
+            thx[j] = delta * x;
+            thy[j] = delta * y;
             wk[j] = norm / (wf_knot_kernel_ft(half * x, l->beta) *
                             wf_knot_kernel_ft(half * y, l->beta));
         }
+        wf_profile_phase_lines(nkb, thx, -nh, nh, w->kx, 2 * ks, ks, 1, 0);
+        wf_profile_phase_lines(nkb, thy, 0, mh, w->ky, 2 * ks, ks, 1, 0);
         for (int m = 0; m <= mh; m++) {
             int ns = lat_nmax(l, m), nn = lat_nmax(l, -m);
             if (nn > ns) ns = nn;
@@ -2454,12 +2484,14 @@ static wf_status draw_job(wf_profile_work *w, const job *jb, const wf_profile_ps
         if (per < 1) per = 1;
         for (int k0 = 0; k0 < nd; k0 += per) {
             int nkb = nd - k0 < per ? nd - k0 : per;
+            double thx[WF_PROFILE_MAX_KNOTS], thy[WF_PROFILE_MAX_KNOTS];
             for (int j = 0; j < nkb; j++) {
                 const double *kp = gd.kpos + 2 * (size_t)(k0 + j);
-                double *lx = w->kx + 2 * (size_t)j * gd.ks, *ly = w->ky + 2 * (size_t)j * gd.ks;
-                phase_line_to(gd.dk * (kp[0] + gd.dx), gd.u, lx, lx + gd.ks, 1);
-                phase_line_to(gd.dk * (kp[1] + gd.dy), gd.u, ly, ly + gd.ks, 1);
+                thx[j] = gd.dk * (kp[0] + gd.dx);
+                thy[j] = gd.dk * (kp[1] + gd.dy);
             }
+            wf_profile_phase_lines(nkb, thx, -gd.u, gd.u, w->kx, 2 * gd.ks, gd.ks, 1, 1);
+            wf_profile_phase_lines(nkb, thy, -gd.u, gd.u, w->ky, 2 * gd.ks, gd.ks, 1, 1);
             /* the smooth part and the lattice ride with pass 0 */
             fold_pass(w, jb, psf, &gd, us, k0, nkb);
         }

@@ -2,6 +2,7 @@
 #ifndef WF_PROFILE_INT_H
 #define WF_PROFILE_INT_H
 
+#include <stddef.h>
 #include <stdint.h>
 #include <string.h>
 
@@ -95,6 +96,13 @@ void wf_profile_knot_method(struct wf_profile_work *work, int method);
  * the widest the CPU has is taken. This selects at most `lanes` (< 0: only reports) and
  * returns the lanes in use. For tests and benchmarks: not to be called while drawing. */
 int wf_profile_simd(int lanes);
+
+/* Phase lines: e^{-i u theta} (-1)^u (alt) or e^{-i u theta} for u = lo .. hi into
+ * re[(u - lo) st] and im[(u - lo) st], for n lines at once, line j (theta[j]) at re0 + j line
+ * and its imaginary parts imoff further on. Re-anchored every 32 steps, so that the
+ * recurrence's rounding stays ~1e-15. */
+void wf_profile_phase_lines(int n, const double *theta, int lo, int hi, double *re0, size_t line,
+                            size_t imoff, size_t st, int alt);
 
 /* The lattice kernel psi(s) = I0(beta sqrt(1 - (2 s / w)^2)) - 1 on |s| <= w / 2 (zero at
  * the ends, so its transform falls as 1/x^2), and that transform over w Delta:

@@ -12,6 +12,7 @@
 #include "hal/simd.h"
 #include "sim/profile.h"
 #include "sim/profile_int.h"
+#include "sim/trig.h"
 
 /* Knots made a chunk at a time: their stream's blocks in SIMD lanes, then the arithmetic in
  * loops the compiler vectorises; only the log stays libm's. */
@@ -40,23 +41,15 @@ WF_CLONES static void knot_uniforms(uint32_t w[4][KNOT_CHUNK * 3 / 2], int m, do
     }
 }
 
-/* (r cos 2 pi u, r sin 2 pi u) for u in (0, 1): the quarter turns taken off u exactly
- * (f = u - q/4 has no rounding: u and q/4 are within a factor 2 of each other, or q = 0),
- * so the series only sees |2 pi f| <= pi/4, where Taylor's to t^17 and t^18 leave < 1e-19;
- * Horner in double adds ~1 ulp. libm's sincos is ~35 ns a call, most of a knot's cost. */
-WF_CLONES static void knot_place(const double *r, const double *cyc, int m, double *xy)
+/* (r cos 2 pi u, r sin 2 pi u): the angle from its turns in SIMD lanes (sim/trig.h), not
+ * libm's sincos, which was most of a knot's cost at ~35 ns a call */
+static void knot_place(const double *r, const double *cyc, int m, double *xy)
 {
+    double c[KNOT_CHUNK], s[KNOT_CHUNK];
+    wf_trig_sincos_turns(cyc, m, c, s);
     for (int j = 0; j < m; j++) {
-        double u = cyc[j];
-        int q = (int)(4.0 * u + 0.5);
-        double t = (u - 0.25 * q) * (2.0 * M_PI), t2 = t * t;
-        double s = t + t * t2 * (-1.0 / 6 + t2 * (1.0 / 120 + t2 * (-1.0 / 5040 + t2 * (1.0 / 362880 + t2 * (-1.0 / 39916800 + t2 * (1.0 / 6227020800.0 + t2 * (-1.0 / 1307674368000.0 + t2 * (1.0 / 355687428096000.0))))))));
-        double c = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24 + t2 * (-1.0 / 720 + t2 * (1.0 / 40320 + t2 * (-1.0 / 3628800 + t2 * (1.0 / 479001600 + t2 * (-1.0 / 87178291200.0 + t2 * (1.0 / 20922789888000.0 + t2 * (-1.0 / 6402373705728000.0)))))))));
-        /* a quarter turn q maps (c, s) to (-s, c) */
-        double cq = q & 1 ? -s : c, sq = q & 1 ? c : s;
-        double sign = q & 2 ? -1.0 : 1.0;
-        xy[2 * j] = r[j] * (sign * cq);
-        xy[2 * j + 1] = r[j] * (sign * sq);
+        xy[2 * j] = r[j] * c[j];
+        xy[2 * j + 1] = r[j] * s[j];
     }
 }
 
