@@ -25,8 +25,9 @@ WF_CLONES void wf_trig_sincos_turns(const double *u, int n, double *c, double *s
 {
     for (int i = 0; i < n; i++) {
         double f = u[i] - ((u[i] + ROUNDER) - ROUNDER);
-        double q = (4.0 * f + ROUNDER) - ROUNDER; /* -2 .. 2 */
-        quarter((f - 0.25 * q) * (2.0 * M_PI), (int)q & 3, &c[i], &s[i]);
+        double q = (4.0 * f + ROUNDER) - ROUNDER; /* -2 .. 2; NaN for NaN or infinite u */
+        int qi = q >= -2.0 && q <= 2.0 ? (int)q : 0; /* no conversion of a NaN: NaN comes out */
+        quarter((f - 0.25 * q) * (2.0 * M_PI), qi & 3, &c[i], &s[i]);
     }
 }
 

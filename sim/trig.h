@@ -8,7 +8,8 @@
 #define WF_TRIG_H
 
 /* c[i] = cos(2 pi u[i]), s[i] = sin(2 pi u[i]) for u in turns, |u| < 2^50. The whole and
- * quarter turns come off u exactly, so the result does not lose accuracy with |u|. */
+ * quarter turns come off u exactly, so the result does not lose accuracy with |u|. NaN and
+ * infinities give NaN. */
 void wf_trig_sincos_turns(const double *u, int n, double *c, double *s);
 
 /* c[i] = cos(x[i]), s[i] = sin(x[i]) for x in radians: quarter turns of pi/2 off by

@@ -45,6 +45,11 @@ START_TEST(test_turns_against_long_double)
     ck_assert(c[0] == 1.0 && s[0] == 0.0);
     ck_assert(c[3] == 0.0 && s[3] == 1.0);  /* 0.25 */
     ck_assert(c[5] == -1.0 && s[5] == 0.0); /* 0.5 */
+    /* NaN and infinities give NaN */
+    const double odd[3] = {NAN, INFINITY, -INFINITY};
+    double oc[3], os[3];
+    wf_trig_sincos_turns(odd, 3, oc, os);
+    for (int i = 0; i < 3; i++) ck_assert(isnan(oc[i]) && isnan(os[i]));
     /* any length, any start: the same values as the long call */
     for (int n = 1; n <= 17; n++) {
         double cc[17], ss[17];
