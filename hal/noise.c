@@ -49,11 +49,9 @@ double wf_rng_uniform(wf_rng *rng)
 
 double wf_rng_uniform53(wf_rng *rng)
 {
-    uint64_t hi = wf_rng_u32(rng) >> 5, lo = wf_rng_u32(rng) >> 6; /* 27 + 26 bits */
-    double u = ((double)(hi * 67108864u + lo) + 0.5) * (1.0 / 9007199254740992.0);
-    /* Above 2^52, x + 0.5 is not representable and rounds to even: x = 2^53 - 1 would give
-     * exactly 1.0. Keep the interval open with the largest double below 1. */
-    return u < 1.0 ? u : 0x1.fffffffffffffp-1;
+    uint32_t w0 = wf_rng_u32(rng);
+    uint32_t w1 = wf_rng_u32(rng);
+    return wf_uniform53_words(w0, w1);
 }
 
 double wf_norm_ppf(double p)

@@ -52,6 +52,16 @@ void wf_rng_init(wf_rng *rng, const wf_noise *noise, uint32_t pixel, uint32_t re
 uint32_t wf_rng_u32(wf_rng *rng);
 double wf_rng_uniform(wf_rng *rng);   /* (0, 1), 32-bit resolution */
 double wf_rng_uniform53(wf_rng *rng); /* (0, 1), 53-bit resolution */
+
+/* wf_rng_uniform53 from its two words in turn, for code that has the words in a batch:
+ * 27 + 26 bits, each part exact in a double, so the sum is the integer the scalar code
+ * converts. Above 2^52, x + 0.5 rounds to even, and x = 2^53 - 1 would give exactly 1.0: the
+ * interval stays open with the largest double below 1. */
+static inline double wf_uniform53_words(uint32_t w0, uint32_t w1)
+{
+    double u = ((double)(w0 >> 5) * 67108864.0 + (double)(w1 >> 6) + 0.5) * (1.0 / 9007199254740992.0);
+    return u < 1.0 ? u : 0x1.fffffffffffffp-1;
+}
 double wf_rng_gauss(wf_rng *rng);     /* N(0, 1) */
 /* Poisson(mean): exact inversion below 10, Hörmann's PTRS rejection above (exact in
  * distribution; log-probabilities via a Stirling form accurate to ~1e-10 up to 1e9 and

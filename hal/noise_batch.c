@@ -383,24 +383,16 @@ WF_INLINE double ptrs_lane(double mu, double smu, double u01, double v)
     return lhs <= rhs ? k : -1.0;
 }
 
-/* (0, 1) at 53 bits from two words, as wf_rng_uniform53: 27 + 26 bits, each part exact in a
- * double, so the sum is the same integer the scalar code converts. */
-WF_INLINE double uniform53(uint32_t w0, uint32_t w1)
-{
-    double u = ((double)(w0 >> 5) * 67108864.0 + (double)(w1 >> 6) + 0.5) *
-               (1.0 / 9007199254740992.0);
-    return u < 1.0 ? u : 0x1.fffffffffffffp-1;
-}
 
 /* u and v of lane i: from one word each (wide = 0: w0, w1), or 53 bits from two (wide = 1). */
 WF_INLINE double ptrs_u(int wide, const uint32_t *w0, const uint32_t *w1, int i)
 {
-    return wide ? uniform53(w0[i], w1[i]) : ((double)w0[i] + 0.5) * (1.0 / 4294967296.0);
+    return wide ? wf_uniform53_words(w0[i], w1[i]) : ((double)w0[i] + 0.5) * (1.0 / 4294967296.0);
 }
 
 WF_INLINE double ptrs_v(int wide, const uint32_t *w1, const uint32_t *w2, const uint32_t *w3, int i)
 {
-    return wide ? uniform53(w2[i], w3[i]) : ((double)w1[i] + 0.5) * (1.0 / 4294967296.0);
+    return wide ? wf_uniform53_words(w2[i], w3[i]) : ((double)w1[i] + 0.5) * (1.0 / 4294967296.0);
 }
 
 #define PTRS_CHUNK 1024 /* undecided lanes gathered at a time: 28 KiB of stack */

@@ -18,14 +18,6 @@
  * loops the compiler vectorises; only the log stays libm's. */
 #define KNOT_CHUNK 128
 
-/* wf_rng_uniform53 from words (hi, lo) */
-static inline double uniform53(uint32_t hi, uint32_t lo)
-{
-    uint64_t h = hi >> 5, l = lo >> 6;
-    double u = ((double)(h * 67108864u + l) + 0.5) * (1.0 / 9007199254740992.0);
-    return u < 1.0 ? u : 0x1.fffffffffffffp-1;
-}
-
 /* Word k of the chunk's stream is word k % 4 of block k / 4. Knot j's three uniforms are
  * words (6j, 6j+1), (6j+2, 6j+3), (6j+4, 6j+5), as wf_rng_uniform53 takes them in turn:
  * prod = u1 u2 (its radius is -r0 ln prod), cyc = u3 (its angle in turns). */
@@ -33,9 +25,9 @@ WF_CLONES static void knot_uniforms(uint32_t w[4][KNOT_CHUNK * 3 / 2], int m, do
 {
     for (int j = 0; j < m; j++) {
         int b = 3 * (j / 2) + j % 2, o = 2 * (j % 2); /* knot j starts at word 6j = 4b + o */
-        double u1 = uniform53(w[o][b], w[o + 1][b]);
-        double u2 = uniform53(w[(o + 2) % 4][b + (o + 2) / 4], w[(o + 3) % 4][b + (o + 3) / 4]);
-        double u3 = uniform53(w[(o + 4) % 4][b + (o + 4) / 4], w[(o + 5) % 4][b + (o + 5) / 4]);
+        double u1 = wf_uniform53_words(w[o][b], w[o + 1][b]);
+        double u2 = wf_uniform53_words(w[(o + 2) % 4][b + (o + 2) / 4], w[(o + 3) % 4][b + (o + 3) / 4]);
+        double u3 = wf_uniform53_words(w[(o + 4) % 4][b + (o + 4) / 4], w[(o + 5) % 4][b + (o + 5) / 4]);
         prod[j] = u1 * u2;
         cyc[j] = u3;
     }
