@@ -1,6 +1,7 @@
 #include "tools/pipeline.h"
 
 #include <errno.h>
+#include <fitsio.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -264,10 +265,11 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         ss.pool_bytes = (size_t)(cfg->stamp_pool_mib * 1048576.0);
         ss.threads = T;
         /* one thread: the catalogs first, so that a bad one fails before any PSF work; either
-         * way a catalog's failure is the one reported */
+         * way a catalog's failure is the one reported. Both sides may read FITS files (a FITS
+         * catalog, the pupil), so only with a cfitsio built reentrant (Debian's is). */
         loader_job lj = {pj, &inputs, NULL, 0, WF_OK, ""};
         pthread_t lt;
-        int overlap = T > 1 && pthread_create(&lt, NULL, load_inputs, &lj) == 0;
+        int overlap = T > 1 && fits_is_reentrant() && pthread_create(&lt, NULL, load_inputs, &lj) == 0;
         if (!overlap) load_inputs(&lj);
         wf_status pst = overlap || !lj.st ? wf_scene_prepare(&ss, &objscene) : WF_OK;
         char prepare_msg[1024];
