@@ -11,7 +11,7 @@ case "${1-}" in
 esac
 cd "$(dirname "$0")/.."
 B=build/rel/bench
-make -s $B/bench_readout $B/bench_direct_error $B/bench_survey $B/bench_profile $B/bench_pages $B/rss bin/wfisim >/dev/null
+make -s $B/bench_readout $B/bench_direct_error $B/bench_survey $B/bench_profile $B/bench_pages $B/bench_cores $B/rss bin/wfisim >/dev/null
 out=docs/BENCHMARKS.md
 REF="${WFISIM_REFERENCE:-../shared/reference}/galsim"
 DATA="${WFISIM_DATA:-../shared/data}"
@@ -21,6 +21,9 @@ N=4088
 cpu=$(grep -m1 'model name' /proc/cpuinfo | sed 's/.*: //')
 mem=$(awk '/MemTotal/ {printf "%.0f GiB", $2/1048576}' /proc/meminfo)
 field() { echo "$1" | tr ' ' '\n' | sed -n "s/^$2=//p"; }
+# median, min and max of numbers on standard input, one a line: "median (min-max)"
+spread() { sort -n | awk '{a[NR] = $1} END {m = NR % 2 ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2; printf "%.2f (%.2f-%.2f)", m, a[1], a[NR]}'; }
+median() { sort -n | awk '{a[NR] = $1} END {printf "%.4f", NR % 2 ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }
 
 row_readout() { # label, args...
   label=$1; shift
@@ -109,6 +112,22 @@ $B/bench_pages 64 3 | while read -r line; do
 done
 {
   echo
+  echo "## What a second core gives on this machine"
+  echo
+  echo "\`bench_cores 3\`: each task on one thread alone, then on two threads at once (each doing"
+  echo "the whole task); throughput = 2 × alone / at once, 2 where the cores share nothing. Best"
+  echo "of 3 rounds. On this kind of virtual machine the answer changes from one run to the next,"
+  echo "even for arithmetic in registers (the second vCPU is not always a core of its own)."
+  echo
+  echo "| task | alone, ms | at once, ms (the slower thread) | throughput of two cores |"
+  echo "|---|---|---|---|"
+} >>"$tmp"
+$B/bench_cores 3 | while read -r line; do
+  name=$(echo "$line" | sed -n 's/^case="\([^"]*\)".*/\1/p')
+  echo "| $name | $(field "$line" alone_ms) | $(field "$line" both_ms) | $(field "$line" throughput_x) |" >>"$tmp"
+done
+{
+  echo
   echo "## Whole program: \`wfisim demo\` (readout + in-process assembly + ramp fit + FITS)"
   echo
   echo "| case | command | wall s | CPU s | peak RSS MiB |"
@@ -170,6 +189,48 @@ if [ -f "$REF/scene_catalog_sca1_pointingA.csv.gz" ] && [ $N = 4088 ]; then
   r=$($B/rss bin/wfisim expose $SC --set scene.kind=grid --set scene.grid.flux=0 --out "$d" 2>&1 | grep '^rss:')
   echo "| empty scene (sky only), 1 thread | \`wfisim expose --mode single --set scene.kind=grid --set scene.grid.flux=0\` | $(field "$r" wall_s) | $(field "$r" cpu_s) | $(field "$r" peak_rss_MiB) |" >>"$tmp"
   rm -rf "$d"
+  # The ceiling for --threads 2: two independent one-thread jobs at once do twice the work
+  # with no serial part and nothing shared, so a two-thread run of one job can hardly beat
+  # half their time. Rounds alternate, so that the three see the same spells of the machine.
+  pr=$(mktemp -d)
+  GS="$SC --set scene.kind=galsim --set scene.catalog=$REF/scene_catalog_sca1_pointingA.csv.gz"
+  for i in 1 2 3 4 5 6; do
+    rm -rf "$pr/solo" "$pr/a" "$pr/b" "$pr/two"
+    r=$($B/rss bin/wfisim expose $GS --threads 1 --out "$pr/solo" 2>&1 | grep '^rss:')
+    echo "$(field "$r" wall_s)" >>"$pr/solo.t"
+    $B/rss bin/wfisim expose $GS --threads 1 --out "$pr/a" >"$pr/a.r" 2>&1 &
+    pa=$!
+    rb=$($B/rss bin/wfisim expose $GS --threads 1 --out "$pr/b" 2>&1 | grep '^rss:')
+    wait $pa
+    ra=$(grep '^rss:' "$pr/a.r")
+    wa=$(field "$ra" wall_s)
+    wb=$(field "$rb" wall_s)
+    awk -v a="$wa" -v b="$wb" 'BEGIN {print (a > b ? a : b)}' >>"$pr/pair.t"
+    r=$($B/rss bin/wfisim expose $GS --threads 2 --out "$pr/two" 2>&1 | grep '^rss:')
+    echo "$(field "$r" wall_s)" >>"$pr/two.t"
+    echo "  ceiling round $i: alone $(tail -n 1 "$pr/solo.t") pair $(tail -n 1 "$pr/pair.t") two $(tail -n 1 "$pr/two.t")" >&2
+  done
+  solo=$(median <"$pr/solo.t")
+  pair=$(median <"$pr/pair.t")
+  two=$(median <"$pr/two.t")
+  {
+    echo
+    echo "What two cores allow for this job: six rounds, each a one-thread run alone, two one-thread"
+    echo "runs started together (the later one's wall time), and one \`--threads 2\` run; wall s,"
+    echo "median (min-max), fresh output folders."
+    echo
+    echo "| case | wall s |"
+    echo "|---|---|"
+    echo "| one job, 1 thread, alone | $(spread <"$pr/solo.t") |"
+    echo "| two jobs of 1 thread at once | $(spread <"$pr/pair.t") |"
+    echo "| one job, \`--threads 2\` | $(spread <"$pr/two.t") |"
+    echo
+    awk -v s="$solo" -v p="$pair" -v t="$two" 'BEGIN {
+      printf "Two cores give this job %.2f× the throughput of one (2 × alone / at once). `--threads 2`\n", 2 * s / p
+      printf "is %.2f× faster than one thread; its wall time is %.2f× half of \"at once\", the most a\n", s / t, t / (p / 2)
+      printf "split of one job into two could expect. Halving the wall time needs 2× from the pair first.\n" }'
+  } >>"$tmp"
+  rm -rf "$pr"
 fi
 if [ -f "$REF/scene_catalog_sca1_pointingA.csv.gz" ]; then
   pd=$(mktemp -d)
