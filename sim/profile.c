@@ -87,6 +87,8 @@ wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
     if (!(acc->cut_tolerance >= 0.0 && acc->cut_tolerance < INFINITY))
         return wf_error(WF_ERR_RANGE, "profile: cut_tolerance %g is not a finite value >= 0",
                         acc->cut_tolerance);
+    /* even also because the PSF tables' batched real transforms are planned without
+     * buffering (sim/profile_psf.c), which FFTW cannot do for odd lengths past 15 */
     if (acc->psf_table_fft < 16 || acc->psf_table_fft > 4096 || acc->psf_table_fft % 2)
         return wf_error(WF_ERR_RANGE, "profile: psf_table_fft %d not an even number in "
                         "[16, 4096]", acc->psf_table_fft);

@@ -508,6 +508,18 @@ START_TEST(test_stream_blocks_match_scalar)
             for (int b = 0; b < n; b++)
                 for (int k = 0; k < 4; k++) ck_assert_uint_eq(w[k][b], wf_rng_u32(&rng));
         }
+    /* a request that ends at the stream's last block is whole; an empty one at its end too */
+    ck_assert(wf_noise_stream_blocks(&noise, 4321u, 2u, WF_PURPOSE_SCENE, 65536u - N, N, w[0], w[1], w[2],
+                                     w[3]) == WF_OK);
+    {
+        wf_rng rng;
+        wf_rng_init(&rng, &noise, 4321u, 2u, WF_PURPOSE_SCENE);
+        wf_rng_seek(&rng, 65536u - N);
+        for (int b = 0; b < N; b++)
+            for (int k = 0; k < 4; k++) ck_assert_uint_eq(w[k][b], wf_rng_u32(&rng));
+    }
+    ck_assert(wf_noise_stream_blocks(&noise, 4321u, 2u, WF_PURPOSE_SCENE, 65536u, 0, w[0], w[1], w[2],
+                                     w[3]) == WF_OK);
     ck_assert(wf_noise_stream_blocks(&noise, 1u, 0u, WF_PURPOSE_SCENE, 65536u - 3u, 4, w[0], w[1],
                                      w[2], w[3]) == WF_ERR_RANGE);
     ck_assert(wf_noise_stream_blocks(&noise, 1u, 0u, WF_PURPOSE_SCENE, 0u, -1, w[0], w[1], w[2],

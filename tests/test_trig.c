@@ -92,12 +92,51 @@ START_TEST(test_radians_against_long_double)
 }
 END_TEST
 
+/* The reduction's own edges: up to just below 2^20 pi/2, where k P1 and k P2 are still exact,
+ * and at the doubles nearest k pi/2 for large k, where the reduced argument is ~1e-10 and the
+ * small component must keep its relative accuracy (the cancellation Cody and Waite avoid).
+ * Just past the limit, libm's values. */
+START_TEST(test_radians_reduction_edges)
+{
+    enum { N = 4096 };
+    static double x[N], c[N], s[N];
+    unsigned long long st = 4242;
+    const double lim = 0x1.921fb54442d18p+20;
+    for (int i = 0; i < N / 2; i++) x[i] = lim * (1.0 - 1e-3 * uniform(&st)) * (i % 2 ? -1.0 : 1.0);
+    for (int i = N / 2; i < N; i++) {
+        double k = (double)((1u << 20) - 1u - (unsigned)(uniform(&st) * 1e6)); /* large k below 2^20 */
+        x[i] = k * (M_PI / 2) * (i % 2 ? -1.0 : 1.0);
+    }
+    x[N - 1] = nextafter(lim, 0.0);
+    wf_trig_sincos(x, N, c, s);
+    double worst = 0.0, worst_rel = 0.0;
+    for (int i = 0; i < N; i++) {
+        long double lc = cosl((long double)x[i]), ls = sinl((long double)x[i]);
+        worst = fmax(worst, fmax(fabs(c[i] - (double)lc), fabs(s[i] - (double)ls)));
+        if (i >= N / 2 && i < N - 1) { /* the small one of the two, relative */
+            long double small = fabsl(lc) < fabsl(ls) ? lc : ls;
+            double got = fabsl(lc) < fabsl(ls) ? c[i] : s[i];
+            ck_assert_msg(fabsl(small) < 1e-9L, "x = %.17g is not near k pi/2", x[i]);
+            worst_rel = fmax(worst_rel, (double)fabsl(((long double)got - small) / small));
+        }
+    }
+    printf("trig: radians near 2^20 pi/2, worst |error| %.3g; near k pi/2, worst relative %.3g\n", worst, worst_rel);
+    ck_assert_msg(worst < 4e-16, "radians near the limit: worst error %.3g", worst);
+    ck_assert_msg(worst_rel < 1e-15, "radians near k pi/2: worst relative error %.3g", worst_rel);
+    const double past[2] = {lim, -nextafter(lim, INFINITY)};
+    double pc[2], ps[2];
+    wf_trig_sincos(past, 2, pc, ps);
+    for (int i = 0; i < 2; i++) ck_assert(pc[i] == cos(past[i]) && ps[i] == sin(past[i]));
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("trig");
     TCase *tc = tcase_create("trig");
     tcase_add_test(tc, test_turns_against_long_double);
     tcase_add_test(tc, test_radians_against_long_double);
+    tcase_add_test(tc, test_radians_reduction_edges);
     suite_add_tcase(s, tc);
     return s;
 }
