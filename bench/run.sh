@@ -22,8 +22,8 @@ cpu=$(grep -m1 'model name' /proc/cpuinfo | sed 's/.*: //')
 mem=$(awk '/MemTotal/ {printf "%.0f GiB", $2/1048576}' /proc/meminfo)
 field() { echo "$1" | tr ' ' '\n' | sed -n "s/^$2=//p"; }
 # median, min and max of numbers on standard input, one a line: "median (min-max)"
-spread() { sort -n | awk '{a[NR] = $1} END {m = NR % 2 ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2; printf "%.2f (%.2f-%.2f)", m, a[1], a[NR]}'; }
-median() { sort -n | awk '{a[NR] = $1} END {printf "%.4f", NR % 2 ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }
+spread() { sort -n | awk '{a[NR] = $1} END {m = NR % 2 ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2; printf "%.3f (%.3f-%.3f)", m, a[1], a[NR]}'; }
+median() { spread | cut -d' ' -f1; }
 
 row_readout() { # label, args...
   label=$1; shift
@@ -117,7 +117,7 @@ done
   echo "\`bench_cores 3\`: each task on one thread alone, then on two threads at once (each doing"
   echo "the whole task); throughput = 2 × alone / at once, 2 where the cores share nothing. Best"
   echo "of 3 rounds. On this kind of virtual machine the answer changes from one run to the next,"
-  echo "even for arithmetic in registers (the second vCPU is not always a core of its own)."
+  echo "even for arithmetic in the first-level cache (the second vCPU is not always a core of its own)."
   echo
   echo "| task | alone, ms | at once, ms (the slower thread) | throughput of two cores |"
   echo "|---|---|---|---|"
