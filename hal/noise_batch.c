@@ -383,7 +383,6 @@ WF_INLINE double ptrs_lane(double mu, double smu, double u01, double v)
     return lhs <= rhs ? k : -1.0;
 }
 
-
 /* u and v of lane i: from one word each (wide = 0: w0, w1), or 53 bits from two (wide = 1). */
 WF_INLINE double ptrs_u(int wide, const uint32_t *w0, const uint32_t *w1, int i)
 {

@@ -365,6 +365,14 @@ START_TEST(prepare_then_populate)
     ck_assert_int_ne(wf_scene_populate(bad, &gal, NULL, &sn, 1), WF_OK);
     ck_assert_msg(strstr(wf_error_message(), "slope") != NULL, "message: %s", wf_error_message());
     wf_scene_destroy(bad);
+    /* one that fails before it waits for the works' helper (a noise tolerance it refuses):
+     * destroy joins the helper, which may still be writing into the scene */
+    ss.threads = 3;
+    ss.noise_tolerance = -1.0;
+    ck_assert_msg(wf_scene_prepare(&ss, &bad) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(wf_scene_populate(bad, &gal, NULL, NULL, 0), WF_ERR_RANGE);
+    ck_assert_msg(strstr(wf_error_message(), "noise_tolerance") != NULL, "message: %s", wf_error_message());
+    wf_scene_destroy(bad);
     wf_catalog_free(&gal);
 }
 END_TEST
