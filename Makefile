@@ -5,6 +5,8 @@
 #   make bench      benchmarks -> docs/BENCHMARKS.md
 PKGS    := cfitsio fftw3 zlib libdeflate yaml-0.1
 CC      ?= cc
+PKG_CONFIG   ?= pkg-config
+INSTALL_DEPS ?= scripts/install-deps.sh
 SAN     ?= 0
 # -O2's vectoriser with -O3's cost model: loops of unknown length and possible aliasing get
 # vector versions too (5% fewer instructions over GalSim's scene). ISO C mode contracts no
@@ -12,9 +14,20 @@ SAN     ?= 0
 OPT     ?= -O2 -fvect-cost-model=dynamic
 CFLAGS  := -std=c11 -D_DEFAULT_SOURCE -Wall -Wextra -Werror -Wshadow \
            -Wstrict-prototypes -Wmissing-prototypes -g $(OPT) -I. \
-           $(shell pkg-config --cflags $(PKGS))
-LDLIBS  := $(shell pkg-config --libs $(PKGS)) -lpthread -lm
-TEST_LDLIBS := $(shell pkg-config --libs check)
+           $(shell $(PKG_CONFIG) --cflags $(PKGS) 2>/dev/null)
+LDLIBS  := $(shell $(PKG_CONFIG) --libs $(PKGS) 2>/dev/null) -lpthread -lm
+TEST_LDLIBS := $(shell $(PKG_CONFIG) --libs check 2>/dev/null)
+
+# The README's commands (demo, test, bench) install the packages first and only then build,
+# in a second make that reads this file again: flags resolved while it was first read, on a
+# machine without the packages, would be empty. Any other build needs the packages already.
+ENTRY   := demo test bench deps clean
+BUILDING := $(filter-out $(ENTRY),$(or $(MAKECMDGOALS),all))
+ifneq ($(BUILDING),)
+ifneq ($(shell $(PKG_CONFIG) --exists $(PKGS) check 2>/dev/null && echo yes),yes)
+$(error missing build packages ($(PKGS) check): run `make deps` (scripts/install-deps.sh) first)
+endif
+endif
 
 ifeq ($(SAN),1)
 BUILD   := build/san
@@ -28,8 +41,10 @@ endif
 # CC), everything in it is rebuilt rather than mixed with objects made with the old ones.
 FLAGS   := $(BUILD)/flags
 FLAGS_NOW := $(strip $(CC) $(CFLAGS) $(LDFLAGS))
+ifneq ($(BUILDING),)
 ifneq ($(FLAGS_NOW),$(strip $(shell cat $(FLAGS) 2>/dev/null)))
 $(shell mkdir -p $(BUILD) && printf '%s\n' '$(FLAGS_NOW)' > $(FLAGS))
+endif
 endif
 
 LAYERS  := hal firmware sim tools
@@ -44,12 +59,13 @@ ifeq ($(SAN),1)
 PROG    := $(BUILD)/wfisim
 endif
 
-.PHONY: all demo test tests bench clean deps
+.PHONY: all demo test tests bench clean deps run-demo run-test run-bench
 .SECONDARY: $(TESTUTIL)
 all: $(PROG)
 
+# '+': runs under `make -n` too, so a dry run shows the build the installed packages give.
 deps:
-	@scripts/install-deps.sh
+	+@$(INSTALL_DEPS)
 
 $(BUILD)/%.o: %.c $(wildcard */*.h) $(FLAGS)
 	@mkdir -p $(dir $@)
@@ -69,13 +85,16 @@ $(BUILD)/tests/%: tests/%.c $(TESTUTIL) $(LIB) $(wildcard */*.h) $(FLAGS)
 
 tests: $(TESTBIN) $(PROG)
 
-demo: deps $(PROG)
+demo test bench: deps
+	+@$(MAKE) --no-print-directory run-$@
+
+run-demo: $(PROG)
 	$(PROG) demo --out out/demo --threads $$(nproc)
 
-test: deps tests
+run-test: tests
 	@WFISIM_BIN=$(abspath $(PROG)) tests/run-all.sh $(TESTBIN)
 
-bench: deps $(PROG)
+run-bench: $(PROG)
 	bench/run.sh
 
 clean:
