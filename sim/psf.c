@@ -66,6 +66,16 @@ static int good_fft_size(int n)
     }
 }
 
+/* GalSim's Aperture pads a pupil image to good_fft_size(ceil(2 D / dx)) samples (its
+ * oversampling 1, which galsim.roman leaves at the default): the smallest 2^k or 3·2^k. */
+static int galsim_pupil_n(double diam, double dx)
+{
+    int need = (int)ceil(2.0 * diam / dx), p2 = 2, p3 = 3;
+    while (p2 < need) p2 *= 2;
+    while (p3 < need) p3 *= 2;
+    return p2 < p3 ? p2 : p3;
+}
+
 static void grid_sizes(const wf_pupil *p, int *mx, int *my, int *nxf, int *nyf)
 {
     *mx = p->i1 - p->i0 + 1;
@@ -274,6 +284,7 @@ wf_status wf_psf_build(const wf_pupil *pupil, const wf_aberrations *ab, const do
     in->period_arcsec = pmin;
     in->fft_nx = nxf;
     in->fft_ny = nyf;
+    in->galsim_n = galsim_pupil_n(pupil->diam, pupil->dx);
     in->kx = mx;
     in->ky = my;
     in->pupil_dx = pupil->dx;
@@ -346,6 +357,9 @@ static wf_status check_draw(const wf_psf_draw_opts *d)
     if ((d->pixel || d->diffusion > 0.0) && (!(d->det_scale > 0.0) || !isfinite(d->det_scale)))
         return wf_error(WF_ERR_RANGE, "psf draw: detector pixel %g arcsec is not positive",
                         d->det_scale);
+    if (d->galsim != 0 && d->galsim != 1)
+        return wf_error(WF_ERR_RANGE, "psf draw: galsim %d is not 0 (exact) or 1 (GalSim's "
+                        "rendering)", d->galsim);
     if (!(d->jitter >= 0.0) || !isfinite(d->jitter))
         return wf_error(WF_ERR_RANGE, "psf draw: jitter %g arcsec is not >= 0", d->jitter);
     if (!(d->diffusion >= 0.0) || !isfinite(d->diffusion))
@@ -353,9 +367,19 @@ static wf_status check_draw(const wf_psf_draw_opts *d)
     return WF_OK;
 }
 
+/* Fourier response of GalSim's Quintic interpolant at u cycles per sample (its kValue). */
+static double quintic_response(double u)
+{
+    if (u == 0.0) return 1.0;
+    double s = sin(PI * u) / (PI * u), c = cos(PI * u), p2 = PI * PI * u * u, s2 = s * s;
+    return s * s2 * s2 * (s * (55.0 - 19.0 * p2) + 2.0 * c * (p2 - 27.0));
+}
+
 /* Per-axis factor of coefficient Δ (frequency f = Δ/T cycles per arcsec): the sample area
- * (no pixel) or the pixel box (sinc), times the Gaussian blurs. */
-static double axis_gain(const wf_psf_draw_opts *d, double period, int delta)
+ * (no pixel) or the pixel box (sinc), times the Gaussian blurs. galsim_n > 0: GalSim's
+ * Quintic at its sample λ/(galsim_n dx) = T/galsim_n, i.e. at Δ/galsim_n cycles per sample
+ * whatever the wavelength. */
+static double axis_gain(const wf_psf_draw_opts *d, double period, int delta, int galsim_n)
 {
     double f = delta / period, g;
     if (d->pixel) {
@@ -365,6 +389,7 @@ static double axis_gain(const wf_psf_draw_opts *d, double period, int delta)
         g = d->scale / period;
     }
     if (d->mtf) g *= d->mtf(fabs(f), d->mtf_ctx);
+    if (galsim_n > 0) g *= quintic_response((double)delta / galsim_n);
     double s2 = d->jitter * d->jitter;
     if (d->diffusion > 0.0) s2 += (d->diffusion * d->det_scale) * (d->diffusion * d->det_scale);
     if (s2 > 0.0) g *= exp(-2.0 * PI * PI * s2 * f * f);
@@ -407,6 +432,7 @@ static wf_status draw_rows(void *ctx, int task, int slot)
     const wf_psf *psf = jb->psf;
     const wf_psf_draw_opts *d = jb->d;
     int nx = d->nx, ny = d->ny, kx = psf->kx, ky = psf->ky, nyc = 2 * ky - 1;
+    int gn = d->galsim ? psf->info.galsim_n : 0;
     int ja = (int)((long)ny * task / jb->ntasks), jend = (int)((long)ny * (task + 1) / jb->ntasks);
     if (jend <= ja) return WF_OK;
     int nb = jend - ja < ROW_BLOCK ? jend - ja : ROW_BLOCK;
@@ -425,14 +451,14 @@ static wf_status draw_rows(void *ctx, int task, int slot)
         double T = m->period;
         /* Δx > 0 stands for ±Δx (Hermitian c, even gains): weight 2, Δx = 0 weight 1. */
         for (int a = 0; a < kx; a++) {
-            double g = axis_gain(d, T, a) * m->weight * (a ? 2.0 : 1.0);
+            double g = axis_gain(d, T, a, gn) * m->weight * (a ? 2.0 : 1.0);
             phasor_row(0, nx, d->cx, d->scale, a, T, g, &axr[(size_t)a * nx], &axi[(size_t)a * nx]);
         }
         for (int j0 = ja; j0 < jend; j0 += nb) {
             int nr = jend - j0 < nb ? jend - j0 : nb;
             for (int t = 0; t < nyc; t++) {
                 int dy = t - (ky - 1);
-                double g = axis_gain(d, T, dy);
+                double g = axis_gain(d, T, dy, gn);
                 phasor_row(j0, nr, d->cy, d->scale, dy, T, g, &ayr[(size_t)t * nb], &ayi[(size_t)t * nb]);
             }
             /* B[Δx][row] = Σ_Δy c[Δx][Δy] Ay[Δy][row] */
@@ -554,7 +580,7 @@ static int same_draw(const wf_psf_draw_opts *p, const wf_psf_draw_opts *q)
     return p->nx == q->nx && p->ny == q->ny && p->scale == q->scale && p->cx == q->cx &&
            p->cy == q->cy && p->pixel == q->pixel && p->det_scale == q->det_scale &&
            p->jitter == q->jitter && p->diffusion == q->diffusion && p->mtf == q->mtf &&
-           p->mtf_ctx == q->mtf_ctx;
+           p->mtf_ctx == q->mtf_ctx && p->galsim == q->galsim;
 }
 
 static void drop_models(wf_psf_cache *c, size_t need, const wf_psf *keep)

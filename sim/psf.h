@@ -73,6 +73,13 @@ typedef struct wf_psf_draw_opts {
      * GalSim comparison in tests/test_psf.c). NULL: none. */
     double (*mtf)(double freq, void *ctx);
     void *mtf_ctx;
+    /* 1: render as GalSim's FFT draw of galsim.roman.getPSF does (drawImage's default with the
+     * pixel): its OpticalPSF is an image sampled at λ/(N_g dx), exactly Nyquist (N_g =
+     * galsim_n below), read through a Quintic interpolant, which multiplies coefficient Δ by
+     * the Quintic's response at Δ/N_g. Changes the native peak by -1.2% … +0.7% with the
+     * filter (docs/OPTICS.md "Agreement with GalSim"); for comparisons with GalSim only,
+     * 0 (exact) otherwise. GalSim's no_pixel draws interpolate in real space instead. */
+    int galsim;
     int threads;      /* rows shared among this many threads (same image for any count) [1] */
 } wf_psf_draw_opts;
 
@@ -83,6 +90,7 @@ typedef struct wf_psf_info {
     double lambda_mean_nm;             /* weight-averaged wavelength */
     double period_arcsec;              /* smallest λ/dx: the valid field is ± half of it */
     int fft_nx, fft_ny;                /* FFT grid of the build */
+    int galsim_n;                      /* GalSim's pupil array for this dx: 2^k or 3·2^k >= 2D/dx */
     int kx, ky;                        /* Fourier coefficients kept per axis (|Δ| < k) */
     double pupil_dx;                   /* m */
     int pupil_n, pupil_bin;
