@@ -16,13 +16,15 @@ static const char *usage =
     "usage: wfisim psf --filter F --sca N [--pupil-bin 1|2|4|8] [--oversample K]\n"
     "                  [--wavelength NM | --sed flat [--nlambda N]] [--size PIX] [--x X --y Y]\n"
     "                  [--jitter ARCSEC] [--diffusion PX] [--pixel on|off] [--data DIR|none]\n"
-    "                  --out FILE\n"
+    "                  [--render exact|galsim] --out FILE\n"
     "  PSF image normalised to unit flux, sampled every 0.11/K arcsec (pixel response when\n"
     "  K = 1), centred on the image centre; SCA position in GalSim pixels [2044 2044];\n"
-    "  pupil_bin [4]; size [64 K]; masks and Zernikes from DIR/roman [$WFISIM_DATA].\n";
+    "  pupil_bin [4]; size [64 K]; masks and Zernikes from DIR/roman [$WFISIM_DATA].\n"
+    "  --render galsim: as GalSim's FFT draw renders getPSF (its Quintic-interpolated\n"
+    "  Nyquist image; peak -1.2%..+1.4% off the exact one) [exact].\n";
 
 typedef struct psf_args {
-    const char *filter, *out, *data, *sed, *pixel;
+    const char *filter, *out, *data, *sed, *pixel, *render;
     int sca, bin, over, size, nlambda;
     double lambda, x, y, jitter, diffusion;
 } psf_args;
@@ -77,6 +79,7 @@ static int parse_args(int argc, char **argv, psf_args *a)
         else if (!strcmp(k, "--data")) a->data = v;
         else if (!strcmp(k, "--sed")) a->sed = v;
         else if (!strcmp(k, "--pixel")) a->pixel = v;
+        else if (!strcmp(k, "--render")) a->render = v;
         else if (!strcmp(k, "--sca")) {
             if (parse_long(v, 1, 18, &n)) return usage_error("--sca '%s' is not 1..18", v);
             a->sca = (int)n;
@@ -125,6 +128,8 @@ static int parse_args(int argc, char **argv, psf_args *a)
         return usage_error("%s", "--wavelength (achromatic) and --sed (chromatic) exclude each other");
     if (a->pixel && strcmp(a->pixel, "on") && strcmp(a->pixel, "off"))
         return usage_error("--pixel '%s' is not on or off", a->pixel);
+    if (a->render && strcmp(a->render, "exact") && strcmp(a->render, "galsim"))
+        return usage_error("--render '%s' is not exact or galsim", a->render);
     if (!a->size) a->size = 64 * a->over;
     return 0;
 }
@@ -181,6 +186,12 @@ static wf_status write_fits(const psf_args *a, const wf_psf_info *info, const wf
     key_dbl(f, "DETSCALE", d->det_scale, "arcsec per detector pixel", &status);
     key_dbl(f, "JITTER", d->jitter, "Gaussian jitter sigma per axis, arcsec", &status);
     key_dbl(f, "DIFFUSN", d->diffusion, "charge diffusion sigma, detector pixels", &status);
+    fits_write_key_str(f, "RENDER", d->galsim ? "galsim" : "exact",
+                       d->galsim ? "GalSim's Quintic on its Nyquist grid" : "exact Fourier sum",
+                       &status);
+    if (d->galsim)
+        fits_write_key_lng(f, "GSPUPILN", info->galsim_n, "GalSim grid: lambda/(GSPUPILN PUPILDX)",
+                           &status);
     key_dbl(f, "CENTERX", d->cx + 1, "FITS x of the PSF centre (1-based)", &status);
     key_dbl(f, "CENTERY", d->cy + 1, "FITS y of the PSF centre (1-based)", &status);
     fits_write_key_str(f, "MODE", info->nlambda > 1 ? "chromatic" : "achromatic",
@@ -285,6 +296,7 @@ int wf_cmd_psf(int argc, char **argv)
     d.scale = WF_PSF_PIXEL_SCALE / a.over;
     d.pixel = a.pixel ? !strcmp(a.pixel, "on") : a.over == 1;
     d.jitter = a.jitter, d.diffusion = a.diffusion;
+    d.galsim = a.render && !strcmp(a.render, "galsim");
     double *img = malloc((size_t)a.size * a.size * sizeof(double));
     if (!img) {
         wf_psf_free(psf);
