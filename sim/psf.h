@@ -76,7 +76,7 @@ typedef struct wf_psf_draw_opts {
     /* 1: render as GalSim's FFT draw of galsim.roman.getPSF does (drawImage's default with the
      * pixel): its OpticalPSF is an image sampled at λ/(N_g dx), exactly Nyquist (N_g =
      * galsim_n below), read through a Quintic interpolant, which multiplies coefficient Δ by
-     * the Quintic's response at Δ/N_g. Changes the native peak by -1.2% … +0.7% with the
+     * the Quintic's response at Δ/N_g. Changes the native peak by -1.2% … +1.4% with the
      * filter (docs/OPTICS.md "Agreement with GalSim"); for comparisons with GalSim only,
      * 0 (exact) otherwise. GalSim's no_pixel draws interpolate in real space instead. */
     int galsim;

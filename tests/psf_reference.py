@@ -29,9 +29,9 @@ conventions for galsim.roman.getPSF (OpticalPSF with an Aperture built from the 
 Method: E is evaluated directly (a matrix Fourier transform, no FFT grid, no interpolation) at
 the NODES x NODES Gauss-Legendre nodes of every pixel (default 12), and each pixel is the
 Gauss-Legendre quadrature of |E|^2 over it. |E|^2 is a trigonometric polynomial with at most
-~2 cycles across a pixel (R062), so the quadrature converges exponentially: 8 and 12 nodes
-agree to < 1e-9 of the peak. Needs numpy and astropy; exits 3 with 'NO_NUMPY <reason>' when
-either cannot be imported.
+~2 cycles across a pixel (R062), so the quadrature converges exponentially: 12 and 16 nodes
+agree to 1e-15 of the peak (8 nodes: 2e-8 at R062). Needs numpy and astropy; exits 3 with
+'NO_NUMPY <reason>' when either cannot be imported.
 """
 import math
 import os
