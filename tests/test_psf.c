@@ -1237,8 +1237,9 @@ START_TEST(test_independent_reference)
     if (access("/usr/bin/python3", X_OK) != 0) WF_SKIP("/usr/bin/python3 not found");
     double *r = malloc(sizeof(double) * INDEP_N * INDEP_N), *o = malloc(sizeof(double) * INDEP_N * INDEP_N),
            *e = malloc(sizeof(double) * INDEP_N * INDEP_N);
-    printf("%-5s %4s %3s %10s %10s %10s %10s %10s | %11s %8s %9s %9s\n", "band", "SCA", "bin",
-           "lam_nm", "peak_ref", "dpeak", "maxdiff", "dsum", "GalSim dpk", "issue", "rms", "dcentre");
+    printf("%-5s %4s %3s %10s %10s %10s %10s %10s | %11s %8s %9s %9s %9s\n", "band", "SCA", "bin",
+           "lam_nm", "peak_ref", "dpeak", "maxdiff", "dsum", "GalSim dpk", "issue", "rms", "dcen_adp",
+           "dcen_sum");
     for (size_t k = 0; k < sizeof indep_cases / sizeof *indep_cases; k++) {
         const indep_case *c = &indep_cases[k];
         wf_filter f;
@@ -1273,10 +1274,19 @@ START_TEST(test_independent_reference)
         double rms = 0;
         for (int i = 0; i < INDEP_N * INDEP_N; i++) rms += (o[i] - e[i]) * (o[i] - e[i]);
         rms = sqrt(rms / (INDEP_N * INDEP_N)) / se.peak;
-        double dcen = fmax(fabs(so.xc - se.xc), fabs(so.yc - se.yc));
-        printf("%-5s %4d %3d %10.4f %10.7f %+10.2e %10.2e %+10.2e | %+10.3f%% %+7.1f%% %9.1e %9.1e\n",
-               c->band, c->sca, c->bin, lam, sr.peak, dpeak, dmax, dsum, galsim_pct, c->issue_pct,
-               rms, dcen);
+        /* centroids: adaptive (HSM's), and the plain first moment of the whole stamp */
+        double dcen = fmax(fabs(so.xc - se.xc), fabs(so.yc - se.yc)), m[2][3] = {{0}};
+        for (int j = 0; j < INDEP_N; j++)
+            for (int i = 0; i < INDEP_N; i++)
+                for (int t = 0; t < 2; t++) {
+                    double v = (t ? e : o)[j * INDEP_N + i];
+                    m[t][0] += v, m[t][1] += v * i, m[t][2] += v * j;
+                }
+        double dcen1 = fmax(fabs(m[0][1] / m[0][0] - m[1][1] / m[1][0]),
+                            fabs(m[0][2] / m[0][0] - m[1][2] / m[1][0]));
+        printf("%-5s %4d %3d %10.4f %10.7f %+10.2e %10.2e %+10.2e | %+10.3f%% %+7.1f%% %9.1e %9.1e "
+               "%9.1e\n", c->band, c->sca, c->bin, lam, sr.peak, dpeak, dmax, dsum, galsim_pct,
+               c->issue_pct, rms, dcen, dcen1);
         /* the issue asks 0.3% of the peak. Both sides are exact; what differs is how the
          * corners' box is taken (the reference: GalSim's min/max of the corner coordinates;
          * wfisim: the mean of the two corners on each side, which differ by 0.01 mm), up to
