@@ -166,13 +166,12 @@ static int parse(int argc, char **argv, cli *c)
 }
 
 /* The SN sample of --sne with its model (--model, else the SALT3 model in the data folder). */
-static wf_status open_injector(const cli *c, wf_sn_injector **inj)
+static wf_status open_injector(const cli *c, wf_sn_injector **inj, char *model, size_t cap)
 {
     *inj = NULL;
     if (!c->sne) return WF_OK;
-    char model[WF_PATH_MAX + 32];
-    if (c->model) snprintf(model, sizeof model, "%s", c->model);
-    else if (c->cfg.data_dir[0]) snprintf(model, sizeof model, "%s/salt3/salt3-k21", c->cfg.data_dir);
+    if (c->model) snprintf(model, cap, "%s", c->model);
+    else if (c->cfg.data_dir[0]) snprintf(model, cap, "%s/salt3/salt3-k21", c->cfg.data_dir);
     else return wf_error(WF_ERR_INPUT, "--sne needs the SALT model: give --model DIR or a data folder (--data)");
     return wf_sn_injector_open(c->sne, model, c->cfg.data_dir, inj);
 }
@@ -186,7 +185,8 @@ static int run_exposure(cli *c, int demo)
     job.stream = c->stream;
     job.replay = c->replay;
     job.version = WFISIM_VERSION;
-    wf_status st = open_injector(c, &job.injector);
+    char model[WF_PATH_MAX + 32];
+    wf_status st = open_injector(c, &job.injector, model, sizeof model);
     if (!st) st = wf_pipeline_expose(&job);
     wf_sn_injector_free(job.injector);
     return st ? fail(demo ? "demo" : "expose", st) : 0;
@@ -325,8 +325,10 @@ static int cmd_survey_run(cli *c)
         fprintf(stderr, "wfisim survey run: the survey draws a scene (scene.kind synthetic, catalog or galsim); no --replay or --stream\n");
         return 2;
     }
-    if ((st = open_injector(c, &opt.sne))) return fail("survey run", st);
+    char model[WF_PATH_MAX + 32];
+    if ((st = open_injector(c, &opt.sne, model, sizeof model))) return fail("survey run", st);
     opt.sne_path = c->sne;
+    opt.sne_model = model;
     wf_survey_run_stats stats;
 #ifdef WF_MPI
     st = wf_survey_run_mpi(&c->cfg, &opt, &stats);

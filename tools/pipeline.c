@@ -99,7 +99,14 @@ wf_status wf_pipeline_load_catalogs(const wf_config *cfg, wf_scene_inputs *in)
     memset(in, 0, sizeof *in);
     wf_skyregion reg;
     wf_status st = sca_region(cfg, &reg);
-    if (st) return st;
+    return st ? st : wf_pipeline_load_catalogs_in(cfg, &reg, in);
+}
+
+wf_status wf_pipeline_load_catalogs_in(const wf_config *cfg, const wf_skyregion *region, wf_scene_inputs *in)
+{
+    memset(in, 0, sizeof *in);
+    wf_skyregion reg = *region;
+    wf_status st;
     if (cfg->scene_kind == 0) { /* synthetic: only the cells the SCA (and stamps reaching it) see */
         wf_synth_config sc;
         wf_synth *syn;

@@ -13,6 +13,7 @@
 #include "sim/survey.h"
 #include "sim/wcs.h"
 #include "tools/pipeline.h"
+#include "tools/surveyrelease.h"
 
 wf_status wf_survey_parse_range(const char *text, long *first, long *last)
 {
@@ -123,7 +124,7 @@ static wf_status configure(const wf_config *base, const wf_survey_run_options *o
  * catalogs the scenes were drawn from and the SN sample, so the products can be traced to
  * their inputs. Rewritten (temporary file, rename) at the end of every run. */
 static wf_status write_manifest(const wf_config *cfg, const wf_survey_run_options *opt, const wf_survey_row *rows,
-                                size_t nrows, const wf_survey_run_stats *stats)
+                                size_t nrows, const wf_survey_run_stats *stats, const char *note)
 {
     char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
     snprintf(path, sizeof path, "%s/survey_run.txt", cfg->out_dir);
@@ -162,6 +163,7 @@ static wf_status write_manifest(const wf_config *cfg, const wf_survey_run_option
     fprintf(out, "products.rendered = %ld\nproducts.skipped = %ld\nproducts.redone = %ld\n", stats->rendered,
             stats->skipped, stats->redone);
     if (opt->area) fprintf(out, "products.outside_area = %ld\n", stats->outside);
+    fputs(note, out);
     int bad = ferror(out);
     if (fclose(out) != 0 || bad) {
         remove(tmp);
@@ -335,9 +337,15 @@ wf_status wf_survey_end(wf_survey_ctx *ctx, const wf_survey_item_result *res, wf
         stats->sne_drawn += (long)res[i].sne;
         rows[i] = res[i].row;
     }
+    const wf_survey_run_options *opt = ctx->opt;
     wf_status st = wf_survey_index_write(ctx->base->out_dir, rows, ctx->nitems);
+    char note[1024] = "";
+    double centre[2] = {opt->area_ra, opt->area_dec};
+    if (!st && opt->sne_path)
+        st = wf_survey_write_release(ctx->base, opt->plan_path, opt->sne_path, opt->sne_model, opt->area ? centre : NULL,
+                                     rows, ctx->nitems, note, sizeof note);
     free(rows);
-    if (!st) st = write_manifest(ctx->base, ctx->opt, ctx->rows, ctx->nrows, stats);
+    if (!st) st = write_manifest(ctx->base, opt, ctx->rows, ctx->nrows, stats, note);
     return st;
 }
 

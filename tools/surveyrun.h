@@ -34,7 +34,8 @@ typedef struct wf_survey_run_options {
     int nscas;                 /* 0: all 18 */
     int ma_table_given;        /* 1: readout.ma_table (given on the command line) applies to all */
     wf_sn_injector *sne;       /* supernovae to inject, or NULL */
-    const char *sne_path;      /* their file, for the run's record */
+    const char *sne_path;      /* their file, for the run's record and the release */
+    const char *sne_model;     /* the SALT model they were made with (for the light curves) */
     const char *version;
     int area;                  /* 1: only the items whose SCA footprint overlaps the circle */
     double area_ra, area_dec, area_radius; /* deg */
