@@ -41,6 +41,16 @@ static void plan_row0(const char *plan, double *ra, double *dec, double *pa, dou
     ck_assert_int_eq(status, 0);
 }
 
+/* A one-visit plan in d (*plan), the SALT model's folder (*model) and exposure 0's pointing. */
+static void one_visit(const char *bin, const char *data, const char *d, char *plan, char *model, size_t cap,
+                      double *ra, double *dec, double *pa, double *mjd)
+{
+    snprintf(plan, cap, "%s/plan.fits", d);
+    snprintf(model, cap, "%s/salt3/salt3-k21", data);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
+    plan_row0(plan, ra, dec, pa, mjd);
+}
+
 static double image_sum(const char *path)
 {
     fitsfile *f;
@@ -91,13 +101,10 @@ START_TEST(injected_flux_and_truth)
     WF_SKIP_UNLESS(data, "the Roman and SALT data");
     const char *d = wf_test_tmpdir();
     char plan[4200], model[4200], sne[4200], stars[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
-    snprintf(model, sizeof model, "%s/salt3/salt3-k21", data);
+    double ra, dec, pa, mjd; /* exposure 0: Y106 */
+    one_visit(bin, data, d, plan, model, sizeof plan, &ra, &dec, &pa, &mjd);
     snprintf(sne, sizeof sne, "%s/sne.fits", d);
     snprintf(stars, sizeof stars, "%s/stars.csv", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
-    double ra, dec, pa, mjd;
-    plan_row0(plan, &ra, &dec, &pa, &mjd); /* exposure 0: Y106 */
 
     /* SN 41 on SCA 1 at pixel (60.3, 50.6) (0-based), SN 42 on SCA 2 at (20.7, 90.2) */
     wf_focal_plane fp;
@@ -241,13 +248,10 @@ START_TEST(release_layout)
     WF_SKIP_UNLESS(data, "the Roman and SALT data");
     const char *d = wf_test_tmpdir();
     char plan[4200], model[4200], sne[4200], out[4200], path[4400], lc[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
-    snprintf(model, sizeof model, "%s/salt3/salt3-k21", data);
+    double ra, dec, pa, mjd;
+    one_visit(bin, data, d, plan, model, sizeof plan, &ra, &dec, &pa, &mjd);
     snprintf(sne, sizeof sne, "%s/sample.fits", d);
     snprintf(out, sizeof out, "%s/release", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
-    double ra, dec, pa, mjd;
-    plan_row0(plan, &ra, &dec, &pa, &mjd);
     wf_focal_plane fp;
     wf_wcs w;
     ck_assert_int_eq(wf_wcs_focal_plane(data, &fp), 0);

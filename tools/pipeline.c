@@ -57,9 +57,7 @@ void wf_pipeline_inputs_free(wf_scene_inputs *in)
     memset(in, 0, sizeof *in);
 }
 
-/* The SCA's footprint on the sky, widened by the largest stamp reach (70"), so that objects
- * just off the SCA whose light reaches onto it are kept. */
-static wf_status sca_region(const wf_config *cfg, wf_skyregion *reg)
+wf_status wf_pipeline_sca_footprint(const wf_config *cfg, double margin_arcsec, wf_skyregion *reg)
 {
     wf_focal_plane fp;
     wf_wcs w;
@@ -72,7 +70,14 @@ static wf_status sca_region(const wf_config *cfg, wf_skyregion *reg)
     const double cy[4] = {-0.5, -0.5, cfg->ro.nrows - 0.5, cfg->ro.nrows - 0.5};
     for (int k = 0; k < 4; k++)
         if ((st = wf_wcs_pix2world(&w, cx[k], cy[k], &ra[k], &dec[k]))) return st;
-    return wf_skyindex_polygon(ra, dec, 4, 70.0, reg);
+    return wf_skyindex_polygon(ra, dec, 4, margin_arcsec, reg);
+}
+
+/* The SCA's footprint on the sky, widened by the largest stamp reach (70"), so that objects
+ * just off the SCA whose light reaches onto it are kept. */
+static wf_status sca_region(const wf_config *cfg, wf_skyregion *reg)
+{
+    return wf_pipeline_sca_footprint(cfg, 70.0, reg);
 }
 
 /* Keeps the rows of a catalog read from a file that fall in the footprint (a sky index:

@@ -73,6 +73,20 @@ static int by_expid_sca(const void *a, const void *b)
     return (x->sca > y->sca) - (x->sca < y->sca);
 }
 
+wf_status wf_survey_text_commit(FILE *out, const char *tmp, const char *path)
+{
+    int bad = ferror(out);
+    if (fclose(out) != 0 || bad) {
+        remove(tmp);
+        return wf_error(WF_ERR_IO, "%s: write failed", tmp);
+    }
+    if (rename(tmp, path) != 0) {
+        remove(tmp);
+        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
+    }
+    return WF_OK;
+}
+
 static wf_status write_csv(const char *dir, const wf_survey_index_row *rows, size_t n)
 {
     char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
@@ -88,16 +102,7 @@ static wf_status write_csv(const char *dir, const wf_survey_index_row *rows, siz
                 r->filter, r->mjd, r->visit, r->orient, r->pointing, r->pass, r->ra, r->dec, r->pa, r->ra_sca,
                 r->dec_sca, r->exptime, r->file, r->truth, r->datasum);
     }
-    int bad = ferror(out);
-    if (fclose(out) != 0 || bad) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: write failed", tmp);
-    }
-    if (rename(tmp, path) != 0) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
-    }
-    return WF_OK;
+    return wf_survey_text_commit(out, tmp, path);
 }
 
 static wf_status write_fits(const char *dir, const wf_survey_index_row *rows, size_t n)

@@ -8,6 +8,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 #include "hal/status.h"
 
 typedef struct wf_survey_index_row {
@@ -31,5 +32,9 @@ wf_status wf_survey_index_write(const char *dir, wf_survey_index_row *rows, size
 
 /* The rows of every product image in dir (names wfisim_eNNNNNN_scaNN.fits), sorted. */
 wf_status wf_survey_index_scan(const char *dir, wf_survey_index_row **rows, size_t *n);
+
+/* Closes a text file written to tmp and renames it onto path (removing tmp on any error), as
+ * the run's record and the CSV index are written. */
+wf_status wf_survey_text_commit(FILE *out, const char *tmp, const char *path);
 
 #endif

@@ -11,7 +11,6 @@
 #include "sim/fitsout.h"
 #include "sim/skyindex.h"
 #include "sim/survey.h"
-#include "sim/wcs.h"
 #include "tools/pipeline.h"
 #include "tools/surveyrelease.h"
 
@@ -164,16 +163,7 @@ static wf_status write_manifest(const wf_config *cfg, const wf_survey_run_option
             stats->skipped, stats->redone);
     if (opt->area) fprintf(out, "products.outside_area = %ld\n", stats->outside);
     fputs(note, out);
-    int bad = ferror(out);
-    if (fclose(out) != 0 || bad) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: write failed", tmp);
-    }
-    if (rename(tmp, path) != 0) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
-    }
-    return WF_OK;
+    return wf_survey_text_commit(out, tmp, path);
 }
 
 wf_status wf_survey_parse_area(const char *text, wf_survey_run_options *opt)
@@ -224,21 +214,10 @@ void wf_survey_free(wf_survey_ctx *ctx)
  * grown by the radius holds the circle's centre (sim/skyindex.h, exact on the sphere). */
 static wf_status in_area(const wf_config *cfg, const wf_survey_run_options *opt, int *inside)
 {
-    wf_focal_plane fp;
-    wf_wcs w;
-    wf_status st;
-    if ((st = wf_wcs_focal_plane(cfg->data_dir[0] ? cfg->data_dir : NULL, &fp)) ||
-        (st = wf_wcs_for_sca(&fp, cfg->ra, cfg->dec, cfg->pa, (int)cfg->ro.sca, &w)))
-        return st;
-    double ra[4], dec[4];
-    const double cx[4] = {-0.5, cfg->ro.ncols - 0.5, cfg->ro.ncols - 0.5, -0.5};
-    const double cy[4] = {-0.5, -0.5, cfg->ro.nrows - 0.5, cfg->ro.nrows - 0.5};
-    for (int k = 0; k < 4; k++)
-        if ((st = wf_wcs_pix2world(&w, cx[k], cy[k], &ra[k], &dec[k]))) return st;
     wf_skyregion reg;
-    if ((st = wf_skyindex_polygon(ra, dec, 4, opt->area_radius * 3600.0, &reg))) return st;
-    *inside = wf_skyindex_contains(&reg, opt->area_ra, opt->area_dec);
-    return WF_OK;
+    wf_status st = wf_pipeline_sca_footprint(cfg, opt->area_radius * 3600.0, &reg);
+    if (!st) *inside = wf_skyindex_contains(&reg, opt->area_ra, opt->area_dec);
+    return st;
 }
 
 wf_status wf_survey_begin(const wf_config *base, const wf_survey_run_options *opt, wf_survey_ctx **out,
