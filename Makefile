@@ -1,5 +1,6 @@
 # wfisim — one static library per layer, one program, Check tests.
 #   make            build bin/wfisim
+#   make MPI=1      also bin/wfisim-mpi: `survey run` on many processes (Open MPI's mpicc)
 #   make demo       run the main job on the built-in default scene
 #   make test       build and run every test (SAN=1: under ASan+UBSan)
 #   make bench      benchmarks -> docs/BENCHMARKS.md
@@ -48,7 +49,7 @@ endif
 endif
 
 LAYERS  := hal firmware sim tools
-LIBSRC  := $(filter-out tools/main.c,$(foreach d,$(LAYERS),$(wildcard $(d)/*.c)))
+LIBSRC  := $(filter-out tools/main.c tools/survey_mpi.c,$(foreach d,$(LAYERS),$(wildcard $(d)/*.c)))
 LIBOBJ  := $(LIBSRC:%.c=$(BUILD)/%.o)
 LIB     := $(BUILD)/libwfisim.a
 TESTSRC := $(wildcard tests/test_*.c)
@@ -58,10 +59,17 @@ PROG    := bin/wfisim
 ifeq ($(SAN),1)
 PROG    := $(BUILD)/wfisim
 endif
+# The MPI program: main.c and tools/survey_mpi.c compiled by mpicc with WF_MPI, linked with
+# the same library, so the plain program and the library never need MPI's headers. Built by
+# MPI=1, and for the tests whenever mpicc is there (the test is skipped without it).
+MPI     ?= 0
+MPICC   ?= mpicc
+MPIPROG := $(patsubst %/wfisim,%/wfisim-mpi,$(PROG))
+HAVE_MPICC := $(shell command -v $(MPICC) 2>/dev/null)
 
 .PHONY: all demo test tests bench clean deps run-demo run-test run-bench
 .SECONDARY: $(TESTUTIL)
-all: $(PROG)
+all: $(PROG) $(if $(filter 1,$(MPI)),$(MPIPROG))
 
 # '+': runs under `make -n` too, so a dry run shows the build the installed packages give.
 deps:
@@ -83,7 +91,15 @@ $(BUILD)/tests/%: tests/%.c $(TESTUTIL) $(LIB) $(wildcard */*.h) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $< $(TESTUTIL) $(LIB) $(TEST_LDLIBS) $(LDLIBS)
 
-tests: $(TESTBIN) $(PROG)
+$(BUILD)/mpi/%.o: tools/%.c $(wildcard */*.h) $(FLAGS)
+	@mkdir -p $(dir $@)
+	$(MPICC) $(CFLAGS) -DWF_MPI -c $< -o $@
+
+$(MPIPROG): $(BUILD)/mpi/main.o $(BUILD)/mpi/survey_mpi.o $(LIB) $(FLAGS)
+	@mkdir -p $(dir $@)
+	$(MPICC) $(LDFLAGS) -o $@ $(BUILD)/mpi/main.o $(BUILD)/mpi/survey_mpi.o $(LIB) $(LDLIBS)
+
+tests: $(TESTBIN) $(PROG) $(if $(HAVE_MPICC),$(MPIPROG))
 
 demo test bench: deps
 	+@$(MAKE) --no-print-directory run-$@
@@ -92,7 +108,7 @@ run-demo: $(PROG)
 	$(PROG) demo --out out/demo --threads $$(nproc)
 
 run-test: tests
-	@WFISIM_BIN=$(abspath $(PROG)) tests/run-all.sh $(TESTBIN)
+	@WFISIM_BIN=$(abspath $(PROG)) $(if $(HAVE_MPICC),WFISIM_MPI_BIN=$(abspath $(MPIPROG))) tests/run-all.sh $(TESTBIN)
 
 run-bench: $(PROG)
 	bench/run.sh

@@ -41,6 +41,16 @@ static void plan_row0(const char *plan, double *ra, double *dec, double *pa, dou
     ck_assert_int_eq(status, 0);
 }
 
+/* A one-visit plan in d (*plan), the SALT model's folder (*model) and exposure 0's pointing. */
+static void one_visit(const char *bin, const char *data, const char *d, char *plan, char *model, size_t cap,
+                      double *ra, double *dec, double *pa, double *mjd)
+{
+    snprintf(plan, cap, "%s/plan.fits", d);
+    snprintf(model, cap, "%s/salt3/salt3-k21", data);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
+    plan_row0(plan, ra, dec, pa, mjd);
+}
+
 static double image_sum(const char *path)
 {
     fitsfile *f;
@@ -91,13 +101,10 @@ START_TEST(injected_flux_and_truth)
     WF_SKIP_UNLESS(data, "the Roman and SALT data");
     const char *d = wf_test_tmpdir();
     char plan[4200], model[4200], sne[4200], stars[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
-    snprintf(model, sizeof model, "%s/salt3/salt3-k21", data);
+    double ra, dec, pa, mjd; /* exposure 0: Y106 */
+    one_visit(bin, data, d, plan, model, sizeof plan, &ra, &dec, &pa, &mjd);
     snprintf(sne, sizeof sne, "%s/sne.fits", d);
     snprintf(stars, sizeof stars, "%s/stars.csv", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
-    double ra, dec, pa, mjd;
-    plan_row0(plan, &ra, &dec, &pa, &mjd); /* exposure 0: Y106 */
 
     /* SN 41 on SCA 1 at pixel (60.3, 50.6) (0-based), SN 42 on SCA 2 at (20.7, 90.2) */
     wf_focal_plane fp;
@@ -199,6 +206,135 @@ START_TEST(injected_flux_and_truth)
     ck_assert_int_eq(seen, 3);
     wf_salt_free(m);
     wf_sn_sample_free(&s);
+}
+END_TEST
+
+/* The IDs of one table of a FITS file (0 when it has none); *ids malloc'd. */
+static long table_ids(const char *path, const char *table, long long **ids)
+{
+    fitsfile *f;
+    int status = 0, c;
+    long n = 0;
+    *ids = NULL;
+    fits_open_file(&f, path, READONLY, &status);
+    ck_assert_msg(status == 0, "%s: cannot open", path);
+    if (fits_movnam_hdu(f, BINARY_TBL, (char *)table, 0, &status)) {
+        status = 0;
+        fits_close_file(f, &status);
+        return 0;
+    }
+    fits_get_num_rows(f, &n, &status);
+    fits_get_colnum(f, CASEINSEN, "ID", &c, &status);
+    *ids = malloc((size_t)(n ? n : 1) * sizeof **ids);
+    if (n) fits_read_col(f, TLONGLONG, c, 1, 1, n, NULL, *ids, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_msg(status == 0, "%s[%s]: cannot read ID", path, table);
+    return n;
+}
+
+static int cmp_ll(const void *a, const void *b)
+{
+    long long x = *(const long long *)a, y = *(const long long *)b;
+    return (x > y) - (x < y);
+}
+
+/* `survey run --sne` over an area writes the release: every object in any product's truth is
+ * in the input catalogs, every SN in sne.fits, the light curves are those `wfisim sn
+ * lightcurves` writes for the plan, and the index lists the products. */
+START_TEST(release_layout)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the Roman and SALT data");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], model[4200], sne[4200], out[4200], path[4400], lc[4200];
+    double ra, dec, pa, mjd;
+    one_visit(bin, data, d, plan, model, sizeof plan, &ra, &dec, &pa, &mjd);
+    snprintf(sne, sizeof sne, "%s/sample.fits", d);
+    snprintf(out, sizeof out, "%s/release", d);
+    wf_focal_plane fp;
+    wf_wcs w;
+    ck_assert_int_eq(wf_wcs_focal_plane(data, &fp), 0);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, ra, dec, pa, 1, &w), 0);
+    wf_sn_sample s;
+    memset(&s, 0, sizeof s);
+    snprintf(s.model, sizeof s.model, "salt3-k21");
+    size_t r;
+    ck_assert_int_eq(wf_sn_sample_push(&s, &r), 0);
+    s.id[r] = 77;
+    s.host_id[r] = -1;
+    s.host_comp[r] = -1;
+    s.flags[r] = WF_SN_FLAG_HOSTLESS;
+    s.z[r] = 0.4;
+    s.t0[r] = mjd;
+    s.x1[r] = 0.0;
+    s.c[r] = 0.0;
+    s.mu[r] = 41.6;
+    s.x0[r] = pow(10.0, -0.4 * s.mu[r]) / 1e-12;
+    ck_assert_int_eq(wf_wcs_pix2world(&w, 60.0, 70.0, &s.ra[r], &s.dec[r]), 0);
+    ck_assert_int_eq(wf_sn_sample_write(&s, sne), 0);
+    wf_sn_sample_free(&s);
+    /* the area: 0.02 deg about the small SCA 1's centre at exposure 0's pointing */
+    double ara, adec;
+    ck_assert_int_eq(wf_wcs_pix2world(&w, 63.5, 63.5, &ara, &adec), 0);
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --data %s --plan %s --exposures 0:4 --scas 1,2 --sne %s --model %s "
+                                 "--area %.8f,%.8f,0.02 --mode single --set readout.ncols=128 --set readout.nrows=128 "
+                                 "--set detector.cr_rate=0 --out %s", bin, data, plan, sne, model, ara, adec, out), 0);
+    /* the index lists every product made, and exposure 0's SCA 1 is one of them */
+    snprintf(path, sizeof path, "%s/survey_index.csv", out);
+    char *idx = wf_test_slurp(path, NULL);
+    ck_assert_ptr_nonnull(idx);
+    ck_assert_msg(strstr(idx, "\n0,1,Y106,") != NULL, "exposure 0 SCA 1 not indexed:\n%s", idx);
+    int rows = -1;
+    for (const char *p = idx; *p; p++) rows += *p == '\n';
+    free(idx);
+    ck_assert_int_eq(wf_test_run("test $(ls %s | grep -c '^wfisim_e.*_sca.._truth.fits$') -eq %d", out, rows), 0);
+    ck_assert_int_eq(wf_test_run("test ! -e %s/wfisim_e000000_sca02.fits", out), 0); /* SCA 2 is off the area */
+    /* every object of every truth table is in the catalogs of the release */
+    long long *gal, *stars, *sn;
+    char gpath[4400], spath[4400], npath[4400];
+    snprintf(gpath, sizeof gpath, "%s/input_galaxies.fits", out);
+    snprintf(spath, sizeof spath, "%s/input_stars.fits", out);
+    snprintf(npath, sizeof npath, "%s/sne.fits", out);
+    long ngal = table_ids(gpath, "GALAXIES", &gal), nstars = table_ids(spath, "STARS", &stars), nsn = table_ids(npath, "SNE", &sn);
+    ck_assert_msg(ngal > 0 && ngal < 1000000, "%ld galaxies in the release catalog", ngal);
+    ck_assert_int_eq(nsn, 1);
+    qsort(gal, (size_t)ngal, sizeof *gal, cmp_ll);
+    qsort(stars, (size_t)nstars, sizeof *stars, cmp_ll);
+    long checked = 0, sne_seen = 0;
+    for (int e = 0; e <= 4; e++)
+        for (int sca = 1; sca <= 2; sca++) {
+            snprintf(path, sizeof path, "%s/wfisim_e%06d_sca%02d_truth.fits", out, e, sca);
+            FILE *probe = fopen(path, "rb");
+            if (!probe) continue;
+            fclose(probe);
+            const char *tables[3] = {"GALAXIES", "STARS", "SNE"};
+            for (int t = 0; t < 3; t++) {
+                long long *ids;
+                long n = table_ids(path, tables[t], &ids);
+                for (long i = 0; i < n; i++) {
+                    long long *list = t == 0 ? gal : t == 1 ? stars : sn;
+                    long len = t == 0 ? ngal : t == 1 ? nstars : nsn;
+                    ck_assert_msg(bsearch(&ids[i], list, (size_t)len, sizeof *list, cmp_ll) != NULL,
+                                  "%s: %s %lld is not in the release's catalogs", path, tables[t], ids[i]);
+                    checked++;
+                    sne_seen += t == 2;
+                }
+                free(ids);
+            }
+        }
+    ck_assert_msg(checked > 10 && sne_seen >= 1, "%ld objects, %ld SNe in the truth tables", checked, sne_seen);
+    free(gal);
+    free(stars);
+    free(sn);
+    /* the light curves: those of `wfisim sn lightcurves` for the same sample and plan */
+    snprintf(lc, sizeof lc, "%s/lc.fits", d);
+    ck_assert_int_eq(wf_test_run("%s sn lightcurves --data %s --sne %s --model %s --plan %s --out %s >/dev/null", bin, data,
+                                 sne, model, plan, lc), 0);
+    snprintf(path, sizeof path, "%s/sn_lightcurves.fits", out);
+    ck_assert_int_eq(wf_test_run("cmp -s %s %s", lc, path), 0);
+    snprintf(path, sizeof path, "%s/survey_run.txt", out);
+    ck_assert(wf_test_file_contains(path, "release.sne = sne.fits, sn_lightcurves.fits"));
 }
 END_TEST
 
@@ -362,6 +498,7 @@ static Suite *suite(void)
     tcase_add_test(tc, sample_roundtrip_and_bad_values);
     tcase_add_test(tc, injector_slope);
     tcase_add_test(tc, thousands_on_one_sca);
+    tcase_add_test(tc, release_layout);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -166,6 +166,194 @@ START_TEST(run_resume_and_independence)
 }
 END_TEST
 
+/* Six small single-frame items: exposures 15 (Y106) and 16 (J129) at one pointing, 17 at the
+ * next, SCAs 3 and 7 (about 0.45 deg apart). */
+#define SIX "--exposures 15:17 --scas 3,7 " SMALL " --mode single"
+
+static const int six_ids[3] = {15, 16, 17}, six_scas[2] = {3, 7};
+
+static void product_path(char *buf, size_t cap, const char *dir, int expid, int sca, int truth)
+{
+    snprintf(buf, cap, "%s/wfisim_e%06d_sca%02d%s.fits", dir, expid, sca, truth ? "_truth" : "");
+}
+
+static int exists(const char *path)
+{
+    struct stat sb;
+    return stat(path, &sb) == 0;
+}
+
+/* The sky position of FITS pixel (x, y) of an image's SCI section through its header's linear
+ * TAN part (CRVAL, CRPIX, CD; the SIP terms move positions by < 0.015 pixel): the test's own
+ * inverse gnomonic projection. */
+static void sci_pixel_to_sky(const char *path, double x, double y, double *ra, double *dec)
+{
+    fitsfile *f;
+    int status = 0;
+    double v[8];
+    const char *keys[8] = {"CRVAL1", "CRVAL2", "CRPIX1", "CRPIX2", "CD1_1", "CD1_2", "CD2_1", "CD2_2"};
+    fits_open_file(&f, path, READONLY, &status);
+    fits_movnam_hdu(f, IMAGE_HDU, "SCI", 0, &status);
+    for (int k = 0; k < 8; k++) fits_read_key_dbl(f, keys[k], &v[k], NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_msg(status == 0, "%s: no linear WCS", path);
+    const double r = M_PI / 180.0;
+    double xi = (v[4] * (x - v[2]) + v[5] * (y - v[3])) * r, eta = (v[6] * (x - v[2]) + v[7] * (y - v[3])) * r;
+    double a0 = v[0] * r, d0 = v[1] * r, den = cos(d0) - eta * sin(d0);
+    *ra = fmod((a0 + atan2(xi, den)) / r + 360.0, 360.0);
+    *dec = atan2(sin(d0) + eta * cos(d0), hypot(xi, den)) / r;
+}
+
+static double sky_distance(double ra1, double dec1, double ra2, double dec2)
+{
+    const double r = M_PI / 180.0;
+    double s = sin((dec2 - dec1) * r / 2), t = sin((ra2 - ra1) * r / 2);
+    return 2 * asin(sqrt(s * s + cos(dec1 * r) * cos(dec2 * r) * t * t)) / r;
+}
+
+START_TEST(index_and_area)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], a[4200], path[4300], keep[4300];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(a, sizeof a, "%s/a", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --out %s", bin, plan, a), 0);
+    /* the index: one row per product in (exposure, SCA) order, with the plan's filter and time */
+    snprintf(path, sizeof path, "%s/survey_index.csv", a);
+    FILE *f = fopen(path, "r");
+    ck_assert_ptr_nonnull(f);
+    char line[1024];
+    ck_assert_ptr_nonnull(fgets(line, sizeof line, f));
+    ck_assert_msg(!strncmp(line, "expid,sca,filter,mjd_mid,", 25), "index header: %s", line);
+    int rows = 0;
+    while (fgets(line, sizeof line, f)) {
+        int expid, sca;
+        char filter[16], file[64], planfilter[16];
+        double mjd, ra, pa, pmjd, exptime;
+        ck_assert_int_eq(sscanf(line, "%d,%d,%15[^,],%lf", &expid, &sca, filter, &mjd), 4);
+        ck_assert_int_eq(expid, six_ids[rows / 2]);
+        ck_assert_int_eq(sca, six_scas[rows % 2]);
+        plan_row(plan, expid, &ra, &pa, &pmjd, &exptime, planfilter);
+        ck_assert_str_eq(filter, planfilter);
+        ck_assert_double_eq_tol(mjd, pmjd, 1e-8);
+        snprintf(file, sizeof file, "wfisim_e%06d_sca%02d.fits,", expid, sca);
+        ck_assert_msg(strstr(line, file) != NULL, "row %d names no %s", rows, file);
+        rows++;
+    }
+    fclose(f);
+    ck_assert_int_eq(rows, 6);
+    snprintf(path, sizeof path, "%s/survey_index.fits", a);
+    ck_assert_msg(wf_fits_verify_checksums(path, 2) == WF_OK, "%s", wf_error_message());
+    /* rebuilt from the products' headers alone: the same bytes */
+    snprintf(keep, sizeof keep, "%s/index.csv", d);
+    ck_assert_int_eq(wf_test_run("cp %s/survey_index.csv %s && rm %s/survey_index.* && %s survey index %s >/dev/null",
+                                 a, keep, a, bin, a), 0);
+    snprintf(path, sizeof path, "%s/survey_index.csv", a);
+    assert_same_file(path, keep);
+    /* --area: a 0.01 deg circle about the centre of exposure 15's SCA 3 (128 x 96 pixels, 0.0024 deg
+     * from centre to corner) takes that SCA at that pointing, in both filters, and nothing else */
+    double ra0, dec0;
+    product_path(path, sizeof path, a, 15, 3, 0);
+    sci_pixel_to_sky(path, 64.5, 48.5, &ra0, &dec0);
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --area %.8f,%.8f,0.01 --out %s/c", bin, plan,
+                                 ra0, dec0, d), 0);
+    char c[4200];
+    snprintf(c, sizeof c, "%s/c", d);
+    int outside = 0;
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 2; k++) {
+            double ra, dec;
+            product_path(path, sizeof path, a, six_ids[i], six_scas[k], 0);
+            sci_pixel_to_sky(path, 64.5, 48.5, &ra, &dec);
+            int want = sky_distance(ra, dec, ra0, dec0) < 0.01 + 0.0024;
+            product_path(keep, sizeof keep, c, six_ids[i], six_scas[k], 0);
+            ck_assert_msg(exists(keep) == want, "%s: made %d, overlaps the area %d", keep, exists(keep), want);
+            if (want) assert_same_file(path, keep);
+            outside += !want;
+        }
+    ck_assert_int_eq(outside, 4);
+    snprintf(path, sizeof path, "%s/survey_run.txt", c);
+    ck_assert(wf_test_file_contains(path, "products.outside_area = 4"));
+    /* an area that no SCA reaches is an error, not an empty release */
+    snprintf(path, sizeof path, "%s/log", d);
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --area %.8f,%.8f,0.01 --out %s/e 2>%s", bin,
+                                 plan, ra0 + 5.0, dec0, d, path), 2);
+    ck_assert(wf_test_file_contains(path, "--area"));
+}
+END_TEST
+
+/* bin/wfisim-mpi under mpirun: the same bytes as one process, and a failed item redone alone. */
+START_TEST(mpi_matches_one_process)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *mpi = getenv("WFISIM_MPI_BIN");
+    if (!mpi || !exists(mpi) || wf_test_run("command -v mpirun >/dev/null 2>&1"))
+        WF_SKIP("Open MPI (mpirun) and bin/wfisim-mpi ($WFISIM_MPI_BIN, make MPI=1) not installed");
+    /* CI runs as root; leak checking (SAN=1) stops at Open MPI's own allocations */
+#define MPIRUN "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 ASAN_OPTIONS=detect_leaks=0 " \
+               "mpirun --oversubscribe -np 3"
+    const char *d = wf_test_tmpdir();
+    char plan[4200], log[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(log, sizeof log, "%s/log", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --out %s/a", bin, plan, d), 0);
+    ck_assert_int_eq(wf_test_run(MPIRUN " %s survey run --plan %s " SIX " --out %s/b 2>%s", mpi, plan, d, log), 0);
+    ck_assert_msg(wf_test_file_contains(log, "6 products rendered"), "MPI run did not make six products");
+    char x[4300], y[4300];
+    static const char *const run_files[] = {"survey_index.csv", "survey_index.fits", "survey_run.txt"};
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 2; k++)
+            for (int t = 0; t < 2; t++) {
+                product_path(x, sizeof x, "a", six_ids[i], six_scas[k], t);
+                char ax[4400], bx[4400];
+                snprintf(ax, sizeof ax, "%s/%s", d, x);
+                product_path(y, sizeof y, "b", six_ids[i], six_scas[k], t);
+                snprintf(bx, sizeof bx, "%s/%s", d, y);
+                assert_same_file(ax, bx);
+            }
+    for (int k = 0; k < 3; k++) {
+        snprintf(x, sizeof x, "%s/a/%s", d, run_files[k]);
+        snprintf(y, sizeof y, "%s/b/%s", d, run_files[k]);
+        assert_same_file(x, y);
+    }
+    /* the last item cannot be written (a folder stands at its temporary name): the run fails
+     * naming it, the five others are whole; once the obstacle is gone a rerun makes only it */
+    ck_assert_int_eq(wf_test_run("mkdir -p %s/c/wfisim_e000017_sca07.fits.tmp/x", d), 0);
+    ck_assert_int_ne(wf_test_run(MPIRUN " %s survey run --plan %s " SIX " --out %s/c >%s 2>&1", mpi, plan, d, log), 0);
+    ck_assert_msg(wf_test_file_contains(log, "exposure 17 SCA 7"), "the failed item is not named");
+    char c[4200];
+    snprintf(c, sizeof c, "%s/c", d);
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 2; k++) {
+            product_path(x, sizeof x, c, six_ids[i], six_scas[k], 0);
+            int last = i == 2 && k == 1;
+            ck_assert_msg(exists(x) == !last, "%s: exists %d after the failed run", x, exists(x));
+            if (!last) ck_assert(wf_survey_product_ok(x));
+        }
+    ck_assert_int_eq(wf_test_run("rm -r %s/c/wfisim_e000017_sca07.fits.tmp", d), 0);
+    ck_assert_int_eq(wf_test_run(MPIRUN " %s survey run --plan %s " SIX " --out %s/c 2>%s", mpi, plan, d, log), 0);
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (0 replacing damaged ones), 5 already done"),
+                  "the rerun did not make exactly the missing item");
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 2; k++) {
+            char ax[4400];
+            product_path(x, sizeof x, "a", six_ids[i], six_scas[k], 0);
+            snprintf(ax, sizeof ax, "%s/%s", d, x);
+            product_path(y, sizeof y, c, six_ids[i], six_scas[k], 0);
+            assert_same_file(ax, y);
+        }
+    snprintf(x, sizeof x, "%s/a/survey_index.csv", d);
+    snprintf(y, sizeof y, "%s/c/survey_index.csv", d);
+    assert_same_file(x, y);
+#undef MPIRUN
+}
+END_TEST
+
 START_TEST(bad_arguments)
 {
     const char *bin = wf_test_program();
@@ -202,6 +390,14 @@ START_TEST(parse_lists)
     ck_assert_int_eq(wf_survey_parse_range("12", &a, &b), 0);
     ck_assert(a == 12 && b == 12);
     ck_assert_int_ne(wf_survey_parse_range("x", &a, &b), 0);
+    wf_survey_run_options o;
+    memset(&o, 0, sizeof o);
+    ck_assert_int_eq(wf_survey_parse_area("-10,-53.5,0.25", &o), 0);
+    ck_assert(o.area && o.area_ra == 350.0 && o.area_dec == -53.5 && o.area_radius == 0.25);
+    ck_assert_int_ne(wf_survey_parse_area("71,-53", &o), 0);
+    ck_assert_int_ne(wf_survey_parse_area("71,-53,0", &o), 0);
+    ck_assert_int_ne(wf_survey_parse_area("71,-93,1", &o), 0);
+    ck_assert_int_ne(wf_survey_parse_area("71,-53,1x", &o), 0);
 }
 END_TEST
 
@@ -213,6 +409,8 @@ static Suite *suite(void)
     tcase_add_test(tc, run_resume_and_independence);
     tcase_add_test(tc, bad_arguments);
     tcase_add_test(tc, parse_lists);
+    tcase_add_test(tc, index_and_area);
+    tcase_add_test(tc, mpi_matches_one_process);
     suite_add_tcase(s, tc);
     return s;
 }

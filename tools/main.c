@@ -28,6 +28,9 @@
 #include "tools/sncmd.h"
 #include "tools/surveycmd.h"
 #include "tools/surveyrun.h"
+#ifdef WF_MPI
+#include "tools/survey_mpi.h"
+#endif
 
 #define WFISIM_VERSION "0.1.0"
 
@@ -45,8 +48,11 @@ static const char *usage_text =
     "  accuracy psf|galaxy|scene|all   error against CPU time of every rendering knob\n"
     "                       (docs/ACCURACY.md)\n"
     "  survey plan --out F  the deep-tier observation plan and its coverage map (docs/SURVEY.md)\n"
-    "  survey run --plan F [--exposures A:B] [--scas 1,2,5-7] [--sne SNE.fits]\n"
-    "                       render every (exposure, SCA) of the range; resumable\n"
+    "  survey run --plan F [--exposures A:B] [--scas 1,2,5-7] [--area RA,DEC,R] [--sne SNE.fits]\n"
+    "                       render every (exposure, SCA) of the range (whose SCA overlaps the\n"
+    "                       circle of R deg); resumable; with bin/wfisim-mpi under mpirun, on\n"
+    "                       many processes (docs/SURVEY.md)\n"
+    "  survey index DIR     the index table of the products in DIR, from their headers\n"
     "  sn generate|lightcurves|lightcurve   supernova sample, truth light curves, one light\n"
     "                       curve (see wfisim sn --help; docs/SUPERNOVAE.md)\n"
     "  config doc           print the reference of every configuration key (docs/CONFIG.md)\n"
@@ -82,7 +88,7 @@ typedef struct cli {
     const char *rates;
     const char *positional;
     const char *id;
-    const char *plan, *exposures, *scas, *sne, *model;
+    const char *plan, *exposures, *scas, *sne, *model, *area;
     int ma_table_given;
 } cli;
 
@@ -147,6 +153,7 @@ static int parse(int argc, char **argv, cli *c)
         else if (!strcmp(a, "--scas") && val) { c->scas = val; i++; }
         else if (!strcmp(a, "--sne") && val) { c->sne = val; i++; }
         else if (!strcmp(a, "--model") && val) { c->model = val; i++; }
+        else if (!strcmp(a, "--area") && val) { c->area = val; i++; }
         else if (a[0] == '-' && a[1] == '-') {
             fprintf(stderr, "wfisim: unknown option '%s' (see wfisim --help)\n", a);
             return 2;
@@ -159,13 +166,12 @@ static int parse(int argc, char **argv, cli *c)
 }
 
 /* The SN sample of --sne with its model (--model, else the SALT3 model in the data folder). */
-static wf_status open_injector(const cli *c, wf_sn_injector **inj)
+static wf_status open_injector(const cli *c, wf_sn_injector **inj, char *model, size_t cap)
 {
     *inj = NULL;
     if (!c->sne) return WF_OK;
-    char model[WF_PATH_MAX + 32];
-    if (c->model) snprintf(model, sizeof model, "%s", c->model);
-    else if (c->cfg.data_dir[0]) snprintf(model, sizeof model, "%s/salt3/salt3-k21", c->cfg.data_dir);
+    if (c->model) snprintf(model, cap, "%s", c->model);
+    else if (c->cfg.data_dir[0]) snprintf(model, cap, "%s/salt3/salt3-k21", c->cfg.data_dir);
     else return wf_error(WF_ERR_INPUT, "--sne needs the SALT model: give --model DIR or a data folder (--data)");
     return wf_sn_injector_open(c->sne, model, c->cfg.data_dir, inj);
 }
@@ -179,7 +185,8 @@ static int run_exposure(cli *c, int demo)
     job.stream = c->stream;
     job.replay = c->replay;
     job.version = WFISIM_VERSION;
-    wf_status st = open_injector(c, &job.injector);
+    char model[WF_PATH_MAX + 32];
+    wf_status st = open_injector(c, &job.injector, model, sizeof model);
     if (!st) st = wf_pipeline_expose(&job);
     wf_sn_injector_free(job.injector);
     return st ? fail(demo ? "demo" : "expose", st) : 0;
@@ -312,20 +319,28 @@ static int cmd_survey_run(cli *c)
     wf_status st = WF_OK;
     if (c->exposures) st = wf_survey_parse_range(c->exposures, &opt.first, &opt.last);
     if (!st && c->scas) st = wf_survey_parse_scas(c->scas, opt.scas, &opt.nscas);
+    if (!st && c->area) st = wf_survey_parse_area(c->area, &opt);
     if (st) return fail("survey run", st);
     if (c->cfg.scene_kind == 2 || c->replay || c->stream) {
         fprintf(stderr, "wfisim survey run: the survey draws a scene (scene.kind synthetic, catalog or galsim); no --replay or --stream\n");
         return 2;
     }
-    if ((st = open_injector(c, &opt.sne))) return fail("survey run", st);
+    char model[WF_PATH_MAX + 32];
+    if ((st = open_injector(c, &opt.sne, model, sizeof model))) return fail("survey run", st);
     opt.sne_path = c->sne;
+    opt.sne_model = model;
     wf_survey_run_stats stats;
+#ifdef WF_MPI
+    st = wf_survey_run_mpi(&c->cfg, &opt, &stats);
+#else
     st = wf_survey_run(&c->cfg, &opt, &stats);
+#endif
     wf_sn_injector_free(opt.sne);
     if (st) return fail("survey run", st);
-    if (!c->cfg.quiet)
+    if (!c->cfg.quiet && !stats.silent)
         fprintf(stderr, "wfisim survey: %ld products rendered (%ld replacing damaged ones), %ld already done; "
-                "%ld supernova images\n", stats.rendered, stats.redone, stats.skipped, stats.sne_drawn);
+                "%ld supernova images%s\n", stats.rendered, stats.redone, stats.skipped, stats.sne_drawn,
+                c->area ? "; SCAs outside --area not made" : "");
     return 0;
 }
 

@@ -57,9 +57,7 @@ void wf_pipeline_inputs_free(wf_scene_inputs *in)
     memset(in, 0, sizeof *in);
 }
 
-/* The SCA's footprint on the sky, widened by the largest stamp reach (70"), so that objects
- * just off the SCA whose light reaches onto it are kept. */
-static wf_status sca_region(const wf_config *cfg, wf_skyregion *reg)
+wf_status wf_pipeline_sca_footprint(const wf_config *cfg, double margin_arcsec, wf_skyregion *reg)
 {
     wf_focal_plane fp;
     wf_wcs w;
@@ -72,7 +70,14 @@ static wf_status sca_region(const wf_config *cfg, wf_skyregion *reg)
     const double cy[4] = {-0.5, -0.5, cfg->ro.nrows - 0.5, cfg->ro.nrows - 0.5};
     for (int k = 0; k < 4; k++)
         if ((st = wf_wcs_pix2world(&w, cx[k], cy[k], &ra[k], &dec[k]))) return st;
-    return wf_skyindex_polygon(ra, dec, 4, 70.0, reg);
+    return wf_skyindex_polygon(ra, dec, 4, margin_arcsec, reg);
+}
+
+/* The SCA's footprint on the sky, widened by the largest stamp reach (70"), so that objects
+ * just off the SCA whose light reaches onto it are kept. */
+static wf_status sca_region(const wf_config *cfg, wf_skyregion *reg)
+{
+    return wf_pipeline_sca_footprint(cfg, 70.0, reg);
 }
 
 /* Keeps the rows of a catalog read from a file that fall in the footprint (a sky index:
@@ -99,7 +104,14 @@ wf_status wf_pipeline_load_catalogs(const wf_config *cfg, wf_scene_inputs *in)
     memset(in, 0, sizeof *in);
     wf_skyregion reg;
     wf_status st = sca_region(cfg, &reg);
-    if (st) return st;
+    return st ? st : wf_pipeline_load_catalogs_in(cfg, &reg, in);
+}
+
+wf_status wf_pipeline_load_catalogs_in(const wf_config *cfg, const wf_skyregion *region, wf_scene_inputs *in)
+{
+    memset(in, 0, sizeof *in);
+    wf_skyregion reg = *region;
+    wf_status st;
     if (cfg->scene_kind == 0) { /* synthetic: only the cells the SCA (and stamps reaching it) see */
         wf_synth_config sc;
         wf_synth *syn;

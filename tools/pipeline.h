@@ -22,6 +22,12 @@ typedef struct wf_scene_inputs {
 /* Reads (or generates) the catalogs of cfg's scene and keeps the rows whose stamps can reach
  * the SCA of cfg's pointing. */
 wf_status wf_pipeline_load_catalogs(const wf_config *cfg, wf_scene_inputs *in);
+/* The footprint of cfg's SCA (its readout.ncols x nrows pixels) at cfg's pointing, grown by
+ * margin_arcsec. */
+wf_status wf_pipeline_sca_footprint(const wf_config *cfg, double margin_arcsec, wf_skyregion *reg);
+
+/* The same for any region (a GalSim scene catalog is read whole). */
+wf_status wf_pipeline_load_catalogs_in(const wf_config *cfg, const wf_skyregion *reg, wf_scene_inputs *in);
 void wf_pipeline_inputs_free(wf_scene_inputs *in);
 
 typedef struct wf_pipeline_job {

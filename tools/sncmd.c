@@ -847,6 +847,51 @@ static wf_status dated_rows(const wf_sn_sample *s, const wf_salt_model *model, c
     return st;
 }
 
+/* The light-curve rows of o's sample (read into *s) at o's epochs, sorted by SN and date. */
+static wf_status lightcurve_rows(const opts *o, wf_sn_sample *s, lc_rows *rows)
+{
+    wf_salt_model *model = NULL;
+    epoch *ep = NULL;
+    size_t nep = 0;
+    wf_bandpass *bp[WF_NFILTER] = {0};
+    wf_status st = wf_sn_sample_read(o->sne, s);
+    if (st) return st;
+    if (!st) st = wf_salt_load(o->model, &model);
+    if (!st) st = o->plan ? plan_epochs(o->plan, &ep, &nep) : grid_epochs(o->grid, o->filters, &ep, &nep);
+    for (size_t e = 0; e < nep && !st; e++) {
+        int f = ep[e].filter;
+        if (bp[f]) continue;
+        if (!(bp[f] = malloc(sizeof *bp[f]))) st = wf_error(WF_ERR_NOMEM, "bandpass");
+        else st = wf_bandpass_load((wf_filter)f, o->data, bp[f]);
+    }
+    int observed = o->plan && !o->window;
+    if (!st) st = observed ? observed_rows(o, ep, nep, bp, rows) : dated_rows(s, model, ep, nep, bp, o->window, rows);
+    if (!st && rows->n) qsort(rows->v, rows->n, sizeof *rows->v, by_id_mjd);
+    for (int f = 0; f < WF_NFILTER; f++) free(bp[f]);
+    free(ep);
+    wf_salt_free(model);
+    return st;
+}
+
+wf_status wf_sn_write_plan_lightcurves(const char *sne, const char *plan, const char *model, const char *data,
+                                       const char *out, size_t *npoints)
+{
+    opts o;
+    memset(&o, 0, sizeof o);
+    o.sne = sne;
+    o.plan = plan;
+    o.model = model;
+    o.data = data ? data : "";
+    wf_sn_sample s;
+    lc_rows rows = {0, 0, NULL};
+    wf_status st = lightcurve_rows(&o, &s, &rows);
+    if (!st) st = write_rows(&rows, out, sne, 1);
+    wf_sn_sample_free(&s); /* zeroed by a failed read: freeing is safe either way */
+    *npoints = rows.n;
+    free(rows.v);
+    return st;
+}
+
 static int cmd_lightcurves(int argc, char **argv)
 {
     opts o;
@@ -856,11 +901,7 @@ static int cmd_lightcurves(int argc, char **argv)
     if (!o.plan == !o.grid) return usage_error("%s", "give one of --plan plan.fits or --grid START:END:STEP");
     if (o.window && !o.plan) return usage_error("%s goes with --plan", "--window");
     wf_sn_sample s;
-    wf_salt_model *model = NULL;
-    epoch *ep = NULL;
-    size_t nep = 0;
     lc_rows rows = {0, 0, NULL};
-    wf_bandpass *bp[WF_NFILTER] = {0};
     int64_t plot_ids[64];
     int nplot = 0;
     if (o.plot) {
@@ -873,19 +914,8 @@ static int cmd_lightcurves(int argc, char **argv)
             plot_ids[nplot++] = v;
         }
     }
-    wf_status st = wf_sn_sample_read(o.sne, &s);
-    if (st) return fail(st);
-    if (!st) st = wf_salt_load(o.model, &model);
-    if (!st) st = o.plan ? plan_epochs(o.plan, &ep, &nep) : grid_epochs(o.grid, o.filters, &ep, &nep);
-    for (size_t e = 0; e < nep && !st; e++) {
-        int f = ep[e].filter;
-        if (bp[f]) continue;
-        if (!(bp[f] = malloc(sizeof *bp[f]))) st = wf_error(WF_ERR_NOMEM, "bandpass");
-        else st = wf_bandpass_load((wf_filter)f, o.data, bp[f]);
-    }
+    wf_status st = lightcurve_rows(&o, &s, &rows);
     int observed = o.plan && !o.window;
-    if (!st) st = observed ? observed_rows(&o, ep, nep, bp, &rows) : dated_rows(&s, model, ep, nep, bp, o.window, &rows);
-    if (!st && rows.n) qsort(rows.v, rows.n, sizeof *rows.v, by_id_mjd);
     int plotted = 0;
     for (int k = 0; k < nplot && !st; k++) {
         size_t i = 0;
@@ -904,10 +934,7 @@ static int cmd_lightcurves(int argc, char **argv)
         printf("wfisim sn: %zu light-curve points of %zu supernovae (%s); wrote %s\n", rows.n, s.n,
                observed ? "images whose SCA holds the SN" : o.window ? "plan dates in each model window" : "grid dates",
                o.out);
-    for (int f = 0; f < WF_NFILTER; f++) free(bp[f]);
     free(rows.v);
-    free(ep);
-    wf_salt_free(model);
     wf_sn_sample_free(&s);
     return st ? fail(st) : 0;
 }

@@ -9,15 +9,19 @@
 #include "sim/wcs.h"
 #include "tools/config.h"
 #include "tools/plot.h"
+#include "tools/surveyindex.h"
 
 static const char *survey_usage =
     "usage: wfisim survey plan [--config FILE] [--data DIR] [--set survey.KEY=VALUE ...]\n"
     "                          [--quiet] --out plan.fits\n"
     "       wfisim survey keys\n"
+    "       wfisim survey index DIR\n"
     "\n"
     "  plan   the deep-tier observation plan (SPEC 6) as FITS tables PLAN and POINTINGS, and\n"
     "         the coverage map per filter next to it (plan.fits -> plan_coverage.fits)\n"
     "  keys   the survey.* keys, their defaults and meaning\n"
+    "  index  rebuild DIR/survey_index.{fits,csv} from the headers of every product in DIR\n"
+    "         (after job arrays over --exposures ranges, or any runs into one folder)\n"
     "\n"
     "  --data DIR   focal plane from DIR/roman/ (GalSim's files); default paths.data, else the\n"
     "               built-in table\n";
@@ -196,5 +200,17 @@ int wf_cmd_survey(int argc, char **argv)
         return 0;
     }
     if (!strcmp(argv[0], "plan")) return cmd_plan(argc - 1, argv + 1);
+    if (!strcmp(argv[0], "index")) {
+        if (argc != 2 || argv[1][0] == '-') return usage_error("%s", "survey index takes one folder: survey index DIR");
+        wf_survey_index_row *rows;
+        size_t n;
+        wf_status st = wf_survey_index_scan(argv[1], &rows, &n);
+        if (!st && !n) st = wf_error(WF_ERR_INPUT, "%s: no product (wfisim_eNNNNNN_scaNN.fits) to index", argv[1]);
+        if (!st) st = wf_survey_index_write(argv[1], rows, n);
+        free(rows);
+        if (st) return fail(st);
+        printf("wfisim survey: %zu products indexed in %s/survey_index.fits and survey_index.csv\n", n, argv[1]);
+        return 0;
+    }
     return usage_error("unknown survey command '%s'", argv[0]);
 }

@@ -3,6 +3,7 @@
  *   wfisim survey plan [--config FILE] [--data DIR] [--set survey.KEY=VALUE ...] [--quiet]
  *                      --out plan.fits
  *   wfisim survey keys          (the survey.* keys, their defaults and meaning, as Markdown)
+ *   wfisim survey index DIR     (DIR/survey_index.{fits,csv} from the products' headers)
  *
  * `plan` writes the plan (tables PLAN and POINTINGS) to the --out file and the coverage map
  * next to it (plan.fits -> plan_coverage.fits), both through a temporary file, and prints

@@ -12,12 +12,18 @@
  * given; single-frame mode uses the planned time exactly.
  *
  * Survey level: DIR/survey_run.txt records the plan (and its DATASUM), the catalogs (files, or
- * the synthetic field's seed: `wfisim catalog --seed N` writes that field) and the SN sample. */
+ * the synthetic field's seed: `wfisim catalog --seed N` writes that field) and the SN sample;
+ * DIR/survey_index.{fits,csv} lists the run's products (tools/surveyindex.h).
+ *
+ * A run is a list of items, (exposure, SCA) pairs in plan order, each made by
+ * wf_survey_make_item alone: wf_survey_run makes them one after another; the MPI program
+ * (tools/survey_mpi.c) hands them out to its ranks and gives the same products. */
 #ifndef WF_SURVEYRUN_H
 #define WF_SURVEYRUN_H
 
 #include "tools/config.h"
 #include "tools/sninject.h"
+#include "tools/surveyindex.h"
 
 #define WF_NSCA 18
 
@@ -28,13 +34,18 @@ typedef struct wf_survey_run_options {
     int nscas;                 /* 0: all 18 */
     int ma_table_given;        /* 1: readout.ma_table (given on the command line) applies to all */
     wf_sn_injector *sne;       /* supernovae to inject, or NULL */
-    const char *sne_path;      /* their file, for the run's record */
+    const char *sne_path;      /* their file, for the run's record and the release */
+    const char *sne_model;     /* the SALT model they were made with (for the light curves) */
     const char *version;
+    int area;                  /* 1: only the items whose SCA footprint overlaps the circle */
+    double area_ra, area_dec, area_radius; /* deg */
 } wf_survey_run_options;
 
 typedef struct wf_survey_run_stats {
     long rendered, skipped, redone; /* redone: a damaged product was replaced */
     long sne_drawn;                 /* SN entries in the truth of the products rendered */
+    long outside;                   /* items outside --area, not made */
+    int silent;                     /* 1: another process reports this run (MPI ranks > 0) */
 } wf_survey_run_stats;
 
 /* Parses "a:b", "a:" or "a" (inclusive EXPIDs) into *first, *last. */
@@ -47,7 +58,34 @@ wf_status wf_survey_parse_scas(const char *text, int *scas, int *n);
  * DATASUM verify and the HDUs cover the whole file). */
 int wf_survey_product_ok(const char *path);
 
+/* Parses "RA,DEC,RADIUS" (degrees) into opt's area. */
+wf_status wf_survey_parse_area(const char *text, wf_survey_run_options *opt);
+
 wf_status wf_survey_run(const wf_config *cfg, const wf_survey_run_options *opt,
                         wf_survey_run_stats *stats);
+
+/* The pieces of a run, for drivers other than wf_survey_run. */
+typedef struct wf_survey_ctx wf_survey_ctx;
+
+/* What making one item gave; fixed size and pointer-free, so that it travels as bytes
+ * between processes of one build. */
+typedef struct wf_survey_item_result {
+    int32_t made;          /* 0 already whole (skipped), 1 rendered */
+    int32_t redone;        /* 1: a damaged product was replaced */
+    int64_t sne;           /* SNe drawn */
+    wf_survey_index_row row;
+} wf_survey_item_result;
+
+/* Reads the plan, selects the items (range, SCAs, area) and makes the output folder. */
+wf_status wf_survey_begin(const wf_config *cfg, const wf_survey_run_options *opt, wf_survey_ctx **out,
+                          size_t *nitems);
+/* Item i (0-based, plan order): skipped when its products are whole, else rendered. */
+wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_result *res);
+/* "exposure E SCA S" of item i, for messages. */
+void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap);
+/* With every item's result: the stats, the index and survey_run.txt (and, with an SN sample,
+ * the release's catalogs and light curves), each through a temporary file and a rename. */
+wf_status wf_survey_end(wf_survey_ctx *ctx, const wf_survey_item_result *res, wf_survey_run_stats *stats);
+void wf_survey_free(wf_survey_ctx *ctx);
 
 #endif

@@ -1,0 +1,196 @@
+#include "tools/survey_mpi.h"
+
+#include <mpi.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+enum { TAG_REPORT = 1, TAG_WORK = 2 };
+
+/* Worker -> rank 0: "ready", with the result of the item just made (if any). The ranks are
+ * one build of one program, so the struct travels as bytes. */
+typedef struct report {
+    int32_t status;      /* wf_status of the item */
+    int32_t has_result;
+    int64_t item;
+    wf_survey_item_result res;
+    char message[1024];
+} report;
+
+static void nap(void)
+{
+    struct timespec ts = {0, 1000000}; /* 1 ms */
+    nanosleep(&ts, NULL);
+}
+
+/* What rank 0's dispatcher and its own worker thread share. */
+typedef struct shared {
+    pthread_mutex_t mu;
+    wf_survey_ctx *ctx;
+    size_t next, n, done_items;
+    int stop;             /* an item failed: hand out no more */
+    int local_done;
+    wf_status st;         /* the first failure */
+    char message[1200];
+    wf_survey_item_result *res;
+    int quiet;
+    time_t t0;
+} shared;
+
+/* The next item to make, or -1 when none is left or the run is stopping. */
+static long long take(shared *s)
+{
+    pthread_mutex_lock(&s->mu);
+    long long i = s->stop || s->next >= s->n ? -1 : (long long)s->next++;
+    pthread_mutex_unlock(&s->mu);
+    return i;
+}
+
+static void record(shared *s, int rank, size_t i, wf_status st, const char *msg, const wf_survey_item_result *res)
+{
+    pthread_mutex_lock(&s->mu);
+    if (st) {
+        if (!s->st) {
+            s->st = st;
+            snprintf(s->message, sizeof s->message, "rank %d: %s", rank, msg);
+        }
+        s->stop = 1;
+    } else {
+        s->res[i] = *res;
+        s->done_items++;
+        if (!s->quiet && res->made) {
+            char name[64];
+            wf_survey_item_name(s->ctx, i, name, sizeof name);
+            fprintf(stderr, "wfisim survey: [%zu/%zu] %s %s MJD %.5f%s on rank %d (%.0f s)\n", s->done_items, s->n,
+                    name, res->row.filter, res->row.mjd, res->redone ? " (damaged product redone)" : "", rank,
+                    difftime(time(NULL), s->t0));
+        }
+    }
+    pthread_mutex_unlock(&s->mu);
+}
+
+static void *local_worker(void *arg)
+{
+    shared *s = arg;
+    for (long long i; (i = take(s)) >= 0;) {
+        wf_survey_item_result res;
+        wf_status st = wf_survey_make_item(s->ctx, (size_t)i, &res);
+        record(s, 0, (size_t)i, st, st ? wf_error_message() : "", &res);
+        if (st) break;
+    }
+    pthread_mutex_lock(&s->mu);
+    s->local_done = 1;
+    pthread_mutex_unlock(&s->mu);
+    return NULL;
+}
+
+/* Rank 0: answers every worker's report with the next item (or -1: stop) until every worker
+ * has been told to stop and its own worker thread (if any) is done. */
+static wf_status dispatch(shared *s, int nranks, int threaded)
+{
+    pthread_t t;
+    int have_thread = threaded && pthread_create(&t, NULL, local_worker, s) == 0;
+    if (!have_thread && nranks == 1) local_worker(s);
+    int active = nranks - 1;
+    report r;
+    for (;;) {
+        pthread_mutex_lock(&s->mu);
+        int local_done = have_thread ? s->local_done : 1;
+        pthread_mutex_unlock(&s->mu);
+        if (!active && local_done) break;
+        int flag = 0;
+        MPI_Status ms;
+        if (active) MPI_Iprobe(MPI_ANY_SOURCE, TAG_REPORT, MPI_COMM_WORLD, &flag, &ms);
+        if (!flag) {
+            nap();
+            continue;
+        }
+        MPI_Recv(&r, (int)sizeof r, MPI_BYTE, ms.MPI_SOURCE, TAG_REPORT, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+        if (r.has_result) record(s, ms.MPI_SOURCE, (size_t)r.item, r.status, r.message, &r.res);
+        int64_t next = take(s);
+        MPI_Send(&next, 1, MPI_INT64_T, ms.MPI_SOURCE, TAG_WORK, MPI_COMM_WORLD);
+        if (next < 0) active--;
+    }
+    if (have_thread) pthread_join(t, NULL);
+    return s->st;
+}
+
+/* Ranks > 0: report, receive an item, make it, until told to stop. */
+static wf_status work(wf_survey_ctx *ctx)
+{
+    report r;
+    memset(&r, 0, sizeof r);
+    wf_status mine = WF_OK;
+    for (;;) {
+        MPI_Send(&r, (int)sizeof r, MPI_BYTE, 0, TAG_REPORT, MPI_COMM_WORLD);
+        int64_t i;
+        MPI_Recv(&i, 1, MPI_INT64_T, 0, TAG_WORK, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+        if (i < 0) break;
+        wf_status st = wf_survey_make_item(ctx, (size_t)i, &r.res);
+        r.item = i;
+        r.has_result = 1;
+        r.status = st;
+        snprintf(r.message, sizeof r.message, "%s", st ? wf_error_message() : "");
+        if (st && !mine) mine = wf_error(st, "%s", r.message);
+    }
+    return mine;
+}
+
+/* Every rank waits here for the others without spinning (MPI_Finalize may busy-poll). */
+static void quiet_barrier(void)
+{
+    MPI_Request rq;
+    int done = 0;
+    MPI_Ibarrier(MPI_COMM_WORLD, &rq);
+    while (MPI_Test(&rq, &done, MPI_STATUS_IGNORE) == MPI_SUCCESS && !done) nap();
+}
+
+wf_status wf_survey_run_mpi(const wf_config *cfg, const wf_survey_run_options *opt, wf_survey_run_stats *stats)
+{
+    memset(stats, 0, sizeof *stats);
+    int provided = 0, rank = 0, nranks = 1;
+    if (MPI_Init_thread(NULL, NULL, MPI_THREAD_FUNNELED, &provided) != MPI_SUCCESS)
+        return wf_error(WF_ERR_IO, "MPI_Init_thread failed");
+    MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+    MPI_Comm_size(MPI_COMM_WORLD, &nranks);
+    stats->silent = rank > 0;
+    wf_survey_ctx *ctx = NULL;
+    size_t n = 0;
+    wf_status st = wf_survey_begin(cfg, opt, &ctx, &n);
+    /* Every rank read the same plan; if any could not, none starts (each reports its own). */
+    int bad = st != WF_OK, any_bad = 0;
+    MPI_Allreduce(&bad, &any_bad, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+    if (any_bad && !st) st = wf_error(WF_ERR_IO, "another rank could not start the run");
+    if (!st && rank == 0) {
+        shared s;
+        memset(&s, 0, sizeof s);
+        pthread_mutex_init(&s.mu, NULL);
+        s.ctx = ctx;
+        s.n = n;
+        s.quiet = cfg->quiet;
+        s.t0 = time(NULL);
+        s.res = calloc(n, sizeof *s.res);
+        if (!s.res) { /* the workers must still be told to stop */
+            s.stop = 1;
+            s.st = WF_ERR_NOMEM;
+            snprintf(s.message, sizeof s.message, "out of memory for %zu results", n);
+        }
+        st = dispatch(&s, nranks, provided >= MPI_THREAD_FUNNELED);
+        if (st) st = wf_error(st, "%s", s.message);
+        else if (s.done_items != n) st = wf_error(WF_ERR_IO, "%zu of %zu items reported", s.done_items, n);
+        if (!st) st = wf_survey_end(ctx, s.res, stats);
+        stats->silent = 0;
+        free(s.res);
+        pthread_mutex_destroy(&s.mu);
+    } else if (!st) {
+        st = work(ctx);
+        stats->silent = 1;
+    }
+    wf_survey_free(ctx);
+    /* the error message is kept across the barrier and MPI_Finalize (neither sets one) */
+    quiet_barrier();
+    MPI_Finalize();
+    return st;
+}

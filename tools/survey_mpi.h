@@ -1,0 +1,25 @@
+/* `wfisim survey run` on many processes (bin/wfisim-mpi, built with `make MPI=1`; the plain
+ * program needs no MPI). Every rank reads the plan and selects the same items; rank 0 hands
+ * them out in plan order, one at a time, to whichever rank asks next (items differ in cost),
+ * and collects what each made. Each item is made by wf_survey_make_item, exactly as a
+ * one-process run makes it, so the products are the same bytes whatever the number of ranks.
+ *
+ * Rank 0 dispatches from its main thread (the only one that calls MPI: MPI_THREAD_FUNNELED)
+ * and makes items on a second thread, so N ranks are N workers; it polls for requests every
+ * millisecond and sleeps in between, so dispatching costs no core. Waiting ranks sleep too
+ * (a non-blocking barrier polled with sleeps) instead of spinning in MPI_Finalize.
+ *
+ * A failed item stops the handing out; the items in flight finish, and the run fails naming
+ * the rank and the item. A rank that dies takes the job down (mpirun's default) and loses only
+ * the items in flight: products are renamed into place when whole, so a rerun redoes exactly
+ * the missing ones. survey_run.txt and the index are written once, by rank 0, at the end. */
+#ifndef WF_SURVEY_MPI_H
+#define WF_SURVEY_MPI_H
+
+#include "tools/surveyrun.h"
+
+/* Calls MPI_Init_thread and MPI_Finalize itself. stats->silent is 1 on ranks > 0. */
+wf_status wf_survey_run_mpi(const wf_config *cfg, const wf_survey_run_options *opt,
+                            wf_survey_run_stats *stats);
+
+#endif
