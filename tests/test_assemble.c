@@ -919,6 +919,23 @@ START_TEST(test_astropy_reads_it)
     free(buf);
     snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/fits_check.py '%s' >/dev/null 2>&1", bad);
     ck_assert_int_ne(system(cmd), 0);
+    /* tile-compressed, as a survey writes it: astropy reads it and its checksums verify */
+    char out2[1024];
+    strcpy(out2, wf_test_tmpdir());
+    wf_assemble_options opt = {.out_dir = out2, .quiet = 1, .compress = 1, .quantize_level = 16};
+    ck_assert_msg(assemble_with(write_stream(&s, order, n, in, "py.wfip"), &opt, fits) == WF_OK, "%s",
+                  wf_error_message());
+    snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/fits_check.py '%s' --shape %dx%d --nres 9 --cosmic 4 --compressed",
+             fits, NROWS, NCOLS);
+    ck_assert_int_eq(system(cmd), 0);
+    buf = slurp(fits, &len);
+    buf[len / 2] ^= 0x40;
+    f = fopen(bad, "wb");
+    ck_assert_uint_eq(fwrite(buf, 1, len, f), len);
+    fclose(f);
+    free(buf);
+    snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/fits_check.py '%s' --compressed >/dev/null 2>&1", bad);
+    ck_assert_int_ne(system(cmd), 0);
     free(s.data);
 }
 END_TEST
