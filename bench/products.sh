@@ -23,7 +23,7 @@ bin/wfisim expose $common --mode single --out "$d/truth1" --stream "$d/single.wf
 truth=$d/truth/wfisim_e000001_sca01_truth.fits
 tbytes=$(stat -c %s "$truth")
 
-row() { # label, stream, settings...
+row() { # label, stream, settings...: prints the table row; the product's path goes to $d/paths
   label=$1; s=$2; shift 2
   o="$d/out$(date +%s%N)"
   sets=""
@@ -35,7 +35,7 @@ row() { # label, stream, settings...
   rssm=$(echo "$r" | tr ' ' '\n' | sed -n 's/^peak_rss_MiB=//p')
   shown=$(echo "$*" | sed 's/products\.//g')
   echo "| $label | \`${shown:-(defaults)}\` | $(awk -v b="$bytes" 'BEGIN {printf "%.1f", b / 1e6}') | $(awk -v b="$bytes" -v t="$tbytes" -v n=$TIER 'BEGIN {printf "%.1f", (b + t) * n / 1e12}') | $cpu | $rssm |"
-  echo "$f"
+  echo "$label|$f" >>"$d/paths"
 }
 {
   echo
@@ -48,21 +48,21 @@ row() { # label, stream, settings...
   echo
   echo "| product | settings | MB per SCA-exposure | deep tier TB | assemble CPU s | peak RSS MiB |"
   echo "|---|---|---|---|---|---|"
-} >"$d/table"
-row "up the ramp, uncompressed" ramp.wfip products.compress=none >>"$d/table"
-row "up the ramp, Rice, lossless floats" ramp.wfip products.compress=rice products.quantize_level=0 >>"$d/table"
-row "up the ramp, Rice, q 16 (survey run's default)" ramp.wfip products.compress=rice >>"$d/table"
-row "up the ramp, no resultants, uncompressed" ramp.wfip products.compress=none products.resultants=drop >>"$d/table"
+}
+row "up the ramp, uncompressed" ramp.wfip products.compress=none
+row "up the ramp, Rice, lossless floats" ramp.wfip products.compress=rice products.quantize_level=0
+row "up the ramp, Rice, q 16 (survey run's default)" ramp.wfip products.compress=rice
+row "up the ramp, no resultants, uncompressed" ramp.wfip products.compress=none products.resultants=drop
 for q in 4 8 16 32; do
-  row "up the ramp, no resultants, Rice, q $q" ramp.wfip products.compress=rice products.quantize_level=$q products.resultants=drop >>"$d/table"
+  row "up the ramp, no resultants, Rice, q $q" ramp.wfip products.compress=rice products.quantize_level=$q products.resultants=drop
 done
-row "single frame, uncompressed" single.wfip products.compress=none >>"$d/table"
-row "single frame, Rice, q 16" single.wfip products.compress=rice >>"$d/table"
-grep '^|' "$d/table"
+row "single frame, uncompressed" single.wfip products.compress=none
+row "single frame, Rice, q 16" single.wfip products.compress=rice
 # photometry of the compressed SCI against the uncompressed one
-ref=$(grep 'no resultants, uncompressed' -A1 "$d/table" | tail -1)
+path_of() { sed -n "s/^$1|//p" "$d/paths"; }
+ref=$(path_of "up the ramp, no resultants, uncompressed")
 args=""
-for q in 4 8 16 32; do args="$args $q=$(grep "no resultants, Rice, q $q |" -A1 "$d/table" | tail -1)"; done
+for q in 4 8 16 32; do args="$args $q=$(path_of "up the ramp, no resultants, Rice, q $q")"; done
 echo
 echo "Quantization error on aperture photometry (\`bench/quant_photometry.py\`): every truth object"
 echo "on the SCA away from its edges, flux in a 3-pixel-radius aperture of SCI (e-/s), compressed"
