@@ -192,6 +192,20 @@ static int identity(int *order, const stream *s)
     return s->n;
 }
 
+/* META stays first and END last; everything between in a pseudo-random order of the seed,
+ * then (reverse) fully reversed. */
+static void shuffle(int *order, int n, uint32_t seed, int reverse)
+{
+    uint32_t lcg = seed;
+    for (int i = n - 2; i > 1; i--) {
+        lcg = lcg * 1664525u + 1013904223u;
+        int j = 1 + (int)((lcg >> 8) % (uint32_t)i);
+        int t = order[i]; order[i] = order[j]; order[j] = t;
+    }
+    if (reverse)
+        for (int i = 1, j = n - 2; i < j; i++, j--) { int t = order[i]; order[i] = order[j]; order[j] = t; }
+}
+
 static wf_status assemble_with(const char *path, const wf_assemble_options *opt, char *out_path)
 {
     FILE *in = fopen(path, "rb");
@@ -356,14 +370,7 @@ START_TEST(test_shuffled_is_identical)
     /* META stays first and END last; everything between in a fixed pseudo-random order,
      * and also fully reversed (every SATURATION before its RESULTANTS) */
     for (int pass = 0; pass < 2; pass++) {
-        uint32_t lcg = 12345u;
-        for (int i = n - 2; i > 1; i--) {
-            lcg = lcg * 1664525u + 1013904223u;
-            int j = 1 + (int)((lcg >> 8) % (uint32_t)i);
-            int t = order[i]; order[i] = order[j]; order[j] = t;
-        }
-        if (pass == 1)
-            for (int i = 1, j = n - 2; i < j; i++, j--) { int t = order[i]; order[i] = order[j]; order[j] = t; }
+        shuffle(order, n, 12345u, pass == 1);
         int moved = 0;
         for (int i = 0; i < n; i++) moved += order[i] != i;
         ck_assert_int_gt(moved, n / 2);
@@ -816,14 +823,7 @@ START_TEST(test_product_modes)
 
     /* the same bytes whatever the packet order: shuffled, and every SATURATION first */
     for (int pass = 0; pass < 2; pass++) {
-        uint32_t lcg = 999u + (uint32_t)pass;
-        for (int i = n - 2; i > 1; i--) {
-            lcg = lcg * 1664525u + 1013904223u;
-            int j = 1 + (int)((lcg >> 8) % (uint32_t)i);
-            int t = order[i]; order[i] = order[j]; order[j] = t;
-        }
-        if (pass == 1)
-            for (int i = 1, j = n - 2; i < j; i++, j--) { int t = order[i]; order[i] = order[j]; order[j] = t; }
+        shuffle(order, n, 999u + (uint32_t)pass, pass == 1);
         char dir2[1024];
         strcpy(dir2, wf_test_tmpdir());
         opt.out_dir = dir2;

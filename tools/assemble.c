@@ -53,18 +53,18 @@ typedef struct meta {
     int nimg;
 } meta;
 
-/* A SATURATION payload whose rows still wait for their resultants. */
-typedef struct pending_sat {
+/* A payload kept until its rows' other half arrives: a SATURATION map whose rows wait for
+ * their resultants, or (products.resultants drop, when nothing holds them in the file) a
+ * RESULTANTS cube [resultant][row][x] whose rows wait for their saturation. */
+typedef struct pending {
     uint32_t first_row, row_count, left; /* left: rows of it not yet fitted */
-    uint8_t *sat;
-} pending_sat;
+    void *data;
+} pending;
 
-/* With products.resultants drop: a RESULTANTS payload whose rows still wait for their
- * saturation (nothing holds them in the file). */
-typedef struct pending_res {
-    uint32_t first_row, row_count, left;
-    uint16_t *cube; /* [resultant][row][x] */
-} pending_res;
+typedef struct pending_list {
+    pending *at;
+    size_t n, cap;
+} pending_list;
 
 enum { HDU_PRIMARY = 1, HDU_SCI, HDU_ERR, HDU_DQ, HDU_RESULTANTS };
 
@@ -74,10 +74,7 @@ typedef struct exposure {
     fitsfile *f;
     char path[4096], tmp[4100];
     uint8_t *rows; /* ROW_* per row */
-    pending_sat *pend;
-    size_t npend, pend_cap;
-    pending_res *pres;
-    size_t npres, pres_cap;
+    pending_list sat_wait, res_wait;
     wf_cosmic_record *cr;
     size_t ncr, cr_cap;
     /* compressed products: each image HDU (index hdu - HDU_SCI) in its part file until END */
@@ -617,10 +614,11 @@ static void exposure_free(exposure *e)
     }
     if (e->tmp[0]) remove(e->tmp);
     meta_free(&e->m);
-    for (size_t i = 0; i < e->npend; i++) free(e->pend[i].sat);
-    free(e->pend);
-    for (size_t i = 0; i < e->npres; i++) free(e->pres[i].cube);
-    free(e->pres);
+    pending_list *lists[2] = {&e->sat_wait, &e->res_wait};
+    for (int k = 0; k < 2; k++) {
+        for (size_t i = 0; i < lists[k]->n; i++) free(lists[k]->at[i].data);
+        free(lists[k]->at);
+    }
     for (int i = 0; i < 4; i++)
         if (e->part[i]) wf_fits_part_discard(e->part[i], e->part_path[i]);
     free(e->rows);
@@ -873,55 +871,41 @@ static wf_status write_fit(const assembler *a, exposure *e, uint32_t y0, uint32_
     return WF_OK;
 }
 
-static pending_sat *pending_for(exposure *e, uint32_t y)
+static pending *pending_for(pending_list *l, uint32_t y)
 {
-    for (size_t i = 0; i < e->npend; i++)
-        if (y >= e->pend[i].first_row && y - e->pend[i].first_row < e->pend[i].row_count)
-            return &e->pend[i];
+    for (size_t i = 0; i < l->n; i++)
+        if (y >= l->at[i].first_row && y - l->at[i].first_row < l->at[i].row_count) return &l->at[i];
     return NULL;
 }
 
-static void pending_done(exposure *e, pending_sat *p)
+static void pending_done(pending_list *l, pending *p)
 {
     if (--p->left) return;
-    free(p->sat);
-    *p = e->pend[--e->npend];
+    free(p->data);
+    *p = l->at[--l->n];
 }
 
-static pending_res *pending_res_for(exposure *e, uint32_t y)
-{
-    for (size_t i = 0; i < e->npres; i++)
-        if (y >= e->pres[i].first_row && y - e->pres[i].first_row < e->pres[i].row_count) return &e->pres[i];
-    return NULL;
-}
-
-static void pending_res_done(exposure *e, pending_res *p)
-{
-    if (--p->left) return;
-    free(p->cube);
-    *p = e->pres[--e->npres];
-}
-
-/* Keeps a RESULTANTS payload whose rows (`waiting` of them) still lack their saturation. */
-static wf_status hold_resultants(const assembler *a, exposure *e, const uint16_t *cube, uint32_t waiting)
+/* Keeps a copy of the current packet's payload (bytes) until `waiting` of its rows are
+ * fitted; what names it in messages. */
+static wf_status pending_keep(const assembler *a, pending_list *l, const void *payload, size_t bytes,
+                              uint32_t waiting, const char *what)
 {
     const wf_packet_header *h = &a->h;
-    if (e->npres == e->pres_cap) {
-        size_t cap = e->pres_cap ? 2 * e->pres_cap : 4;
-        pending_res *p = realloc(e->pres, cap * sizeof *p);
-        if (!p) return fail(a, WF_ERR_NOMEM, "cannot grow the pending resultants table");
-        e->pres = p;
-        e->pres_cap = cap;
+    if (l->n == l->cap) {
+        size_t cap = l->cap ? 2 * l->cap : 8;
+        pending *p = realloc(l->at, cap * sizeof *p);
+        if (!p) return fail(a, WF_ERR_NOMEM, "cannot grow the table of pending %s", what);
+        l->at = p;
+        l->cap = cap;
     }
-    size_t n = (size_t)e->fit.nres * h->row_count * h->ncols;
-    pending_res *p = &e->pres[e->npres];
-    if (!(p->cube = malloc(n * sizeof *p->cube)))
-        return fail(a, WF_ERR_NOMEM, "cannot keep the resultants of %" PRIu32 " rows", h->row_count);
-    memcpy(p->cube, cube, n * sizeof *p->cube);
+    pending *p = &l->at[l->n];
+    if (!(p->data = malloc(bytes)))
+        return fail(a, WF_ERR_NOMEM, "cannot keep the %s of %" PRIu32 " rows", what, h->row_count);
+    memcpy(p->data, payload, bytes);
     p->first_row = h->first_row;
     p->row_count = h->row_count;
     p->left = waiting;
-    e->npres++;
+    l->n++;
     return WF_OK;
 }
 
@@ -987,7 +971,9 @@ static wf_status on_resultants(const assembler *a, exposure *e, const void *payl
         e->rows[y] |= ROW_DATA;
         waiting += !(e->rows[y] & ROW_SAT);
     }
-    if (drop && waiting && (st = hold_resultants(a, e, cube, waiting))) return st;
+    if (drop && waiting &&
+        (st = pending_keep(a, &e->res_wait, cube, (size_t)nres * plane * sizeof *cube, waiting, "resultants")))
+        return st;
 
     if ((st = grow_out(a, e, plane))) return st;
     const size_t nc = (size_t)e->m.ncols;
@@ -995,13 +981,14 @@ static wf_status on_resultants(const assembler *a, exposure *e, const void *payl
         if (!(e->rows[y] & ROW_SAT)) { y++; continue; }
         uint32_t y0 = y;
         for (; y < end && (e->rows[y] & ROW_SAT); y++) {
-            pending_sat *p = pending_for(e, y);
+            pending *p = pending_for(&e->sat_wait, y);
             if (!p) return fail(a, WF_ERR_INTERNAL, "saturation of row %" PRIu32 " lost", y);
             size_t k = (size_t)(y - y0) * nc;
             st = fit_row(a, e, y, cube + (size_t)(y - h->first_row) * nc, plane,
-                         p->sat + (size_t)(y - p->first_row) * nc, e->sci + k, e->err + k, e->dq + k);
+                         (const uint8_t *)p->data + (size_t)(y - p->first_row) * nc, e->sci + k, e->err + k,
+                         e->dq + k);
             if (st) return st;
-            pending_done(e, p);
+            pending_done(&e->sat_wait, p);
         }
         if ((st = write_fit(a, e, y0, y - y0))) return st;
     }
@@ -1023,7 +1010,7 @@ static wf_status on_saturation_ramp(const assembler *a, exposure *e, const uint8
     if ((st = grow_out(a, e, (size_t)h->row_count * nc))) return st;
     /* Rows whose resultants came first were written to the file and not kept: read them back
      * rather than hold cubes for an unknown time (memory stays one tile whatever the order).
-     * Dropped resultants were held (hold_resultants). */
+     * Dropped resultants were kept in res_wait. */
     for (uint32_t y = h->first_row; y < end;) {
         if (!(e->rows[y] & ROW_DATA)) { y++; continue; }
         uint32_t y0 = y;
@@ -1031,13 +1018,14 @@ static wf_status on_saturation_ramp(const assembler *a, exposure *e, const uint8
         size_t n = y - y0, plane = n * nc;
         if (a->opt && a->opt->drop_resultants) {
             for (uint32_t r = y0; r < y; r++) {
-                pending_res *p = pending_res_for(e, r);
+                pending *p = pending_for(&e->res_wait, r);
                 if (!p) return fail(a, WF_ERR_INTERNAL, "resultants of row %" PRIu32 " lost", r);
                 size_t k = (size_t)(r - y0) * nc;
-                st = fit_row(a, e, r, p->cube + (size_t)(r - p->first_row) * nc, (size_t)p->row_count * nc,
-                             sat + (size_t)(r - h->first_row) * nc, e->sci + k, e->err + k, e->dq + k);
+                st = fit_row(a, e, r, (const uint16_t *)p->data + (size_t)(r - p->first_row) * nc,
+                             (size_t)p->row_count * nc, sat + (size_t)(r - h->first_row) * nc, e->sci + k,
+                             e->err + k, e->dq + k);
                 if (st) return st;
-                pending_res_done(e, p);
+                pending_done(&e->res_wait, p);
             }
             if ((st = write_fit(a, e, y0, (uint32_t)n))) return st;
             continue;
@@ -1057,23 +1045,7 @@ static wf_status on_saturation_ramp(const assembler *a, exposure *e, const uint8
         }
         if ((st = write_fit(a, e, y0, (uint32_t)n))) return st;
     }
-    if (!waiting) return WF_OK;
-    if (e->npend == e->pend_cap) {
-        size_t cap = e->pend_cap ? 2 * e->pend_cap : 8;
-        pending_sat *p = realloc(e->pend, cap * sizeof *p);
-        if (!p) return fail(a, WF_ERR_NOMEM, "cannot grow the pending table");
-        e->pend = p;
-        e->pend_cap = cap;
-    }
-    pending_sat *p = &e->pend[e->npend];
-    if (!(p->sat = malloc((size_t)h->row_count * nc)))
-        return fail(a, WF_ERR_NOMEM, "cannot keep a saturation map of %" PRIu32 " rows", h->row_count);
-    memcpy(p->sat, sat, (size_t)h->row_count * nc);
-    p->first_row = h->first_row;
-    p->row_count = h->row_count;
-    p->left = waiting;
-    e->npend++;
-    return WF_OK;
+    return waiting ? pending_keep(a, &e->sat_wait, sat, (size_t)h->row_count * nc, waiting, "saturation map") : WF_OK;
 }
 
 #if defined(__SSE2__) && defined(__GNUC__)
@@ -1287,7 +1259,7 @@ static wf_status on_end(assembler *a, exposure *e, char *last_path, size_t last_
         return fail(a, WF_ERR_CORRUPT, "%s%s%s", part_d, miss_d && miss_s ? "; " : "", part_s);
     }
     uint32_t unfit = row_ranges(e->rows, 0, nr, ROW_FIT, 0, data, sizeof data);
-    if (unfit || e->npend)
+    if (unfit || e->sat_wait.n || e->res_wait.n)
         return fail(a, WF_ERR_INTERNAL, "rows %s received but not fitted", data);
 
     wf_status st;
