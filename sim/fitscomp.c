@@ -21,9 +21,10 @@ int wf_fits_comp_dither_seed(uint64_t seed, uint32_t exposure, uint32_t sca)
 wf_status wf_fits_part_create(const char *path, const wf_fits_comp *c, int bitpix, int naxis,
                               long *naxes, fitsfile **f)
 {
-    if (!(c->quantize == 0 || c->quantize >= 1) || c->dither_seed < 1 || c->dither_seed > 10000)
-        return wf_error(WF_ERR_INTERNAL, "%s: quantize level %g or dither seed %d out of range", path,
-                        c->quantize, c->dither_seed);
+    if (!(c->quantize == 0 || c->quantize >= 1))
+        return wf_error(WF_ERR_RANGE, "%s: products.quantize_level %g: 0 (lossless) or at least 1", path, c->quantize);
+    if (c->dither_seed < 1 || c->dither_seed > 10000)
+        return wf_error(WF_ERR_INTERNAL, "%s: dither seed %d outside 1..10000", path, c->dither_seed);
     unlink(path);
     int status = 0;
     const int is_float = bitpix == FLOAT_IMG || bitpix == DOUBLE_IMG;

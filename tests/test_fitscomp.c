@@ -284,6 +284,15 @@ START_TEST(test_dither_seed)
     /* 1800 draws from 10000 values: about 1650 distinct if they spread like random ones */
     ck_assert_int_gt(distinct, 1550);
     ck_assert_int_ne(wf_fits_comp_dither_seed(1, 5, 3), wf_fits_comp_dither_seed(2, 5, 3));
+    /* a step coarser than the noise is refused, naming the key, and leaves no file */
+    char part[4096];
+    snprintf(part, sizeof part, "%s/p.part", wf_test_tmpdir());
+    fitsfile *f = NULL;
+    long ax[2] = {8, 8};
+    wf_fits_comp c = {.quantize = 0.5, .dither_seed = 1};
+    ck_assert_int_eq(wf_fits_part_create(part, &c, FLOAT_IMG, 2, ax, &f), WF_ERR_RANGE);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "products.quantize_level"));
+    ck_assert_int_ne(access(part, F_OK), 0);
 }
 END_TEST
 
