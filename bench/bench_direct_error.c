@@ -52,7 +52,7 @@ static int run(int n, const char *ma, double rate, int nl, wf_sampling sampling,
     char dir[] = "/tmp/wfisim-bench-XXXXXX";
     if (!mkdtemp(dir)) return 1;
     FILE *f = fmemopen(mem.data, mem.len, "rb");
-    wf_assemble_options opt = {dir, 1};
+    wf_assemble_options opt = {.out_dir = dir, .quiet = 1};
     char path[1024];
     wf_status st = wf_assemble_stream(f, "bench", &opt, path, sizeof path);
     fclose(f);

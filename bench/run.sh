@@ -309,6 +309,8 @@ if [ -d "$DATA/salt3/salt3-k21" ]; then
   } >>"$tmp"
 fi
 rm -rf "$sd"
+# ---- products a survey can keep: bytes per SCA-exposure and per tier ------------------
+bench/products.sh >>"$tmp"
 if [ -f docs/BENCHMARKS.notes.md ]; then echo >>"$tmp"; cat docs/BENCHMARKS.notes.md >>"$tmp"; fi
 mv "$tmp" "$out"
 echo "wrote $out" >&2

@@ -16,6 +16,7 @@
 #include "tests/testutil.h"
 #include "tools/assemble.h"
 #include "tools/rampfit.h"
+#include "tools/surveyrun.h"
 
 #define NCOLS 64
 #define NROWS 96
@@ -191,6 +192,31 @@ static int identity(int *order, const stream *s)
     return s->n;
 }
 
+/* META stays first and END last; everything between in a pseudo-random order of the seed,
+ * then (reverse) fully reversed. */
+static void shuffle(int *order, int n, uint32_t seed, int reverse)
+{
+    uint32_t lcg = seed;
+    for (int i = n - 2; i > 1; i--) {
+        lcg = lcg * 1664525u + 1013904223u;
+        int j = 1 + (int)((lcg >> 8) % (uint32_t)i);
+        int t = order[i]; order[i] = order[j]; order[j] = t;
+    }
+    if (reverse)
+        for (int i = 1, j = n - 2; i < j; i++, j--) { int t = order[i]; order[i] = order[j]; order[j] = t; }
+}
+
+static wf_status assemble_with(const char *path, const wf_assemble_options *opt, char *out_path)
+{
+    FILE *in = fopen(path, "rb");
+    ck_assert_ptr_nonnull(in);
+    char last[4096];
+    wf_status st = wf_assemble_stream(in, path, opt, last, sizeof last);
+    fclose(in);
+    if (out_path) strcpy(out_path, last);
+    return st;
+}
+
 static wf_status assemble_file(const char *path, const char *out_dir, char *out_path)
 {
     FILE *in = fopen(path, "rb");
@@ -344,14 +370,7 @@ START_TEST(test_shuffled_is_identical)
     /* META stays first and END last; everything between in a fixed pseudo-random order,
      * and also fully reversed (every SATURATION before its RESULTANTS) */
     for (int pass = 0; pass < 2; pass++) {
-        uint32_t lcg = 12345u;
-        for (int i = n - 2; i > 1; i--) {
-            lcg = lcg * 1664525u + 1013904223u;
-            int j = 1 + (int)((lcg >> 8) % (uint32_t)i);
-            int t = order[i]; order[i] = order[j]; order[j] = t;
-        }
-        if (pass == 1)
-            for (int i = 1, j = n - 2; i < j; i++, j--) { int t = order[i]; order[i] = order[j]; order[j] = t; }
+        shuffle(order, n, 12345u, pass == 1);
         int moved = 0;
         for (int i = 0; i < n; i++) moved += order[i] != i;
         ck_assert_int_gt(moved, n / 2);
@@ -776,6 +795,95 @@ START_TEST(test_disk_full)
 }
 END_TEST
 
+/* products.compress / quantize_level / resultants: each mode against the plain product. */
+enum { MODE_RICE, MODE_RICE_DROP, MODE_PLAIN_DROP, MODE_LOSSLESS, N_MODES };
+
+START_TEST(test_product_modes)
+{
+    const int mode = _i;
+    char in[1024], ref_dir[1024], out[1024], ref[4096], fits[4096], again[4096];
+    dirs(in, ref_dir);
+    strcpy(out, wf_test_tmpdir());
+    spec sp = default_spec();
+    sp.cosmic = 1;
+    sp.sat_x = 5, sp.sat_y = 40, sp.sat_val = 3;
+    stream s;
+    build(&sp, &s);
+    int order[MAX_PACKETS], n = identity(order, &s);
+    const char *path = write_stream(&s, order, n, in, "m.wfip");
+    ck_assert_int_eq(assemble_file(path, ref_dir, ref), WF_OK);
+    wf_assemble_options opt = {.out_dir = out, .quiet = 1, .compress = mode != MODE_PLAIN_DROP,
+                               .quantize_level = mode == MODE_LOSSLESS ? 0 : 16,
+                               .drop_resultants = mode == MODE_RICE_DROP || mode == MODE_PLAIN_DROP};
+    ck_assert_msg(assemble_with(path, &opt, fits) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(count_entries(out), 1); /* no part file left behind */
+    const int want_hdus = opt.drop_resultants ? 5 : 6;
+    ck_assert_int_eq(assert_checksums(fits), want_hdus);
+    ck_assert_msg(wf_survey_product_ok(fits), "%s", wf_error_message());
+
+    /* the same bytes whatever the packet order: shuffled, and every SATURATION first */
+    for (int pass = 0; pass < 2; pass++) {
+        shuffle(order, n, 999u + (uint32_t)pass, pass == 1);
+        char dir2[1024];
+        strcpy(dir2, wf_test_tmpdir());
+        opt.out_dir = dir2;
+        ck_assert_msg(assemble_with(write_stream(&s, order, n, in, "m2.wfip"), &opt, again) == WF_OK, "%s",
+                      wf_error_message());
+        assert_same_file(fits, again);
+        n = identity(order, &s);
+    }
+
+    fitsfile *a = open_fits(ref), *b = open_fits(fits);
+    static float sa[NROWS * NCOLS], sb[NROWS * NCOLS];
+    static uint32_t da[NROWS * NCOLS], db[NROWS * NCOLS];
+    static uint16_t ca[9 * NROWS * NCOLS], cb[9 * NROWS * NCOLS];
+    int status = 0;
+    for (int k = 0; k < 2; k++) {
+        const char *name = k ? "ERR" : "SCI";
+        read_image(a, name, TFLOAT, NROWS * NCOLS, sa);
+        read_image(b, name, TFLOAT, NROWS * NCOLS, sb);
+        ck_assert_int_eq(fits_is_compressed_image(b, &status), opt.compress);
+        for (int i = 0; i < NROWS * NCOLS; i++) {
+            if (mode != MODE_RICE && mode != MODE_RICE_DROP) /* lossless or plain floats: the same bits */
+                ck_assert_msg(!memcmp(&sa[i], &sb[i], sizeof sa[i]), "%s pixel %d: %.9g, plain %.9g", name, i,
+                              sb[i], sa[i]);
+            else /* a noise-free ramp: cfitsio's noise estimate, and the step, are tiny */
+                ck_assert_msg(fabsf(sa[i] - sb[i]) <= 1e-3f * fabsf(sa[i]) + 1e-6f, "%s pixel %d: %.9g, plain %.9g",
+                              name, i, sb[i], sa[i]);
+        }
+    }
+    read_image(a, "DQ", TUINT, NROWS * NCOLS, da);
+    read_image(b, "DQ", TUINT, NROWS * NCOLS, db);
+    ck_assert_msg(!memcmp(da, db, sizeof da), "DQ changed");
+    ck_assert_uint_eq(db[40 * NCOLS + 5] & WF_DQ_SATURATED, WF_DQ_SATURATED);
+    fits_movnam_hdu(b, BINARY_TBL, "COSMICRAYS", 0, &status);
+    ck_assert_int_eq(status, 0);
+    if (opt.drop_resultants) {
+        fits_movnam_hdu(b, ANY_HDU, "RESULTANTS", 0, &status);
+        ck_assert_int_eq(status, BAD_HDU_NUM);
+        status = 0;
+        fits_clear_errmsg();
+    } else {
+        read_image(a, "RESULTANTS", TUSHORT, 9 * NROWS * NCOLS, ca);
+        read_image(b, "RESULTANTS", TUSHORT, 9 * NROWS * NCOLS, cb);
+        ck_assert_msg(!memcmp(ca, cb, sizeof ca), "RESULTANTS changed");
+    }
+    fits_close_file(a, &status);
+    fits_close_file(b, &status);
+
+    /* a damaged compressed product is not taken as done by survey resume */
+    size_t len;
+    unsigned char *buf = slurp(fits, &len);
+    buf[len - 3 * 2880 - 100] ^= 0x08; /* in the last image HDU's data */
+    FILE *f = fopen(fits, "wb");
+    ck_assert_uint_eq(fwrite(buf, 1, len, f), len);
+    fclose(f);
+    free(buf);
+    ck_assert(!wf_survey_product_ok(fits));
+    free(s.data);
+}
+END_TEST
+
 static int python_with_astropy(void)
 {
     return access("/usr/bin/python3", X_OK) == 0 &&
@@ -811,6 +919,23 @@ START_TEST(test_astropy_reads_it)
     free(buf);
     snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/fits_check.py '%s' >/dev/null 2>&1", bad);
     ck_assert_int_ne(system(cmd), 0);
+    /* tile-compressed, as a survey writes it: astropy reads it and its checksums verify */
+    char out2[1024];
+    strcpy(out2, wf_test_tmpdir());
+    wf_assemble_options opt = {.out_dir = out2, .quiet = 1, .compress = 1, .quantize_level = 16};
+    ck_assert_msg(assemble_with(write_stream(&s, order, n, in, "py.wfip"), &opt, fits) == WF_OK, "%s",
+                  wf_error_message());
+    snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/fits_check.py '%s' --shape %dx%d --nres 9 --cosmic 4 --compressed",
+             fits, NROWS, NCOLS);
+    ck_assert_int_eq(system(cmd), 0);
+    buf = slurp(fits, &len);
+    buf[len / 2] ^= 0x40;
+    f = fopen(bad, "wb");
+    ck_assert_uint_eq(fwrite(buf, 1, len, f), len);
+    fclose(f);
+    free(buf);
+    snprintf(cmd, sizeof cmd, "/usr/bin/python3 tests/fits_check.py '%s' --compressed >/dev/null 2>&1", bad);
+    ck_assert_int_ne(system(cmd), 0);
     free(s.data);
 }
 END_TEST
@@ -831,6 +956,7 @@ static Suite *assemble_suite(void)
     tcase_add_test(tc, test_two_exposures);
     tcase_add_test(tc, test_disk_full);
     tcase_add_test(tc, test_astropy_reads_it);
+    tcase_add_loop_test(tc, test_product_modes, 0, N_MODES);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -358,6 +358,9 @@ static const bad_set bad_sets[] = {
     {"detector.ipc=[[0,0,0],[0,1,0],[0,0,0]", WF_ERR_INPUT, "detector.ipc", "YAML"},
     {"run.threads=0", WF_ERR_RANGE, "run.threads", "1 to 1024"},
     {"readout.compress=2", WF_ERR_INPUT, "readout.compress", "true or false"},
+    {"products.compress=zip", WF_ERR_INPUT, "products.compress", "auto, none, rice"},
+    {"products.resultants=maybe", WF_ERR_INPUT, "products.resultants", "keep, drop"},
+    {"products.quantize_level=-1", WF_ERR_RANGE, "products.quantize_level", "0"},
 };
 
 START_TEST(test_bad_set)
@@ -395,6 +398,19 @@ START_TEST(test_finish_constraints)
     ck_assert_int_eq(wf_config_finish(&cfg, &clock), WF_ERR_IO);
     assert_message_has("readout.ma_table");
     assert_message_has(path);
+
+    /* a step coarser than the noise is refused; 0 (lossless) and >= 1 are taken */
+    wf_config_defaults(&cfg);
+    ck_assert_int_eq(cfg.products.compress, WF_COMPRESS_AUTO);
+    ck_assert(cfg.products.quantize_level == 16 && cfg.products.drop_resultants == 0);
+    ck_assert_int_eq(wf_config_set(&cfg, "products.quantize_level=0.5", NULL), WF_OK);
+    ck_assert_int_eq(wf_config_finish(&cfg, &clock), WF_ERR_RANGE);
+    assert_message_has("products.quantize_level");
+    for (int k = 0; k < 2; k++) {
+        wf_config_defaults(&cfg);
+        ck_assert_int_eq(wf_config_set(&cfg, k ? "products.quantize_level=1" : "products.quantize_level=0", NULL), WF_OK);
+        ck_assert_int_eq(wf_config_finish(&cfg, &clock), WF_OK);
+    }
 }
 END_TEST
 

@@ -101,6 +101,23 @@ START_TEST(run_resume_and_independence)
             header(img, "MA_TABLE", v);
             ck_assert_msg(atoi(v + (v[0] == '\'')) == 6, "MA table %s for a 300 s exposure", v);
         }
+    /* survey products are tile-compressed by default (products.compress auto), RESULTANTS kept */
+    {
+        char img[4200];
+        snprintf(img, sizeof img, "%s/a/wfisim_e000015_sca03.fits", d);
+        fitsfile *f;
+        int status = 0, nhdu = 0, compressed[4];
+        fits_open_file(&f, img, READONLY, &status);
+        fits_get_num_hdus(f, &nhdu, &status);
+        for (int h = 0; h < 4; h++) {
+            fits_movabs_hdu(f, h + 2, NULL, &status);
+            compressed[h] = fits_is_compressed_image(f, &status);
+        }
+        fits_close_file(f, &status);
+        ck_assert_int_eq(status, 0);
+        ck_assert_int_eq(nhdu, 6);
+        ck_assert_msg(compressed[0] && compressed[1] && compressed[2] && compressed[3], "%s: image HDUs not compressed", img);
+    }
     /* again: everything verifies, nothing is rendered */
     char log[4200];
     snprintf(log, sizeof log, "%s/log2", d);
@@ -163,6 +180,25 @@ START_TEST(run_resume_and_independence)
     char alone[4200];
     snprintf(alone, sizeof alone, "%s/b/wfisim_e000016_sca07.fits", d);
     assert_same_file(alone, keep);
+    /* products.resultants drop, uncompressed: SCI, ERR, DQ, COSMICRAYS, the truth beside */
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s --exposures 16 --scas 7 " SMALL
+                                 " --set products.compress=none --set products.resultants=drop --out %s/c",
+                                 bin, plan, d), 0);
+    snprintf(alone, sizeof alone, "%s/c/wfisim_e000016_sca07.fits", d);
+    ck_assert_msg(wf_survey_product_ok(alone), "%s", wf_error_message());
+    fitsfile *f2;
+    int status = 0, nhdu = 0;
+    fits_open_file(&f2, alone, READONLY, &status);
+    fits_get_num_hdus(f2, &nhdu, &status);
+    fits_movnam_hdu(f2, ANY_HDU, "SCI", 0, &status);
+    ck_assert_int_eq(fits_is_compressed_image(f2, &status), 0);
+    fits_movnam_hdu(f2, ANY_HDU, "RESULTANTS", 0, &status);
+    ck_assert_int_eq(status, BAD_HDU_NUM);
+    status = 0;
+    fits_close_file(f2, &status);
+    ck_assert_int_eq(nhdu, 5);
+    snprintf(alone, sizeof alone, "%s/c/wfisim_e000016_sca07_truth.fits", d);
+    ck_assert(wf_survey_product_ok(alone));
 }
 END_TEST
 

@@ -899,7 +899,7 @@ static wf_status scene_readout(const acc_run *run, const scene_in *in, const flo
     if (!st && !mkdtemp(dir)) st = wf_error(WF_ERR_IO, "%s: cannot create a temporary directory: %s", dir, strerror(errno));
     if (!st) {
         FILE *f = fmemopen(mem.data, mem.len, "rb");
-        wf_assemble_options opt = {dir, 1};
+        wf_assemble_options opt = {.out_dir = dir, .quiet = 1};
         st = f ? wf_assemble_stream(f, "accuracy readout", &opt, path, sizeof path)
                : wf_error(WF_ERR_IO, "accuracy: cannot read the packet stream back");
         if (f) fclose(f);

@@ -16,6 +16,7 @@
 #include "hal/arena.h"
 #include "hal/clock.h"
 #include "hal/packet.h"
+#include "sim/fitscomp.h"
 #include "sim/fitsdisk.h"
 #include "sim/fitsout.h"
 #include "tools/rampfit.h"
@@ -52,11 +53,20 @@ typedef struct meta {
     int nimg;
 } meta;
 
-/* A SATURATION payload whose rows still wait for their resultants. */
-typedef struct pending_sat {
+/* A payload kept until its rows' other half arrives: a SATURATION map whose rows wait for
+ * their resultants, or (products.resultants drop, when nothing holds them in the file) a
+ * RESULTANTS cube [resultant][row][x] whose rows wait for their saturation. */
+typedef struct pending {
     uint32_t first_row, row_count, left; /* left: rows of it not yet fitted */
-    uint8_t *sat;
-} pending_sat;
+    void *data;
+} pending;
+
+typedef struct pending_list {
+    pending *at;
+    size_t n, cap;
+} pending_list;
+
+enum { HDU_PRIMARY = 1, HDU_SCI, HDU_ERR, HDU_DQ, HDU_RESULTANTS };
 
 typedef struct exposure {
     meta m;
@@ -64,10 +74,12 @@ typedef struct exposure {
     fitsfile *f;
     char path[4096], tmp[4100];
     uint8_t *rows; /* ROW_* per row */
-    pending_sat *pend;
-    size_t npend, pend_cap;
+    pending_list sat_wait, res_wait;
     wf_cosmic_record *cr;
     size_t ncr, cr_cap;
+    /* compressed products: each image HDU (index hdu - HDU_SCI) in its part file until END */
+    fitsfile *part[4];
+    char part_path[4][4120];
     /* scratch, grown to the largest run of rows fitted at once (a tile) */
     uint16_t *cube;
     size_t cube_cap;
@@ -79,7 +91,13 @@ typedef struct exposure {
     wf_fits_datasum sum[5];
 } exposure;
 
-enum { HDU_PRIMARY = 1, HDU_SCI, HDU_ERR, HDU_DQ, HDU_RESULTANTS };
+/* Where an image HDU is being written: the product itself, or its part file (as HDU 2). */
+static fitsfile *hdu_file(const exposure *e, int hdu, int *number)
+{
+    fitsfile *p = e->part[hdu - HDU_SCI];
+    *number = p ? 2 : hdu;
+    return p ? p : e->f;
+}
 
 typedef struct assembler {
     const char *name;
@@ -568,12 +586,18 @@ static int write_primary(fitsfile *f, const meta *m, int *status)
 
 static int write_host_line(fitsfile *f, const hdr_line *h, int *status);
 
-/* The image HDUs share their pixel grid, so each carries the host's img. cards (the WCS). */
-static int create_image(fitsfile *f, int bitpix, int naxis, long *naxes, const char *extname,
+/* The image HDUs share their pixel grid, so each carries the host's img. cards (the WCS).
+ * f is the product (the HDU is created there) or a part file whose compressed image
+ * exists already; cfitsio named that one, hence EXTNAME updated rather than added. */
+static int create_image(fitsfile *f, int in_part, int bitpix, int naxis, long *naxes, const char *extname,
                         const char *bunit, const char *comment, const meta *m, int *status)
 {
-    fits_create_img(f, bitpix, naxis, naxes, status);
-    fits_write_key_str(f, "EXTNAME", extname, comment, status);
+    if (in_part) {
+        fits_update_key_str(f, "EXTNAME", extname, comment, status);
+    } else {
+        fits_create_img(f, bitpix, naxis, naxes, status);
+        fits_write_key_str(f, "EXTNAME", extname, comment, status);
+    }
     if (bunit) fits_write_key_str(f, "BUNIT", bunit, "physical unit of the data", status);
     for (int i = 0; i < m->nimg && !*status; i++) write_host_line(f, &m->img[i], status);
     return *status;
@@ -590,13 +614,24 @@ static void exposure_free(exposure *e)
     }
     if (e->tmp[0]) remove(e->tmp);
     meta_free(&e->m);
-    for (size_t i = 0; i < e->npend; i++) free(e->pend[i].sat);
-    free(e->pend);
+    pending_list *lists[2] = {&e->sat_wait, &e->res_wait};
+    for (int k = 0; k < 2; k++) {
+        for (size_t i = 0; i < lists[k]->n; i++) free(lists[k]->at[i].data);
+        free(lists[k]->at);
+    }
+    for (int i = 0; i < 4; i++)
+        if (e->part[i]) wf_fits_part_discard(e->part[i], e->part_path[i]);
     free(e->rows);
     free(e->cr);
     free(e->cube);
     free(e->sci); /* the block of all three planes */
     free(e);
+}
+
+static wf_status reserve_in(const assembler *a, fitsfile *f, const char *path, const char *doing)
+{
+    wf_status st = wf_fits_reserve_checksum(f, path);
+    return st ? fail(a, st, "%s: %s", doing, wf_error_message()) : WF_OK;
 }
 
 static wf_status reserve(const assembler *a, exposure *e, const char *doing)
@@ -672,31 +707,46 @@ static wf_status exposure_open(assembler *a, const void *payload, exposure **out
         }
     }
     if ((st = reserve(a, e, "primary header"))) goto bad;
-    for (int hdu = HDU_SCI; hdu <= (m->ramp ? HDU_RESULTANTS : HDU_DQ); hdu++) e->sum[hdu - 1].valid = 1;
-    if (create_image(e->f, FLOAT_IMG, 2, naxes, "SCI", "electron/s",
-                     m->ramp ? "count rate from the ramp fit" : "count rate", m, &status)) {
-        st = fail_fits(a, e, status, "creating SCI");
-        goto bad;
-    }
-    if ((st = reserve(a, e, "SCI header"))) goto bad;
-    if (create_image(e->f, FLOAT_IMG, 2, naxes, "ERR", "electron/s",
-                     "1-sigma uncertainty: read and Poisson", m, &status)) {
-        st = fail_fits(a, e, status, "creating ERR");
-        goto bad;
-    }
-    if ((st = reserve(a, e, "ERR header"))) goto bad;
-    if (create_image(e->f, ULONG_IMG, 2, naxes, "DQ", NULL, "data quality: 1 DO_NOT_USE, 2 SATURATED, 4 JUMP_DET", m, &status)) {
-        st = fail_fits(a, e, status, "creating DQ");
-        goto bad;
-    }
-    if ((st = reserve(a, e, "DQ header"))) goto bad;
-    if (m->ramp) {
-        if (create_image(e->f, USHORT_IMG, 3, naxes, "RESULTANTS", "adu",
-                         "averaged reads [resultant][y][x]", m, &status)) {
-            st = fail_fits(a, e, status, "creating RESULTANTS");
+    static const struct {
+        int bitpix, naxis;
+        const char *name, *bunit, *comment_ramp, *comment_single;
+    } img[] = {
+        {FLOAT_IMG, 2, "SCI", "electron/s", "count rate from the ramp fit", "count rate"},
+        {FLOAT_IMG, 2, "ERR", "electron/s", "1-sigma uncertainty: read and Poisson", NULL},
+        {ULONG_IMG, 2, "DQ", NULL, "data quality: 1 DO_NOT_USE, 2 SATURATED, 4 JUMP_DET", NULL},
+        {USHORT_IMG, 3, "RESULTANTS", "adu", "averaged reads [resultant][y][x]", NULL},
+    };
+    const int last = m->ramp && !(a->opt && a->opt->drop_resultants) ? HDU_RESULTANTS : HDU_DQ;
+    const int compress = a->opt && a->opt->compress;
+    wf_fits_comp comp = {.quantize = a->opt ? a->opt->quantize_level : 0,
+                         .dither_seed = wf_fits_comp_dither_seed(m->seed, m->exposure, m->sca)};
+    for (int hdu = HDU_SCI; hdu <= last; hdu++) {
+        const int k = hdu - HDU_SCI;
+        const char *comment = !m->ramp && img[k].comment_single ? img[k].comment_single : img[k].comment_ramp;
+        fitsfile *f = e->f;
+        const char *fpath = e->tmp;
+        char doing[64];
+        if (compress) {
+            snprintf(e->part_path[k], sizeof e->part_path[k], "%s.%s", e->tmp, img[k].name);
+            if ((st = wf_fits_part_create(e->part_path[k], &comp, img[k].bitpix, img[k].naxis, naxes, &e->part[k]))) {
+                char why[900];
+                snprintf(why, sizeof why, "%s", wf_error_message());
+                st = fail(a, st, "%s", why);
+                goto bad;
+            }
+            f = e->part[k];
+            fpath = e->part_path[k];
+        } else {
+            e->sum[hdu - 1].valid = 1; /* summed as the rows are written */
+        }
+        if (create_image(f, compress, img[k].bitpix, img[k].naxis, naxes, img[k].name, img[k].bunit, comment, m,
+                         &status)) {
+            snprintf(doing, sizeof doing, "creating %s", img[k].name);
+            st = fail_fits(a, e, status, doing);
             goto bad;
         }
-        if ((st = reserve(a, e, "RESULTANTS header"))) goto bad;
+        snprintf(doing, sizeof doing, "%s header", img[k].name);
+        if ((st = reserve_in(a, f, fpath, doing))) goto bad;
     }
     *out = e;
     return WF_OK;
@@ -791,12 +841,17 @@ static wf_status fit_row(const assembler *a, const exposure *e, uint32_t y, cons
 static wf_status write_rows(const assembler *a, exposure *e, int hdu, int type, uint32_t y0,
                             uint32_t n, void *data, const char *what)
 {
-    int status = 0;
-    fits_movabs_hdu(e->f, hdu, NULL, &status);
-    /* TFLOAT is stored as its bit pattern, TUINT with BZERO 2^31; the rows are written in
-     * place (nothing reads a tile's planes after they are written) */
-    wf_fits_write32(e->f, (LONGLONG)y0 * e->m.ncols, data, (size_t)n * (size_t)e->m.ncols,
-                    type == TUINT ? 0x80000000u : 0, &e->sum[hdu - 1], &status);
+    int status = 0, number;
+    fitsfile *f = hdu_file(e, hdu, &number);
+    fits_movabs_hdu(f, number, NULL, &status);
+    if (f != e->f) { /* a compressed part: cfitsio codes whole rows, which are whole tiles */
+        fits_write_img(f, type, (LONGLONG)y0 * e->m.ncols + 1, (LONGLONG)n * e->m.ncols, data, &status);
+    } else {
+        /* TFLOAT is stored as its bit pattern, TUINT with BZERO 2^31; the rows are written in
+         * place (nothing reads a tile's planes after they are written) */
+        wf_fits_write32(f, (LONGLONG)y0 * e->m.ncols, data, (size_t)n * (size_t)e->m.ncols,
+                        type == TUINT ? 0x80000000u : 0, &e->sum[hdu - 1], &status);
+    }
     if (status) {
         char doing[96];
         snprintf(doing, sizeof doing, "writing %s rows %" PRIu32 "-%" PRIu32, what, y0, y0 + n - 1);
@@ -816,19 +871,42 @@ static wf_status write_fit(const assembler *a, exposure *e, uint32_t y0, uint32_
     return WF_OK;
 }
 
-static pending_sat *pending_for(exposure *e, uint32_t y)
+static pending *pending_for(pending_list *l, uint32_t y)
 {
-    for (size_t i = 0; i < e->npend; i++)
-        if (y >= e->pend[i].first_row && y - e->pend[i].first_row < e->pend[i].row_count)
-            return &e->pend[i];
+    for (size_t i = 0; i < l->n; i++)
+        if (y >= l->at[i].first_row && y - l->at[i].first_row < l->at[i].row_count) return &l->at[i];
     return NULL;
 }
 
-static void pending_done(exposure *e, pending_sat *p)
+static void pending_done(pending_list *l, pending *p)
 {
     if (--p->left) return;
-    free(p->sat);
-    *p = e->pend[--e->npend];
+    free(p->data);
+    *p = l->at[--l->n];
+}
+
+/* Keeps a copy of the current packet's payload (bytes) until `waiting` of its rows are
+ * fitted; what names it in messages. */
+static wf_status pending_keep(const assembler *a, pending_list *l, const void *payload, size_t bytes,
+                              uint32_t waiting, const char *what)
+{
+    const wf_packet_header *h = &a->h;
+    if (l->n == l->cap) {
+        size_t cap = l->cap ? 2 * l->cap : 8;
+        pending *p = realloc(l->at, cap * sizeof *p);
+        if (!p) return fail(a, WF_ERR_NOMEM, "cannot grow the table of pending %s", what);
+        l->at = p;
+        l->cap = cap;
+    }
+    pending *p = &l->at[l->n];
+    if (!(p->data = malloc(bytes)))
+        return fail(a, WF_ERR_NOMEM, "cannot keep the %s of %" PRIu32 " rows", what, h->row_count);
+    memcpy(p->data, payload, bytes);
+    p->first_row = h->first_row;
+    p->row_count = h->row_count;
+    p->left = waiting;
+    l->n++;
+    return WF_OK;
 }
 
 /* Packet covers rows no earlier packet of its kind covered, and lies inside the SCA. */
@@ -874,17 +952,28 @@ static wf_status on_resultants(const assembler *a, exposure *e, const void *payl
         for (size_t i = 0; i < plane * nres; i++) e->cube[i] = (uint16_t)(b[2 * i] | b[2 * i + 1] << 8);
         cube = e->cube;
     }
-    int status = 0;
-    long fp[3] = {1, (long)h->first_row + 1, 1};
-    long lp[3] = {e->m.ncols, (long)(h->first_row + h->row_count), nres};
-    fits_movabs_hdu(e->f, HDU_RESULTANTS, NULL, &status);
-    fits_write_subset(e->f, TUSHORT, fp, lp, (void *)(uintptr_t)cube, &status);
-    if (status) return fail_fits(a, e, status, "writing RESULTANTS");
-    for (int r = 0; r < nres; r++) /* TUSHORT is stored with BZERO 32768 */
-        wf_fits_datasum_add16(&e->sum[HDU_RESULTANTS - 1], cube + (size_t)r * plane, plane,
-                              (uint64_t)e->m.ncols * ((uint64_t)h->first_row + (uint64_t)e->m.nrows * (uint64_t)r),
-                              0x8000);
-    for (uint32_t y = h->first_row; y < h->first_row + h->row_count; y++) e->rows[y] |= ROW_DATA;
+    const int drop = a->opt && a->opt->drop_resultants;
+    if (!drop) {
+        int status = 0, number;
+        fitsfile *f = hdu_file(e, HDU_RESULTANTS, &number);
+        long fp[3] = {1, (long)h->first_row + 1, 1};
+        long lp[3] = {e->m.ncols, (long)(h->first_row + h->row_count), nres};
+        fits_movabs_hdu(f, number, NULL, &status);
+        fits_write_subset(f, TUSHORT, fp, lp, (void *)(uintptr_t)cube, &status);
+        if (status) return fail_fits(a, e, status, "writing RESULTANTS");
+        for (int r = 0; f == e->f && r < nres; r++) /* TUSHORT is stored with BZERO 32768 */
+            wf_fits_datasum_add16(&e->sum[HDU_RESULTANTS - 1], cube + (size_t)r * plane, plane,
+                                  (uint64_t)e->m.ncols * ((uint64_t)h->first_row + (uint64_t)e->m.nrows * (uint64_t)r),
+                                  0x8000);
+    }
+    uint32_t waiting = 0;
+    for (uint32_t y = h->first_row; y < h->first_row + h->row_count; y++) {
+        e->rows[y] |= ROW_DATA;
+        waiting += !(e->rows[y] & ROW_SAT);
+    }
+    if (drop && waiting &&
+        (st = pending_keep(a, &e->res_wait, cube, (size_t)nres * plane * sizeof *cube, waiting, "resultants")))
+        return st;
 
     if ((st = grow_out(a, e, plane))) return st;
     const size_t nc = (size_t)e->m.ncols;
@@ -892,13 +981,14 @@ static wf_status on_resultants(const assembler *a, exposure *e, const void *payl
         if (!(e->rows[y] & ROW_SAT)) { y++; continue; }
         uint32_t y0 = y;
         for (; y < end && (e->rows[y] & ROW_SAT); y++) {
-            pending_sat *p = pending_for(e, y);
+            pending *p = pending_for(&e->sat_wait, y);
             if (!p) return fail(a, WF_ERR_INTERNAL, "saturation of row %" PRIu32 " lost", y);
             size_t k = (size_t)(y - y0) * nc;
             st = fit_row(a, e, y, cube + (size_t)(y - h->first_row) * nc, plane,
-                         p->sat + (size_t)(y - p->first_row) * nc, e->sci + k, e->err + k, e->dq + k);
+                         (const uint8_t *)p->data + (size_t)(y - p->first_row) * nc, e->sci + k, e->err + k,
+                         e->dq + k);
             if (st) return st;
-            pending_done(e, p);
+            pending_done(&e->sat_wait, p);
         }
         if ((st = write_fit(a, e, y0, y - y0))) return st;
     }
@@ -919,17 +1009,33 @@ static wf_status on_saturation_ramp(const assembler *a, exposure *e, const uint8
     }
     if ((st = grow_out(a, e, (size_t)h->row_count * nc))) return st;
     /* Rows whose resultants came first were written to the file and not kept: read them back
-     * rather than hold cubes for an unknown time (memory stays one tile whatever the order). */
+     * rather than hold cubes for an unknown time (memory stays one tile whatever the order).
+     * Dropped resultants were kept in res_wait. */
     for (uint32_t y = h->first_row; y < end;) {
         if (!(e->rows[y] & ROW_DATA)) { y++; continue; }
         uint32_t y0 = y;
         while (y < end && (e->rows[y] & ROW_DATA)) y++;
         size_t n = y - y0, plane = n * nc;
+        if (a->opt && a->opt->drop_resultants) {
+            for (uint32_t r = y0; r < y; r++) {
+                pending *p = pending_for(&e->res_wait, r);
+                if (!p) return fail(a, WF_ERR_INTERNAL, "resultants of row %" PRIu32 " lost", r);
+                size_t k = (size_t)(r - y0) * nc;
+                st = fit_row(a, e, r, (const uint16_t *)p->data + (size_t)(r - p->first_row) * nc,
+                             (size_t)p->row_count * nc, sat + (size_t)(r - h->first_row) * nc, e->sci + k,
+                             e->err + k, e->dq + k);
+                if (st) return st;
+                pending_done(&e->res_wait, p);
+            }
+            if ((st = write_fit(a, e, y0, (uint32_t)n))) return st;
+            continue;
+        }
         if ((st = grow_cube(a, e, plane * nres))) return st;
-        int status = 0, anynul = 0;
+        int status = 0, anynul = 0, number;
+        fitsfile *f = hdu_file(e, HDU_RESULTANTS, &number);
         long fp[3] = {1, (long)y0 + 1, 1}, lp[3] = {(long)nc, (long)y, nres}, inc[3] = {1, 1, 1};
-        fits_movabs_hdu(e->f, HDU_RESULTANTS, NULL, &status);
-        fits_read_subset(e->f, TUSHORT, fp, lp, inc, NULL, e->cube, &anynul, &status);
+        fits_movabs_hdu(f, number, NULL, &status);
+        fits_read_subset(f, TUSHORT, fp, lp, inc, NULL, e->cube, &anynul, &status);
         if (status) return fail_fits(a, e, status, "reading back RESULTANTS");
         for (uint32_t r = y0; r < y; r++) {
             size_t k = (size_t)(r - y0) * nc;
@@ -939,23 +1045,7 @@ static wf_status on_saturation_ramp(const assembler *a, exposure *e, const uint8
         }
         if ((st = write_fit(a, e, y0, (uint32_t)n))) return st;
     }
-    if (!waiting) return WF_OK;
-    if (e->npend == e->pend_cap) {
-        size_t cap = e->pend_cap ? 2 * e->pend_cap : 8;
-        pending_sat *p = realloc(e->pend, cap * sizeof *p);
-        if (!p) return fail(a, WF_ERR_NOMEM, "cannot grow the pending table");
-        e->pend = p;
-        e->pend_cap = cap;
-    }
-    pending_sat *p = &e->pend[e->npend];
-    if (!(p->sat = malloc((size_t)h->row_count * nc)))
-        return fail(a, WF_ERR_NOMEM, "cannot keep a saturation map of %" PRIu32 " rows", h->row_count);
-    memcpy(p->sat, sat, (size_t)h->row_count * nc);
-    p->first_row = h->first_row;
-    p->row_count = h->row_count;
-    p->left = waiting;
-    e->npend++;
-    return WF_OK;
+    return waiting ? pending_keep(a, &e->sat_wait, sat, (size_t)h->row_count * nc, waiting, "saturation map") : WF_OK;
 }
 
 #if defined(__SSE2__) && defined(__GNUC__)
@@ -1169,10 +1259,20 @@ static wf_status on_end(assembler *a, exposure *e, char *last_path, size_t last_
         return fail(a, WF_ERR_CORRUPT, "%s%s%s", part_d, miss_d && miss_s ? "; " : "", part_s);
     }
     uint32_t unfit = row_ranges(e->rows, 0, nr, ROW_FIT, 0, data, sizeof data);
-    if (unfit || e->npend)
+    if (unfit || e->sat_wait.n || e->res_wait.n)
         return fail(a, WF_ERR_INTERNAL, "rows %s received but not fitted", data);
 
     wf_status st;
+    for (int k = 0; k < 4; k++) { /* compressed images, in HDU order, after the primary */
+        if (!e->part[k]) continue;
+        st = wf_fits_part_append(e->f, e->tmp, e->part[k], e->part_path[k]);
+        e->part[k] = NULL;
+        if (st) {
+            char why[900];
+            snprintf(why, sizeof why, "%s", wf_error_message());
+            return fail(a, st, "%s", why);
+        }
+    }
     if ((e->m.effects && has_word(e->m.effects, "cosmic")) || e->ncr)
         if ((st = write_cosmics(a, e))) return st;
     if ((st = wf_fits_checksum_all(e->f, e->tmp, e->sum, (int)(sizeof e->sum / sizeof e->sum[0])))) {

@@ -3,7 +3,10 @@
  * ERR (e-/s, float32), DQ (uint32, WF_DQ_*), and in up-the-ramp mode RESULTANTS (uint16 ADU
  * cube [resultant][y][x]); COSMICRAYS (cosmic-ray truth table) when cosmic rays are on;
  * CHECKSUM/DATASUM on every HDU (docs/PACKETS.md). Tiles are fitted and written as
- * they arrive (memory bounded by a tile, not the SCA). Written to "<name>.tmp" and renamed
+ * they arrive (memory bounded by a tile, not the SCA). With `compress` the image HDUs are
+ * tile-compressed (sim/fitscomp.h); with `drop_resultants` RESULTANTS is left out (a tile's
+ * resultants are then held until its SATURATION packet arrives: one tile in the readout's
+ * order, more only if a stream sends them far apart). Written to "<name>.tmp" and renamed
  * only when every row arrived exactly once, so a damaged stream leaves no FITS behind. */
 #ifndef WF_ASSEMBLE_H
 #define WF_ASSEMBLE_H
@@ -15,6 +18,9 @@
 typedef struct wf_assemble_options {
     const char *out_dir;   /* where FITS files go */
     int quiet;
+    int compress;          /* tile-compress the image HDUs */
+    double quantize_level; /* with compress: SCI and ERR step noise / q; 0 lossless */
+    int drop_resultants;   /* no RESULTANTS HDU */
 } wf_assemble_options;
 
 /* Reads the whole stream; writes out_dir/wfisim_e<exposure>_sca<NN>.fits per exposure.

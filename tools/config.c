@@ -72,6 +72,10 @@ static const char *const samplings[] = {"per-read", "direct", NULL};
 
 static const char *const scene_kinds[] = {"synthetic", "catalog", "grid", "galsim", NULL};
 static const char *const pupil_bins[] = {"1", "2", "4", "8", NULL};
+static const char *const compressions[] = {"auto", "none", "rice", NULL};
+static const char *const keep_drop[] = {"keep", "drop", NULL};
+_Static_assert(WF_COMPRESS_AUTO == 0 && WF_COMPRESS_NONE == 1 && WF_COMPRESS_RICE == 2,
+               "products.compress choices follow WF_COMPRESS_*");
 
 static const key_desc keys[] = {
     {.name = "seed", .type = KT_UINT, .unit = "", .def = "1", FIELD(seed),
@@ -117,6 +121,15 @@ static const key_desc keys[] = {
      .doc = "Do not report progress and files written on stderr."},
     {.name = "run.uncached_writes", .type = KT_BOOL, .unit = "", .def = "true", FIELD(uncached_writes),
      .doc = "Write products past the page cache (O_DIRECT) on file systems that state its alignment (ext4, xfs; not tmpfs): a single-frame SCA's 200 MB then cost the device's transfer, not a copy into fresh cache pages. false: through the page cache. The bytes written are the same."},
+    {.name = "products.compress", .type = KT_ENUM, .unit = "", .def = "auto", .choices = compressions,
+     FIELD(products.compress),
+     .doc = "Image HDUs of a product: `rice`: tile-compressed FITS (one row a tile; integer HDUs, DQ and RESULTANTS, Rice-coded losslessly; SCI and ERR quantized, see products.quantize_level, with subtractive dithering seeded from seed, exposure and SCA, then Rice-coded); `none`: plain images; `auto`: rice for `survey run`, none for expose, demo and assemble (exact pixels for comparisons with GalSim and the accuracy tools). Astropy and cfitsio read both alike."},
+    {.name = "products.quantize_level", .type = KT_DOUBLE, .unit = "", .def = "16", MIN(0),
+     FIELD(products.quantize_level),
+     .doc = "With products.compress rice: SCI and ERR are rounded to steps of (noise / q), the noise being cfitsio's estimate for each row from its pixel differences; dithered rounding adds noise of rms (step / sqrt 12) = noise / (3.46 q) and no bias (docs/SURVEY.md measures it on photometry). 0: floats kept exact (GZIP, lossless); otherwise at least 1."},
+    {.name = "products.resultants", .type = KT_ENUM, .unit = "", .def = "keep", .choices = keep_drop,
+     FIELD(products.drop_resultants),
+     .doc = "Up-the-ramp products: `keep` writes the RESULTANTS cube (ADU, ~70% of an uncompressed product); `drop` leaves it out: SCI, ERR, DQ, COSMICRAYS and the truth file are written all the same."},
     {.name = "run.out", .type = KT_STRING, .unit = "", .def = "out", .nonempty = 1,
      FIELD(out_dir), .doc = "Directory that receives the products."},
 
@@ -1057,6 +1070,10 @@ wf_status wf_config_finish(wf_config *cfg, wf_clock *clock)
         snprintf(msg, sizeof msg, "%s", wf_error_message());
         return wf_error(st, "readout.ma_table: %s", msg);
     }
+    if (cfg->products.quantize_level > 0 && cfg->products.quantize_level < 1)
+        return wf_error(WF_ERR_RANGE,
+                        "products.quantize_level %g: 0 (lossless) or at least 1 (a step no coarser than the noise)",
+                        cfg->products.quantize_level);
     cfg->ro.seed = cfg->seed;
     return WF_OK;
 }
@@ -1080,6 +1097,8 @@ static const struct {
     {"sn.x1", "Stretch distribution."},
     {"sn.c", "Colour distribution."},
     {"sn.host", "Host galaxies."},
+    {"products", "What a product keeps and how it is stored (docs/SURVEY.md): the truth tables "
+                 "are always written."},
     {"paths", "Where optional inputs live; the program runs without them on built-in values."},
 };
 

@@ -14,6 +14,9 @@
 
 #define WF_PATH_MAX 1024
 
+/* products.compress: `auto` is rice for `survey run`, none for every other command */
+enum { WF_COMPRESS_AUTO = 0, WF_COMPRESS_NONE = 1, WF_COMPRESS_RICE = 2 };
+
 typedef struct wf_config {
     uint64_t seed;                 /* seed [1] */
     wf_readout_config ro;          /* readout.*, detector.*, exposure.id/sca/mode/sampling/exptime */
@@ -23,6 +26,11 @@ typedef struct wf_config {
     int quiet;                     /* run.quiet [false] */
     int uncached_writes;           /* run.uncached_writes [true] */
     char out_dir[WF_PATH_MAX];     /* run.out ["out"] */
+    struct {                       /* products.*: what a product keeps (docs/SURVEY.md) */
+        int compress;              /* WF_COMPRESS_* [auto] */
+        double quantize_level;     /* float HDUs' step is noise / this; 0 lossless [16] */
+        int drop_resultants;       /* products.resultants: keep (0) or drop (1) [keep] */
+    } products;
     char filter[16];               /* exposure.filter [Y106] */
     /* Built-in grid scene (scene.*) until the renderer lands. */
     double sky_rate;               /* scene.sky_rate, e-/pixel/s */

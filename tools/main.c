@@ -199,7 +199,8 @@ static int cmd_assemble(cli *c)
     if (st) return fail("assemble", st);
     FILE *in = strcmp(c->positional, "-") ? fopen(c->positional, "rb") : stdin;
     if (!in) { wf_error(WF_ERR_IO, "%s: cannot open", c->positional); return fail("assemble", WF_ERR_IO); }
-    wf_assemble_options opt = {c->cfg.out_dir, c->cfg.quiet};
+    wf_assemble_options opt;
+    wf_pipeline_assemble_options(&c->cfg, &opt);
     char path[WF_PATH_MAX] = "";
     st = wf_assemble_stream(in, c->positional, &opt, path, sizeof path);
     if (in != stdin) fclose(in);

@@ -152,6 +152,16 @@ typedef struct assembler_thread {
     char path[WF_PATH_MAX];
 } assembler_thread;
 
+void wf_pipeline_assemble_options(const wf_config *cfg, wf_assemble_options *opt)
+{
+    memset(opt, 0, sizeof *opt);
+    opt->out_dir = cfg->out_dir;
+    opt->quiet = cfg->quiet;
+    opt->compress = cfg->products.compress == WF_COMPRESS_RICE;
+    opt->quantize_level = cfg->products.quantize_level;
+    opt->drop_resultants = cfg->products.drop_resultants;
+}
+
 static long pipe_read(void *ctx, void *buf, size_t n) { return (long)wf_link_pipe_read(ctx, buf, n); }
 
 static void *assemble_main(void *arg)
@@ -374,8 +384,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
     if ((st = wf_link_pipe_open(&lp, (size_t)4 << 20, "in-process stream", &link))) goto done;
     assembler_thread at = {0};
     at.in = &lp;
-    at.opt.out_dir = cfg->out_dir;
-    at.opt.quiet = cfg->quiet;
+    wf_pipeline_assemble_options(cfg, &at.opt);
     pthread_t th;
     if (pthread_create(&th, NULL, assemble_main, &at) != 0) {
         wf_link_pipe_free(&lp);

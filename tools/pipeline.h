@@ -10,6 +10,7 @@
 #include "hal/scene.h"
 #include "sim/catalog.h"
 #include "sim/scene.h"
+#include "tools/assemble.h"
 #include "tools/config.h"
 #include "tools/sninject.h"
 
@@ -54,6 +55,10 @@ void wf_pipeline_paths(const char *dir, unsigned exposure, unsigned sca, char *i
 
 /* The built-in grid scene of cfg (scene.sky_rate, scene.grid.*). */
 void wf_pipeline_grid(const wf_config *cfg, wf_scene_grid *g);
+
+/* The assembler's options from cfg: run.out, run.quiet and products.* (compress auto is
+ * none here; `survey run` resolves it to rice before it comes through). */
+void wf_pipeline_assemble_options(const wf_config *cfg, wf_assemble_options *opt);
 
 /* mkdir -p. */
 wf_status wf_pipeline_make_dir(const char *dir);

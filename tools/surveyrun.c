@@ -111,6 +111,8 @@ static wf_status configure(const wf_config *base, const wf_survey_run_options *o
     wf_status st = wf_config_set(cfg, buf, opt->plan_path);
     if (st) return st;
     cfg->ro.exptime = x->exptime;
+    /* products a survey can keep: tile-compressed unless asked otherwise (docs/SURVEY.md) */
+    if (cfg->products.compress == WF_COMPRESS_AUTO) cfg->products.compress = WF_COMPRESS_RICE;
     if (!opt->ma_table_given) {
         char name[8];
         if ((st = nearest_table(cfg->frame_time, x->exptime, name, sizeof name))) return st;
