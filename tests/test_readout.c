@@ -704,6 +704,42 @@ START_TEST(cosmic_truth_larger_than_tile)
 }
 END_TEST
 
+/* One readout instance in an arena of exactly its need, on a grid scene and a memory link
+ * (lm holds what it sent). */
+typedef struct instance {
+    size_t need;
+    void *mem;
+    wf_arena arena;
+    wf_scene_grid g;
+    wf_scene_source src;
+    wf_noise noise;
+    wf_link_memory lm;
+    wf_link link;
+    wf_readout *ro;
+} instance;
+
+static void instance_open(instance *in, const wf_readout_config *cfg, const wf_clock *clock)
+{
+    memset(in, 0, sizeof *in);
+    ck_assert_msg(wf_readout_arena_need(cfg, clock, &in->need) == WF_OK, "%s", wf_error_message());
+    in->mem = malloc(in->need);
+    wf_arena_init(&in->arena, in->mem, in->need, "instance");
+    in->g = test_grid(cfg->ncols, cfg->nrows);
+    wf_scene_grid_source(&in->g, &in->src);
+    in->noise = (wf_noise){WF_NOISE_PHILOX, 1, 1, 1};
+    wf_link_memory_open(&in->lm, &in->link);
+    ck_assert_msg(wf_readout_create(cfg, clock, &in->src, &in->noise, &in->link, &in->arena, &in->ro) == WF_OK,
+                  "%s", wf_error_message());
+}
+
+static void instance_close(instance *in)
+{
+    ck_assert(in->arena.high_water <= in->need);
+    wf_readout_destroy(in->ro);
+    wf_link_memory_close(&in->lm);
+    free(in->mem);
+}
+
 /* Checked size arithmetic (hal/size.h): a product or sum that would wrap saturates, and
  * stays saturated; the arena's alignment cost and typed allocation refuse it. */
 START_TEST(size_arithmetic_saturates)
@@ -782,24 +818,10 @@ START_TEST(time_and_size_limits)
     cfg.det.cr_rate = 5.0;
     ck_assert_int_eq(wf_ma_from_counts("longest", longest, 1, &clock.ma), WF_OK);
     clock.frame_time = WF_EXPOSURE_TIME_MAX / WF_MA_MAX_READS;
-    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_OK);
-    void *mem = malloc(need);
-    wf_arena arena;
-    wf_arena_init(&arena, mem, need, "longest");
-    wf_scene_grid g = test_grid(64, 64);
-    wf_scene_source src;
-    wf_scene_grid_source(&g, &src);
-    wf_noise noise = {WF_NOISE_PHILOX, 1, 1, 1};
-    wf_link_memory lm;
-    wf_link link;
-    wf_link_memory_open(&lm, &link);
-    wf_readout *ro;
-    ck_assert_int_eq(wf_readout_create(&cfg, &clock, &src, &noise, &link, &arena, &ro), WF_OK);
-    ck_assert_int_eq(wf_readout_send_meta(ro, NULL), WF_OK);
-    ck_assert(arena.high_water <= need);
-    wf_readout_destroy(ro);
-    wf_link_memory_close(&lm);
-    free(mem);
+    instance in;
+    instance_open(&in, &cfg, &clock);
+    ck_assert_int_eq(wf_readout_send_meta(in.ro, NULL), WF_OK);
+    instance_close(&in);
 }
 END_TEST
 
@@ -813,43 +835,28 @@ START_TEST(meta_fits_any_detector)
     small_config(&cfg, &clock, 1, 1);
     cfg.tile_rows = 1;
     cfg.compress = 0; /* the uncompressed text must fit one packet too */
-    size_t need;
-    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_OK);
-    void *mem = malloc(need);
-    wf_arena arena;
-    wf_arena_init(&arena, mem, need, "1x1");
-    wf_scene_grid g = test_grid(1, 1);
-    wf_scene_source src;
-    wf_scene_grid_source(&g, &src);
-    wf_noise noise = {WF_NOISE_PHILOX, 1, 1, 1};
-    wf_link_memory lm;
-    wf_link link;
-    wf_link_memory_open(&lm, &link);
-    wf_readout *ro;
-    ck_assert_int_eq(wf_readout_create(&cfg, &clock, &src, &noise, &link, &arena, &ro), WF_OK);
-    size_t mark = wf_arena_mark(&arena), half = WF_READOUT_META_MAX / 2;
+    instance in;
+    instance_open(&in, &cfg, &clock);
+    size_t mark = wf_arena_mark(&in.arena), half = WF_READOUT_META_MAX / 2;
     char *extra = malloc(WF_READOUT_META_MAX + 1);
     for (size_t i = 0; i < half; i++) extra[i] = i % 64 == 63 ? '\n' : 'x';
     extra[half] = '\0';
-    ck_assert_int_eq(wf_readout_send_meta(ro, extra), WF_OK);
-    ck_assert_uint_eq(wf_arena_mark(&arena), mark);
+    ck_assert_int_eq(wf_readout_send_meta(in.ro, extra), WF_OK);
+    ck_assert_uint_eq(wf_arena_mark(&in.arena), mark);
     /* the packet carries every byte: the fixed lines and the extra ones */
     wf_packet_header h;
-    ck_assert_int_eq(wf_packet_header_read(lm.data, &h), WF_OK);
+    ck_assert_int_eq(wf_packet_header_read(in.lm.data, &h), WF_OK);
     ck_assert_uint_eq(h.kind, WF_PK_META);
     ck_assert_uint_gt(h.raw_len, half);
-    ck_assert_uint_eq(lm.len, WF_PACKET_HEADER_SIZE + h.raw_len); /* not deflated: the text as it is */
-    ck_assert(!memcmp(lm.data + lm.len - half, extra, half));
+    ck_assert_uint_eq(in.lm.len, WF_PACKET_HEADER_SIZE + h.raw_len); /* not deflated: the text as it is */
+    ck_assert(!memcmp(in.lm.data + in.lm.len - half, extra, half));
     memset(extra, 'x', WF_READOUT_META_MAX);
     extra[WF_READOUT_META_MAX] = '\0';
-    ck_assert_int_eq(wf_readout_send_meta(ro, extra), WF_ERR_RANGE);
+    ck_assert_int_eq(wf_readout_send_meta(in.ro, extra), WF_ERR_RANGE);
     ck_assert_ptr_nonnull(strstr(wf_error_message(), "META text longer"));
-    ck_assert_uint_eq(wf_arena_mark(&arena), mark);
-    ck_assert(arena.high_water <= need);
+    ck_assert_uint_eq(wf_arena_mark(&in.arena), mark);
     free(extra);
-    wf_readout_destroy(ro);
-    wf_link_memory_close(&lm);
-    free(mem);
+    instance_close(&in);
 }
 END_TEST
 
