@@ -126,6 +126,8 @@ START_TEST(corrupt_stream_leaves_nothing)
     snprintf(tmp, sizeof tmp, "%s.tmp", out);
     ck_assert(!exists(out));
     ck_assert(!exists(tmp));
+    snprintf(out, sizeof out, "%s/out", d);
+    ck_assert_msg(!exists(out), "the folder assemble made is left behind");
 }
 END_TEST
 
