@@ -112,8 +112,8 @@ static const key_desc keys[] = {
     {.name = "readout.frame_time", .type = KT_DOUBLE, .unit = "s", .def = NULL, ABOVE(0),
      MAX(WF_FRAME_TIME_MAX), FIELD(frame_time),
      .doc = "Time per full-frame read (romanisim's value; older tools 3.04). At most 100 s, 30x "
-            "the flight value: no WFI read pattern is slower, and the ramp's exposure time (reads "
-            "x frame time) must stay within a day (exposure.exptime)."},
+            "the flight value, room for what-if studies with every size derived from it finite; "
+            "the ramp's exposure time (reads x frame time) is held to a day too (exposure.exptime)."},
     {.name = "readout.ma_table", .type = KT_STRING, .unit = "", .def = "6", .nonempty = 1,
      FIELD(ma_table),
      .doc = "MultiAccum table: built-in Rev F `4`, `6`, `11`, or a table file (path from the "
