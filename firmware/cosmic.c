@@ -1,7 +1,10 @@
 #include "firmware/cosmic.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
+
+#include "hal/size.h"
 
 #define DEDX_MIN 10.0
 #define DEDX_MAX 10000.0
@@ -14,7 +17,9 @@ double wf_cosmic_expected_hits(const wf_detector *det, int ncols, int nrows, dou
 
 static int reach_rows(const wf_detector *det)
 {
-    return (int)ceil(det->cr_lmax_um / det->pixel_um) + 2;
+    /* a track longer than the largest SCA (65536 rows, firmware/readout.c) reaches no further */
+    double rows = ceil(det->cr_lmax_um / det->pixel_um) + 2.0;
+    return rows < 65538.0 ? (int)rows : 65538;
 }
 
 /* Mean pixels a track touches, from the mean path length of the power law: sizes buffers. */
@@ -26,8 +31,11 @@ static double mean_pixels_per_hit(const wf_detector *det)
     return 2.0 + 1.5 * mean_len / det->pixel_um;
 }
 
-static void capacities(const wf_detector *det, int ncols, int tile_rows, double exptime,
-                       int *cap_dep, int *cap_truth)
+/* Hits and deposits one tile's buffers hold at most: an int count each. */
+#define CR_CAPACITY_MAX ((size_t)INT_MAX)
+
+static wf_status capacities(const wf_detector *det, int ncols, int tile_rows, double exptime,
+                            int *cap_dep, int *cap_truth)
 {
     /* Hits that can touch a tile start within reach of it; most tracks are short, so the
      * deposits come mostly from hits starting in the tile and a few bands around it. */
@@ -35,17 +43,31 @@ static void capacities(const wf_detector *det, int ncols, int tile_rows, double 
     double hits_near = wf_cosmic_expected_hits(det, ncols, rows, exptime);
     double hits_own = wf_cosmic_expected_hits(det, ncols, tile_rows, exptime);
     double dep = hits_near * mean_pixels_per_hit(det);
-    *cap_dep = (int)(2.0 * dep + 12.0 * sqrt(dep + 1.0) + 4.0 * reach_rows(det) * 2 + 256);
-    *cap_truth = (int)(1.5 * hits_own + 12.0 * sqrt(hits_own + 1.0) + 64);
+    /* computed as doubles and checked before they become counts: a long exposure or a high
+     * rate must be refused with its reason, not wrap to a negative buffer size */
+    size_t cd = wf_size_from_double(2.0 * dep + 12.0 * sqrt(dep + 1.0) + 4.0 * reach_rows(det) * 2 + 256,
+                                    CR_CAPACITY_MAX);
+    size_t ct = wf_size_from_double(1.5 * hits_own + 12.0 * sqrt(hits_own + 1.0) + 64, CR_CAPACITY_MAX);
+    if (cd == WF_SIZE_OVERFLOW || ct == WF_SIZE_OVERFLOW)
+        return wf_error(WF_ERR_RANGE,
+                        "cosmic rays: %.3g hits expected near a tile of %d x %d pixels in %g s "
+                        "(detector.cr_rate %g hits/cm2/s): more than a tile's buffers can count; "
+                        "lower the rate, the exposure time or the tile height",
+                        hits_near, ncols, tile_rows, exptime, det->cr_rate);
+    *cap_dep = (int)cd;
+    *cap_truth = (int)ct;
+    return WF_OK;
 }
 
 wf_status wf_cosmic_arena_need(const wf_detector *det, int ncols, int tile_rows,
-                               double exptime, size_t *bytes)
+                               double exptime, size_t *bytes, size_t *truth_bytes)
 {
     int cd, ct;
-    capacities(det, ncols, tile_rows, exptime, &cd, &ct);
-    *bytes = wf_arena_cost((size_t)cd * sizeof(wf_cr_deposit)) +
-             wf_arena_cost((size_t)ct * sizeof(wf_cosmic_record));
+    wf_status st = capacities(det, ncols, tile_rows, exptime, &cd, &ct);
+    if (st) return st;
+    *truth_bytes = wf_size_mul((size_t)ct, sizeof(wf_cosmic_record));
+    *bytes = wf_size_add(wf_arena_cost(wf_size_mul((size_t)cd, sizeof(wf_cr_deposit))),
+                         wf_arena_cost(*truth_bytes));
     return WF_OK;
 }
 
@@ -61,11 +83,12 @@ wf_status wf_cosmic_init(wf_cosmic *cr, const wf_detector *det, const wf_noise *
     cr->frame_time = frame_time;
     cr->total_reads = total_reads;
     cr->max_reach_rows = reach_rows(det);
-    capacities(det, ncols, tile_rows, exptime, &cr->cap_deposits, &cr->cap_truth);
+    wf_status st = capacities(det, ncols, tile_rows, exptime, &cr->cap_deposits, &cr->cap_truth);
+    if (st) return st;
     cr->ndeposits = cr->ntruth = 0;
     void *p;
-    wf_status st = wf_arena_calloc(arena, (size_t)cr->cap_deposits, sizeof(wf_cr_deposit),
-                                   "cosmic-ray deposits", &p);
+    st = wf_arena_calloc(arena, (size_t)cr->cap_deposits, sizeof(wf_cr_deposit),
+                         "cosmic-ray deposits", &p);
     if (st) return st;
     cr->deposits = p;
     st = wf_arena_calloc(arena, (size_t)cr->cap_truth, sizeof(wf_cosmic_record),

@@ -38,9 +38,10 @@ typedef struct wf_cosmic {
 } wf_cosmic;
 
 /* Capacity planning from expectations with a wide margin (> 10 sigma); exceeding it is an
- * error, never a silent drop. */
+ * error, never a silent drop. *truth_bytes: the largest COSMIC packet payload a tile sends.
+ * WF_ERR_RANGE when the expectations (rate x area x exposure time) exceed what an int counts. */
 wf_status wf_cosmic_arena_need(const wf_detector *det, int ncols, int tile_rows,
-                               double exptime, size_t *bytes);
+                               double exptime, size_t *bytes, size_t *truth_bytes);
 wf_status wf_cosmic_init(wf_cosmic *cr, const wf_detector *det, const wf_noise *noise,
                          int ncols, int nrows, int tile_rows, double exptime, double frame_time,
                          int total_reads, wf_arena *arena);

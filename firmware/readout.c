@@ -8,6 +8,7 @@
 #include "firmware/cosmic.h"
 #include "hal/packet.h"
 #include "hal/simd.h"
+#include "hal/size.h"
 
 
 struct wf_readout {
@@ -16,6 +17,7 @@ struct wf_readout {
     wf_scene_source scene;
     wf_noise noise;
     wf_link link;
+    wf_arena *arena;               /* for the META text, reserved and given back */
     int ntiles, halo_cap;          /* rows the halo block can hold: tile_rows + 2 */
     int total_reads;
     int16_t resultant_of_read[WF_MA_MAX_READS]; /* -1: read not digitised */
@@ -64,17 +66,15 @@ static double exposure_time(const wf_readout_config *cfg, const wf_clock *clock)
     return cfg->mode == WF_MODE_RAMP ? wf_clock_exposure_time(clock) : cfg->exptime;
 }
 
-/* The META text goes through the same packet buffer: small tiles (test sizes) still leave it
- * this much room, or an uncompressed META would not fit. */
-#define META_MIN_BYTES 65536u
-
+/* The packet buffer carries the META text too (uncompressed when the link is not deflated):
+ * however small the tile, it holds WF_READOUT_META_MAX bytes. */
 static size_t tile_payload_max(const wf_readout_config *cfg, const wf_clock *clock)
 {
-    size_t px = (size_t)cfg->tile_rows * (size_t)cfg->ncols;
-    size_t res = px * sizeof(uint16_t) * (size_t)nres_of(cfg, clock);
-    size_t single = px * sizeof(float);
+    size_t px = wf_size_mul((size_t)cfg->tile_rows, (size_t)cfg->ncols);
+    size_t res = wf_size_mul3(px, sizeof(uint16_t), (size_t)nres_of(cfg, clock));
+    size_t single = wf_size_mul(px, sizeof(float));
     size_t n = res > single ? res : single;
-    return n > META_MIN_BYTES ? n : META_MIN_BYTES;
+    return n > WF_READOUT_META_MAX ? n : WF_READOUT_META_MAX;
 }
 
 /* Up-the-ramp per-read sampling keeps a tile's Poisson thresholds (7 words per pixel of the
@@ -84,13 +84,26 @@ static size_t tile_payload_max(const wf_readout_config *cfg, const wf_clock *clo
 static size_t thresholds_bytes(const wf_readout_config *cfg)
 {
     if (cfg->mode != WF_MODE_RAMP || cfg->sampling != WF_SAMPLE_PER_READ) return 0;
-    return 7 * (size_t)(cfg->tile_rows + 2) * (size_t)cfg->ncols * sizeof(uint32_t);
+    return wf_size_mul3(7 * sizeof(uint32_t), (size_t)cfg->tile_rows + 2, (size_t)cfg->ncols);
 }
 
-static size_t packet_buffer_raw(const wf_readout_config *cfg, const wf_clock *clock)
+/* Cosmic rays' arena bytes and the largest COSMIC payload a tile sends (0, 0 when off). */
+static wf_status cosmic_need(const wf_readout_config *cfg, const wf_clock *clock, size_t *bytes,
+                             size_t *truth)
+{
+    *bytes = *truth = 0;
+    if (!cfg->det.on.cosmic_rays || cfg->mode != WF_MODE_RAMP) return WF_OK;
+    return wf_cosmic_arena_need(&cfg->det, cfg->ncols, cfg->tile_rows, exposure_time(cfg, clock), bytes,
+                                truth);
+}
+
+/* The packet buffer's raw capacity: the largest payload of any packet a tile sends (its
+ * resultants or single frame, its cosmic-ray truth, the META text), or the thresholds. */
+static size_t packet_buffer_raw(const wf_readout_config *cfg, const wf_clock *clock, size_t cosmic_truth)
 {
     size_t n = tile_payload_max(cfg, clock), t = thresholds_bytes(cfg);
-    return n > t ? n : t;
+    if (t > n) n = t;
+    return cosmic_truth > n ? cosmic_truth : n;
 }
 
 static int direct_blocks(const wf_ma_table *ma);
@@ -113,10 +126,18 @@ static wf_status check_config(const wf_readout_config *cfg, const wf_clock *cloc
         return wf_error(WF_ERR_RANGE, "readout: tile_rows %d < 1", cfg->tile_rows);
     if (cfg->mode == WF_MODE_RAMP && clock->ma.nresultants < 1)
         return wf_error(WF_ERR_INPUT, "readout: MA table has no resultants");
-    if (cfg->mode == WF_MODE_SINGLE && !(cfg->exptime > 0.0))
-        return wf_error(WF_ERR_RANGE, "readout: exposure time %g s must be > 0", cfg->exptime);
-    if (!(clock->frame_time > 0.0))
-        return wf_error(WF_ERR_RANGE, "readout: frame time %g s must be > 0", clock->frame_time);
+    if (cfg->mode == WF_MODE_RAMP && (clock->ma.nresultants > WF_MA_MAX_RESULTANTS ||
+                                      wf_ma_total_reads(&clock->ma) > WF_MA_MAX_READS))
+        return wf_error(WF_ERR_RANGE, "readout: MA table %s has %d resultants over %d reads (at most %d over %d)",
+                        clock->ma.name, clock->ma.nresultants, wf_ma_total_reads(&clock->ma),
+                        WF_MA_MAX_RESULTANTS, WF_MA_MAX_READS);
+    if (!(clock->frame_time > 0.0 && clock->frame_time <= WF_FRAME_TIME_MAX))
+        return wf_error(WF_ERR_RANGE, "readout: frame time %g s is outside (0, %g] s", clock->frame_time,
+                        WF_FRAME_TIME_MAX);
+    double t = exposure_time(cfg, clock);
+    if (!(t > 0.0 && t <= WF_EXPOSURE_TIME_MAX))
+        return wf_error(WF_ERR_RANGE, "readout: exposure time %g s is outside (0, %g] s", t,
+                        WF_EXPOSURE_TIME_MAX);
     if (!(cfg->det.gain > 0.0))
         return wf_error(WF_ERR_RANGE, "readout: gain %g e-/ADU must be > 0", cfg->det.gain);
     return WF_OK;
@@ -137,30 +158,42 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
 {
     wf_status st = check_config(cfg, clock);
     if (st) return st;
-    size_t halo = (size_t)(cfg->tile_rows + 2) * (size_t)cfg->ncols;
-    size_t tile = (size_t)cfg->tile_rows * (size_t)cfg->ncols;
-    size_t n = wf_arena_cost(sizeof(wf_readout));
-    n += wf_arena_cost(halo * sizeof(float));
-    n += (cfg->mode == WF_MODE_RAMP ? 4 : 2) * wf_arena_cost(halo * sizeof(double));
-    if (cfg->mode == WF_MODE_RAMP && cfg->time_variable)
-        n += wf_arena_cost(halo * sizeof(float)) + wf_arena_cost(halo * sizeof(double));
-    n += wf_arena_cost(tile * sizeof(float));
-    n += wf_arena_cost(4 * (size_t)words_blocks(cfg, clock) * (size_t)cfg->ncols * sizeof(uint32_t));
-    n += wf_arena_cost((size_t)cfg->ncols * sizeof(double));
-    n += wf_arena_cost(tile * sizeof(double));
-    if (cfg->mode == WF_MODE_RAMP)
-        n += wf_arena_cost(tile * sizeof(uint16_t) * (size_t)clock->ma.nresultants) +
-             wf_arena_cost((size_t)cfg->ncols * sizeof(double)) + wf_arena_cost((size_t)cfg->ncols);
-    else
-        n += wf_arena_cost(tile * sizeof(float)) + single_arena_need(cfg);
-    n += wf_arena_cost(tile);
-    n += wf_packer_arena_need(packet_buffer_raw(cfg, clock), cfg->compress);
-    if (cfg->det.on.cosmic_rays && cfg->mode == WF_MODE_RAMP) {
-        size_t cr;
-        wf_cosmic_arena_need(&cfg->det, cfg->ncols, cfg->tile_rows, exposure_time(cfg, clock), &cr);
-        n += cr;
+    size_t cr, cr_truth;
+    if ((st = cosmic_need(cfg, clock, &cr, &cr_truth))) return st;
+    size_t nc = (size_t)cfg->ncols;
+    size_t halo = wf_size_mul((size_t)cfg->tile_rows + 2, nc);
+    size_t tile = wf_size_mul((size_t)cfg->tile_rows, nc);
+#define ADD(b) n = wf_size_add(n, wf_arena_cost(b))
+    size_t n = 0;
+    ADD(sizeof(wf_readout));
+    ADD(wf_size_mul(halo, sizeof(float)));
+    for (int i = 0; i < (cfg->mode == WF_MODE_RAMP ? 4 : 2); i++) ADD(wf_size_mul(halo, sizeof(double)));
+    if (cfg->mode == WF_MODE_RAMP && cfg->time_variable) {
+        ADD(wf_size_mul(halo, sizeof(float)));
+        ADD(wf_size_mul(halo, sizeof(double)));
     }
-    *bytes = n + 4096; /* alignment of the block itself */
+    ADD(wf_size_mul(tile, sizeof(float)));
+    ADD(wf_size_mul3(4 * sizeof(uint32_t), (size_t)words_blocks(cfg, clock), nc));
+    ADD(wf_size_mul(nc, sizeof(double)));
+    ADD(wf_size_mul(tile, sizeof(double)));
+    if (cfg->mode == WF_MODE_RAMP) {
+        ADD(wf_size_mul3(tile, sizeof(uint16_t), (size_t)clock->ma.nresultants));
+        ADD(wf_size_mul(nc, sizeof(double)));
+        ADD(nc);
+    } else {
+        ADD(wf_size_mul(tile, sizeof(float)));
+        n = wf_size_add(n, single_arena_need(cfg));
+    }
+    ADD(tile);
+    n = wf_size_add(n, wf_packer_arena_need(packet_buffer_raw(cfg, clock, cr_truth), cfg->compress));
+    n = wf_size_add(n, cr);
+    ADD(WF_READOUT_META_MAX); /* wf_readout_send_meta's text, released after it is sent */
+#undef ADD
+    n = wf_size_add(n, 4096); /* alignment of the block itself */
+    if (n == WF_SIZE_OVERFLOW)
+        return wf_error(WF_ERR_RANGE, "readout: the buffers of a %d x %d tile do not fit the address space",
+                        cfg->ncols, cfg->tile_rows);
+    *bytes = n;
     return WF_OK;
 }
 
@@ -216,6 +249,7 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     ro->scene = *scene;
     ro->noise = *noise;
     ro->link = *link;
+    ro->arena = arena;
     ro->ntiles = (cfg->nrows + cfg->tile_rows - 1) / cfg->tile_rows;
     ro->halo_cap = cfg->tile_rows + 2;
     size_t halo = (size_t)ro->halo_cap * (size_t)cfg->ncols;
@@ -251,7 +285,9 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
         if ((st = single_init(ro, arena))) return st;
     }
     TAKE(ro->sat, tile, "saturation map");
-    st = wf_packer_init(&ro->packer, arena, packet_buffer_raw(cfg, clock), cfg->compress);
+    size_t cr, cr_truth;
+    if ((st = cosmic_need(cfg, clock, &cr, &cr_truth))) return st;
+    st = wf_packer_init(&ro->packer, arena, packet_buffer_raw(cfg, clock, cr_truth), cfg->compress);
     if (st) return st;
     ro->cosmic_on = cfg->det.on.cosmic_rays && cfg->mode == WF_MODE_RAMP && cfg->det.cr_rate > 0;
     if (ro->cosmic_on) {
@@ -875,11 +911,14 @@ wf_status wf_readout_send_meta(wf_readout *ro, const char *extra)
 {
     const wf_readout_config *c = &ro->cfg;
     const wf_detector *d = &c->det;
-    /* The resultant tile buffer is idle between tiles and large enough for the text. */
-    char *buf = (char *)ro->sum;
-    size_t cap = (size_t)c->tile_rows * c->ncols * sizeof(double), len = 0;
-    size_t room = tile_payload_max(c, &ro->clock); /* what one packet carries */
-    if (cap > room) cap = room;
+    /* The text's own room, counted in the arena need and given back once it is sent: the
+     * META does not depend on the detector's size, so no tile buffer is the right size for
+     * it (a 1 x 1 SCA's are a few bytes). */
+    size_t mark = wf_arena_mark(ro->arena), cap = WF_READOUT_META_MAX, len = 0;
+    void *text;
+    wf_status st = wf_arena_reserve(ro->arena, cap, "META text", &text);
+    if (st) return st;
+    char *buf = text;
     int bad = 0;
     bad |= append(buf, cap, &len,
                   "ncols = %d\nnrows = %d\nmode = %s\nsampling = %s\nexposure = %u\nsca = %u\n"
@@ -916,9 +955,11 @@ wf_status wf_readout_send_meta(wf_readout *ro, const char *extra)
     for (int i = 0; i < 9; i++)
         if (on[i]) { bad |= append(buf, cap, &len, "%s%s", first ? "" : ",", names[i]); first = 0; }
     bad |= append(buf, cap, &len, "\n%s", extra ? extra : "");
-    if (bad)
-        return wf_error(WF_ERR_RANGE, "readout: META text longer than %zu bytes", cap);
-    return send(ro, WF_PK_META, 0, 0, 0, buf, len);
+    st = bad ? wf_error(WF_ERR_RANGE, "readout: META text longer than %zu bytes (extra lines: %zu bytes)", cap,
+                        extra ? strlen(extra) : (size_t)0)
+             : send(ro, WF_PK_META, 0, 0, 0, buf, len);
+    wf_arena_release(ro->arena, mark);
+    return st;
 }
 
 wf_status wf_readout_send_end(wf_readout *ro)

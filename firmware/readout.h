@@ -53,6 +53,10 @@ typedef struct wf_readout_config {
 
 typedef struct wf_readout wf_readout;
 
+/* Bytes of META text at most: its own lines (at most ~16 KiB, with an MA table of 2048
+ * separate reads) and the host's extra lines (tools/pipeline.c keeps them to half of it). */
+#define WF_READOUT_META_MAX ((size_t)128 * 1024)
+
 /* Arena bytes one instance needs: depends on ncols, tile_rows and the MA table, not nrows. */
 wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *clock,
                                 size_t *bytes);

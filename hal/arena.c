@@ -1,4 +1,5 @@
 #include "hal/arena.h"
+#include "hal/size.h"
 
 #include <stdint.h>
 #include <stdlib.h>
@@ -79,6 +80,7 @@ void *wf_arena_host_realloc(void *p, size_t used, size_t size)
 
 size_t wf_arena_cost(size_t size)
 {
+    if (size > WF_SIZE_OVERFLOW - (ARENA_ALIGN - 1)) return WF_SIZE_OVERFLOW; /* would wrap to 0 */
     return (size + ARENA_ALIGN - 1) / ARENA_ALIGN * ARENA_ALIGN;
 }
 
@@ -93,7 +95,7 @@ wf_status wf_arena_reserve(wf_arena *arena, size_t size, const char *what, void 
 {
     *out = NULL;
     size_t need = wf_arena_cost(size);
-    if (need < size || need > arena->capacity - arena->used)
+    if (need == WF_SIZE_OVERFLOW || need > arena->capacity - arena->used)
         return wf_error(WF_ERR_NOMEM,
                         "%s: cannot reserve %zu bytes for %s (%zu of %zu bytes in use); "
                         "raise the memory budget or lower the tile height",
@@ -108,7 +110,7 @@ wf_status wf_arena_reserve(wf_arena *arena, size_t size, const char *what, void 
 
 wf_status wf_arena_calloc(wf_arena *arena, size_t count, size_t elem, const char *what, void **out)
 {
-    if (elem && count > SIZE_MAX / elem) {
+    if (wf_size_mul(count, elem) == WF_SIZE_OVERFLOW) {
         *out = NULL;
         return wf_error(WF_ERR_NOMEM, "%s: size of %s overflows (%zu x %zu)", arena->name,
                         what ? what : "a buffer", count, elem);

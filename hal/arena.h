@@ -68,7 +68,7 @@ wf_status wf_arena_split(wf_arena *arena, size_t size, const char *name, wf_aren
 void wf_arena_join(wf_arena *arena, const wf_arena *top);
 
 /* Bytes an allocation of `size` consumes, alignment included: lets a module report its need
- * before anything is reserved. */
+ * before anything is reserved. WF_SIZE_OVERFLOW (hal/size.h) when that does not fit a size_t. */
 size_t wf_arena_cost(size_t size);
 
 #endif

@@ -90,6 +90,12 @@ wf_status wf_ma_load(const char *path, wf_ma_table *out)
                 st = wf_error(WF_ERR_RANGE, "%s:%d: bad read range %ld-%ld (reads count from 1)", path, lineno, a, b);
                 goto done;
             }
+            /* the readout maps every read to its resultant in a table of this length */
+            if (b > WF_MA_MAX_READS) {
+                st = wf_error(WF_ERR_RANGE, "%s:%d: read %ld past the %d reads an exposure may take", path, lineno,
+                              b, WF_MA_MAX_READS);
+                goto done;
+            }
             if (count == 0) {
                 if (out->nresultants >= WF_MA_MAX_RESULTANTS) {
                     st = wf_error(WF_ERR_RANGE, "%s:%d: more than %d resultants", path, lineno, WF_MA_MAX_RESULTANTS);

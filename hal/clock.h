@@ -9,7 +9,7 @@
 #include "hal/status.h"
 
 #define WF_MA_MAX_RESULTANTS 64
-#define WF_MA_MAX_READS 2048
+#define WF_MA_MAX_READS 2048 /* reads an exposure takes, skipped ones included */
 
 typedef struct wf_ma_table {
     char name[64];
@@ -25,6 +25,10 @@ typedef struct wf_clock {
 } wf_clock;
 
 #define WF_FRAME_TIME_DEFAULT 3.16247
+/* Physical bounds (docs/CONFIG.md): a frame read at most 100 s (30x the flight's), an
+ * exposure (single frame, or the last read of a ramp) at most a day. */
+#define WF_FRAME_TIME_MAX 100.0
+#define WF_EXPOSURE_TIME_MAX 86400.0
 
 /* A built-in table: "4", "6", "11" (Rev F, SPEC §3.2). */
 wf_status wf_ma_builtin(const char *name, wf_ma_table *out);

@@ -2,6 +2,7 @@
 
 #include "hal/arena.h"
 
+#include <errno.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -51,7 +52,7 @@ static wf_status stream_send(void *ctx, const void *packet, size_t len)
     wf_status st = WF_OK;
     pthread_mutex_lock(&s->lock);
     if (fwrite(packet, 1, len, s->file) != len)
-        st = wf_error(WF_ERR_IO, "%s: write failed (disk full or pipe closed?)", s->name);
+        st = wf_error(WF_ERR_IO, "%s: write failed: %s", s->name, strerror(errno));
     pthread_mutex_unlock(&s->lock);
     return st;
 }

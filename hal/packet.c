@@ -1,7 +1,9 @@
 #include "hal/packet.h"
 
 #include "hal/arena.h"
+#include "hal/size.h"
 
+#include <inttypes.h>
 #include <libdeflate.h>
 
 #include <stdlib.h>
@@ -86,8 +88,9 @@ static void arena_zfree(voidpf opaque, voidpf p) { (void)opaque; (void)p; }
 
 size_t wf_packer_arena_need(size_t max_raw, int compress)
 {
-    size_t wire = max_raw + max_raw / 1000 + 64; /* covers deflateBound for stored blocks */
-    return wf_arena_cost(WF_PACKET_HEADER_SIZE + wire) + (compress ? DEFLATE_STATE_BYTES : 0);
+    size_t wire = wf_size_add(max_raw, max_raw / 1000 + 64); /* covers deflateBound for stored blocks */
+    return wf_size_add(wf_arena_cost(wf_size_add(WF_PACKET_HEADER_SIZE, wire)),
+                       compress ? DEFLATE_STATE_BYTES : 0);
 }
 
 wf_status wf_packer_init(wf_packer *pk, wf_arena *arena, size_t max_raw, int compress)
@@ -156,6 +159,15 @@ wf_status wf_packer_send(wf_packer *pk, const wf_link *link, wf_packet_header *h
     h->payload_crc = crc(payload, wire_len);
     wf_packet_header_write(h, pk->buf);
     return wf_link_send(link, pk->buf, WF_PACKET_HEADER_SIZE + wire_len);
+}
+
+void wf_packet_rows_text(const wf_packet_header *h, char *buf, size_t n)
+{
+    if (n) buf[0] = '\0';
+    /* META and END carry no rows (END's row_count is the exposure's height); 64 bits, so
+     * that a damaged header's numbers are printed as they are, not wrapped */
+    if (h->row_count == 0 || h->kind == WF_PK_END) return;
+    snprintf(buf, n, "rows %" PRIu32 "-%" PRIu64, h->first_row, (uint64_t)h->first_row + h->row_count - 1);
 }
 
 long wf_packet_read_file(void *ctx, void *buf, size_t n)
@@ -234,20 +246,20 @@ wf_status wf_packet_reader_next(wf_packet_reader *r, wf_packet_header *h, const 
     if (got < 0)
         return wf_error(WF_ERR_IO, "%s: read error in packet %ld at offset %llu", r->name, r->count + 1,
                         (unsigned long long)r->offset);
+    char rows[48];
+    wf_packet_rows_text(h, rows, sizeof rows);
     if (got != (long)h->payload_len)
-        return wf_error(WF_ERR_CORRUPT, "%s: truncated stream: packet %ld (rows %u-%u) at offset %llu ends early",
-                        r->name, r->count + 1, h->first_row, h->first_row + h->row_count - 1,
-                        (unsigned long long)r->offset);
+        return wf_error(WF_ERR_CORRUPT, "%s: truncated stream: packet %ld (kind %u%s%s) at offset %llu ends early",
+                        r->name, r->count + 1, h->kind, rows[0] ? ", " : "", rows, (unsigned long long)r->offset);
     if (crc(r->wire, h->payload_len) != h->payload_crc)
-        return wf_error(WF_ERR_CORRUPT, "%s: bad CRC in packet %ld (kind %u, rows %u-%u) at offset %llu",
-                        r->name, r->count + 1, h->kind, h->first_row, h->first_row + h->row_count - 1,
-                        (unsigned long long)r->offset);
+        return wf_error(WF_ERR_CORRUPT, "%s: bad CRC in packet %ld (kind %u%s%s) at offset %llu",
+                        r->name, r->count + 1, h->kind, rows[0] ? ", " : "", rows, (unsigned long long)r->offset);
     if (h->flags & WF_PACKET_FLAG_DEFLATE) {
         if ((st = grow(&r->raw, &r->raw_cap, (size_t)h->raw_len + 1u)) != WF_OK) return st;
         uLongf out_len = h->raw_len;
         if (uncompress(r->raw, &out_len, r->wire, h->payload_len) != Z_OK || out_len != h->raw_len)
-            return wf_error(WF_ERR_CORRUPT, "%s: packet %ld (rows %u-%u) does not inflate to %u bytes",
-                            r->name, r->count + 1, h->first_row, h->first_row + h->row_count - 1, h->raw_len);
+            return wf_error(WF_ERR_CORRUPT, "%s: packet %ld (kind %u%s%s) does not inflate to %u bytes",
+                            r->name, r->count + 1, h->kind, rows[0] ? ", " : "", rows, h->raw_len);
         *payload = r->raw;
     } else {
         if (h->raw_len != h->payload_len)

@@ -68,6 +68,9 @@ wf_status wf_packer_send(wf_packer *pk, const wf_link *link, wf_packet_header *h
  * before it returns), *bytes long (at least the max_raw of init), 64-byte aligned. */
 void *wf_packer_scratch(wf_packer *pk, size_t *bytes);
 
+/* "rows A-B" of a header, for messages; "" for a packet without rows (META, END). */
+void wf_packet_rows_text(const wf_packet_header *h, char *buf, size_t n);
+
 /* Header (de)serialisation, exposed for tests and tools. */
 void wf_packet_header_write(const wf_packet_header *h, unsigned char out[WF_PACKET_HEADER_SIZE]);
 wf_status wf_packet_header_read(const unsigned char in[WF_PACKET_HEADER_SIZE], wf_packet_header *h);

@@ -1,5 +1,7 @@
 #include "sim/pupil.h"
 
+#include "sim/bandpass.h"
+
 #include "hal/arena.h"
 
 #include <errno.h>
@@ -16,22 +18,16 @@
 
 wf_status wf_pupil_group_of_filter(const char *filter, wf_pupil_group *out)
 {
-    static const char *const shortwave[] = {"R062", "Z087", "Y106", "J129", "H158", "W146", "W149"};
-    static const char *const longwave[] = {"F184", "K213"};
     if (!filter) return wf_error(WF_ERR_INPUT, "pupil: no filter name");
-    for (size_t i = 0; i < sizeof shortwave / sizeof *shortwave; i++)
-        if (!strcasecmp(filter, shortwave[i])) {
-            *out = WF_PUPIL_SHORT;
-            return WF_OK;
-        }
-    for (size_t i = 0; i < sizeof longwave / sizeof *longwave; i++)
-        if (!strcasecmp(filter, longwave[i])) {
-            *out = WF_PUPIL_LONG;
-            return WF_OK;
-        }
-    return wf_error(WF_ERR_INPUT,
-                    "pupil: unknown filter '%s' (one of R062 Z087 Y106 J129 H158 F184 K213 W146)",
-                    filter);
+    wf_filter f;
+    wf_status st = wf_filter_parse(filter, &f); /* the one reading of filter names (W149 is W146) */
+    if (st) {
+        char msg[256];
+        snprintf(msg, sizeof msg, "%s", wf_error_message());
+        return wf_error(st, "pupil: %s", msg);
+    }
+    *out = f == WF_F184 || f == WF_K213 ? WF_PUPIL_LONG : WF_PUPIL_SHORT;
+    return WF_OK;
 }
 
 wf_status wf_pupil_geometry_default(wf_pupil_group group, wf_pupil_geometry *out)

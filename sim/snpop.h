@@ -28,6 +28,18 @@
  * redraw loop would stall, and the validation refuses the parameters. */
 #define WF_SNPOP_MIN_ACCEPT 1e-3
 
+/* The largest |x1| and |c| any SN may have (sn.x1.*, sn.c.*, `sn lightcurve --x1 --c`): twice
+ * the widest SALT training ranges, so that the Tripp magnitude and the model's colour law
+ * stay finite numbers. */
+#define WF_SNPOP_X1_LIMIT 10.0
+#define WF_SNPOP_C_LIMIT 2.0
+/* |alpha|, |beta| (sn.alpha, sn.beta, --alpha, --beta) and the distance modulus
+ * (`sn lightcurve --mu`; z = 10, WF_COSMO_ZMAX, is mu ~ 52): within these x0 stays a
+ * positive finite number whatever x1 and c are. */
+#define WF_SNPOP_ALPHA_LIMIT 10.0
+#define WF_SNPOP_BETA_LIMIT 20.0
+#define WF_SNPOP_MU_MAX 100.0
+
 typedef struct wf_snpop_agauss {
     double peak;
     double sigma_minus, sigma_plus; /* ≥ 0, not both 0 */

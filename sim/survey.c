@@ -8,6 +8,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "sim/bandpass.h"
 #include "sim/fitsout.h"
 
 #define DEG (M_PI / 180.0)
@@ -163,6 +164,15 @@ static wf_status set_value(wf_survey_params *p, const skey *k, char *value, cons
                         return wf_error(WF_ERR_INPUT, "%s: %s: filter name '%s' has a character "
                                         "other than letters, digits and '_'", origin, k->name,
                                         items[i]);
+                /* a plan's filters are rendered by name (exposure.filter): read them as
+                 * every command does, and keep each under its one name (W149 is W146) */
+                wf_filter f;
+                if ((st = wf_filter_parse(items[i], &f))) {
+                    char msg[256];
+                    snprintf(msg, sizeof msg, "%s", wf_error_message());
+                    return wf_error(st, "%s: %s: %s", origin, k->name, msg);
+                }
+                items[i] = (char *)wf_filter_name(f);
                 for (int j = 0; j < i; j++)
                     if (!strcmp(items[j], items[i]))
                         return wf_error(WF_ERR_INPUT, "%s: %s: filter '%s' listed twice", origin,

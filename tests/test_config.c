@@ -139,7 +139,7 @@ START_TEST(test_yaml_overrides_nested_keys)
                                   "  sky_rate: 0\n"
                                   "  grid: {flux: 50.5, sigma: 2, spacing: 32}\n"
                                   "paths:\n"
-                                  "  data: /somewhere/data\n");
+                                  "  data: /\n"); /* a folder that is there */
     wf_config cfg;
     wf_config_defaults(&cfg);
     ck_assert_msg(wf_config_load(&cfg, path) == WF_OK, "%s", wf_error_message());
@@ -171,7 +171,7 @@ START_TEST(test_yaml_overrides_nested_keys)
     ck_assert_double_eq(cfg.grid_flux, 50.5);
     ck_assert_double_eq(cfg.grid_sigma, 2.0);
     ck_assert_int_eq(cfg.grid_spacing, 32);
-    ck_assert_str_eq(cfg.data_dir, "/somewhere/data");
+    ck_assert_str_eq(cfg.data_dir, "/");
     /* untouched keys keep their defaults */
     ck_assert_double_eq(cfg.ro.det.dark_current, 0.015);
     ck_assert_double_eq(cfg.frame_time, 3.16247);
@@ -266,7 +266,7 @@ static const bad_case bad_files[] = {
     {"readout:\n  tile_rows: 6.5\n", WF_ERR_INPUT, ":2", "readout.tile_rows", "integer"},
     {"run:\n  quiet: maybe\n", WF_ERR_INPUT, ":2", "run.quiet", "true or false"},
     {"exposure:\n  mode: rampp\n", WF_ERR_INPUT, ":2", "exposure.mode", "ramp, single"},
-    {"exposure:\n  filter: W149\n", WF_ERR_INPUT, ":2", "exposure.filter", "W146"},
+    {"exposure:\n  filter: W150\n", WF_ERR_INPUT, ":2", "exposure.filter", "W146"},
     {"detector: 5\n", WF_ERR_INPUT, ":1", "detector", "section"},
     {"detector:\n  gain:\n", WF_ERR_INPUT, ":2", "detector.gain", "no value"},
     {"detector:\n  ipc: 1.0\n", WF_ERR_INPUT, ":2", "detector.ipc", "3x3"},
@@ -361,6 +361,13 @@ static const bad_set bad_sets[] = {
     {"products.compress=zip", WF_ERR_INPUT, "products.compress", "auto, none, rice"},
     {"products.resultants=maybe", WF_ERR_INPUT, "products.resultants", "keep, drop"},
     {"products.quantize_level=-1", WF_ERR_RANGE, "products.quantize_level", "0"},
+    {"readout.frame_time=100.001", WF_ERR_RANGE, "readout.frame_time", "to 100 s"},
+    {"readout.frame_time=1e300", WF_ERR_RANGE, "readout.frame_time", "to 100 s"},
+    {"exposure.exptime=86400.5", WF_ERR_RANGE, "exposure.exptime", "to 86400 s"},
+    {"exposure.filter=W150", WF_ERR_INPUT, "exposure.filter", "W146 (W149: W146)"},
+    {"paths.data=/dev/null", WF_ERR_INPUT, "paths.data", "not a directory"},
+    {"paths.reference=/dev/null", WF_ERR_INPUT, "paths.reference", "not a directory"},
+    {"paths.data=/nonexistent/wfisim-data", WF_ERR_IO, "paths.data", "/nonexistent/wfisim-data"},
 };
 
 START_TEST(test_bad_set)
@@ -473,6 +480,84 @@ START_TEST(test_survey_keys)
 }
 END_TEST
 
+/* The physical bounds at their edges: readout.frame_time 100 s and exposure.exptime a day are
+ * taken; a ramp's exposure time (reads x frame time) is held to the same day when the
+ * configuration is finished (a single frame does not use it); an MA table may not name a
+ * read past the 2048 the readout tabulates. */
+START_TEST(test_time_limits)
+{
+    wf_config cfg;
+    wf_clock clock;
+    wf_config_defaults(&cfg);
+    ck_assert_int_eq(wf_config_set(&cfg, "readout.frame_time=100", NULL), WF_OK);
+    ck_assert_int_eq(wf_config_set(&cfg, "exposure.exptime=86400", NULL), WF_OK);
+    ck_assert_int_eq(wf_config_finish(&cfg, &clock), WF_OK); /* table 6: 94 reads x 100 s */
+    const char *longest = write_file("longest.ma", "2048\n");
+    char set[4300];
+    snprintf(set, sizeof set, "readout.ma_table=%s", longest);
+    const struct { const char *frame, *mode; wf_status st; } cases[] = {
+        {"42.1875", "ramp", WF_OK},         /* 2048 x 42.1875 s = 86400 s */
+        {"42.1876", "ramp", WF_ERR_RANGE},  /* 86400.2 s */
+        {"42.1876", "single", WF_OK},       /* the ramp's time is not used */
+    };
+    for (int i = 0; i < 3; i++) {
+        wf_config_defaults(&cfg);
+        char ft[64], mode[64];
+        snprintf(ft, sizeof ft, "readout.frame_time=%s", cases[i].frame);
+        snprintf(mode, sizeof mode, "exposure.mode=%s", cases[i].mode);
+        ck_assert_int_eq(wf_config_set(&cfg, set, NULL), WF_OK);
+        ck_assert_int_eq(wf_config_set(&cfg, ft, NULL), WF_OK);
+        ck_assert_int_eq(wf_config_set(&cfg, mode, NULL), WF_OK);
+        wf_status st = wf_config_finish(&cfg, &clock);
+        ck_assert_msg(st == cases[i].st, "%s %s: status %d (%s)", cases[i].frame, cases[i].mode, st, wf_error_message());
+        if (st) {
+            assert_message_has("readout.ma_table");
+            assert_message_has("readout.frame_time");
+        } else if (!strcmp(cases[i].mode, "ramp")) {
+            ck_assert_double_eq(wf_clock_exposure_time(&clock), 86400.0);
+        }
+    }
+    const char *past = write_file("past.ma", "1\n2049\n");
+    snprintf(set, sizeof set, "readout.ma_table=%s", past);
+    wf_config_defaults(&cfg);
+    ck_assert_int_eq(wf_config_set(&cfg, set, NULL), WF_OK);
+    ck_assert_int_eq(wf_config_finish(&cfg, &clock), WF_ERR_RANGE);
+    assert_message_has("past.ma:2");
+    assert_message_has("2049");
+}
+END_TEST
+
+/* exposure.filter reads names as sim/bandpass.c does (any case; W149 is W146) and keeps the
+ * one name, from --set and from YAML; paths.data and paths.reference take a folder or
+ * nothing. */
+START_TEST(test_filter_alias_and_dirs)
+{
+    wf_config cfg;
+    wf_config_defaults(&cfg);
+    const char *names[][2] = {{"W149", "W146"}, {"w149", "W146"}, {"W146", "W146"}, {"y106", "Y106"}};
+    for (int i = 0; i < 4; i++) {
+        char set[64];
+        snprintf(set, sizeof set, "exposure.filter=%s", names[i][0]);
+        ck_assert_int_eq(wf_config_set(&cfg, set, NULL), WF_OK);
+        ck_assert_str_eq(cfg.filter, names[i][1]);
+    }
+    const char *yaml = write_file("w149.yaml", "exposure:\n  filter: W149\n");
+    wf_config_defaults(&cfg);
+    ck_assert_int_eq(wf_config_load(&cfg, yaml), WF_OK);
+    ck_assert_str_eq(cfg.filter, "W146");
+    char set[4300];
+    snprintf(set, sizeof set, "paths.data=%s", wf_test_tmpdir());
+    ck_assert_int_eq(wf_config_set(&cfg, set, NULL), WF_OK);
+    ck_assert_int_eq(wf_config_set(&cfg, "paths.data=", NULL), WF_OK);
+    ck_assert_str_eq(cfg.data_dir, "");
+    snprintf(set, sizeof set, "paths:\n  data: %s\n", yaml); /* a file */
+    const char *bad = write_file("data.yaml", set);
+    ck_assert_int_eq(wf_config_load(&cfg, bad), WF_ERR_INPUT);
+    assert_message_has("data.yaml:2");
+    assert_message_has("not a directory");
+}
+END_TEST
+
 START_TEST(test_doc_matches_generated)
 {
     FILE *gen = tmpfile();
@@ -519,6 +604,8 @@ static Suite *config_suite(void)
     tcase_add_loop_test(tc, test_bad_set, 0, (int)(sizeof bad_sets / sizeof *bad_sets));
     tcase_add_test(tc, test_finish_constraints);
     tcase_add_test(tc, test_ma_table_from_file);
+    tcase_add_test(tc, test_time_limits);
+    tcase_add_test(tc, test_filter_alias_and_dirs);
     tcase_add_test(tc, test_survey_keys);
     tcase_add_test(tc, test_doc_matches_generated);
     suite_add_tcase(s, tc);

@@ -237,6 +237,61 @@ START_TEST(packet_crcs_are_zlib_crc32)
 }
 END_TEST
 
+/* A damaged packet's message gives its rows as they are: none for META and END (a META's
+ * row_count of 0 once printed as "rows 0-4294967295"), and a crafted header's numbers
+ * without wrapping at 2^32. */
+START_TEST(damaged_packet_rows_named)
+{
+    wf_packet_header h = {0};
+    char rows[48];
+    h.kind = WF_PK_META;
+    wf_packet_rows_text(&h, rows, sizeof rows);
+    ck_assert_str_eq(rows, "");
+    h.kind = WF_PK_END;
+    h.row_count = 4088; /* END's count is the exposure's height */
+    wf_packet_rows_text(&h, rows, sizeof rows);
+    ck_assert_str_eq(rows, "");
+    h.kind = WF_PK_RESULTANTS;
+    h.first_row = 64;
+    h.row_count = 64;
+    wf_packet_rows_text(&h, rows, sizeof rows);
+    ck_assert_str_eq(rows, "rows 64-127");
+    h.first_row = UINT32_MAX - 1;
+    h.row_count = 8;
+    wf_packet_rows_text(&h, rows, sizeof rows);
+    ck_assert_str_eq(rows, "rows 4294967294-4294967301");
+
+    /* a META packet with one payload byte flipped, read back */
+    const char *text = "ncols = 1\nnrows = 1\n";
+    size_t raw = strlen(text), need = wf_packer_arena_need(raw, 0) + 64;
+    void *mem = malloc(need);
+    wf_arena arena;
+    wf_arena_init(&arena, mem, need, "test packer");
+    wf_packer pk;
+    ck_assert_int_eq(wf_packer_init(&pk, &arena, raw, 0), WF_OK);
+    wf_link_memory m;
+    wf_link link;
+    ck_assert_int_eq(wf_link_memory_open(&m, &link), WF_OK);
+    wf_packet_header meta = {0};
+    meta.kind = WF_PK_META;
+    ck_assert_int_eq(wf_packer_send(&pk, &link, &meta, text, raw), WF_OK);
+    m.data[WF_PACKET_HEADER_SIZE + 3] ^= 0x40;
+    FILE *f = fmemopen(m.data, m.len, "rb");
+    wf_packet_reader r;
+    wf_packet_reader_open(&r, f, "damaged.bin");
+    const void *payload;
+    int eof;
+    ck_assert_int_eq(wf_packet_reader_next(&r, &h, &payload, &eof), WF_ERR_CORRUPT);
+    const char *msg = wf_error_message();
+    ck_assert_msg(strstr(msg, "bad CRC") && strstr(msg, "kind 1") && !strstr(msg, "rows"), "%s", msg);
+    wf_packet_reader_close(&r);
+    fclose(f);
+    wf_link_memory_close(&m);
+    wf_packer_close(&pk);
+    free(mem);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("link");
@@ -247,6 +302,7 @@ static Suite *suite(void)
     tcase_add_test(tc, pipe_reader_stops);
     tcase_add_test(tc, packet_reader_through_pipe);
     tcase_add_test(tc, packet_crcs_are_zlib_crc32);
+    tcase_add_test(tc, damaged_packet_rows_named);
     suite_add_tcase(s, tc);
     return s;
 }

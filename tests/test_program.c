@@ -11,6 +11,8 @@
 
 #include "sim/wcs.h"
 #include "tests/testutil.h"
+#include "tools/config.h"
+#include "tools/pipeline.h"
 
 #define SMALL "--quiet --set scene.kind=grid --set readout.ncols=96 --set readout.nrows=80 --set readout.ma_table=4 " \
               "--set detector.cr_rate=500 --set scene.grid.spacing=20 --set scene.grid.flux=2e4"
@@ -124,6 +126,8 @@ START_TEST(corrupt_stream_leaves_nothing)
     snprintf(tmp, sizeof tmp, "%s.tmp", out);
     ck_assert(!exists(out));
     ck_assert(!exists(tmp));
+    snprintf(out, sizeof out, "%s/out", d);
+    ck_assert_msg(!exists(out), "the folder assemble made is left behind");
 }
 END_TEST
 
@@ -345,14 +349,17 @@ START_TEST(catalog_file_on_the_command_line)
     snprintf(bad, sizeof bad, "%s/bad/" FITS, d);
     ck_assert(!exists(bad));
     /* with two threads the catalog is read while the optics are built: the same message as
-     * one thread's, also when the data folder is missing too (the first failure in the
-     * order one thread meets them) */
+     * one thread's, also when the data folder lacks its files too (the first failure in the
+     * order one thread meets them; a folder that does not exist is refused with the options) */
+    ck_assert_int_eq(wf_test_run("mkdir %s/nodata", d), 0);
+    char nodata[4300];
+    snprintf(nodata, sizeof nodata, "--set paths.data=%s/nodata", d);
     for (int both = 0; both < 2; both++) {
         char *m[2] = {NULL, NULL};
         for (int th = 1; th <= 2; th++) {
             ck_assert_int_ne(wf_test_run("%s expose --quiet --catalog %s --set readout.ncols=64 --set readout.nrows=64 "
                                          "--threads %d %s --out %s/bad 2>%s/err2.txt", bin, path, th,
-                                         both ? "--set paths.data=/nonexistent/wfisim-data" : "", d, d), 0);
+                                         both ? nodata : "", d, d), 0);
             snprintf(err, sizeof err, "%s/err2.txt", d);
             m[th - 1] = wf_test_slurp(err, &n);
             ck_assert(!exists(bad));
@@ -371,11 +378,11 @@ START_TEST(catalog_file_on_the_command_line)
     char *m1 = NULL;
     for (int th = 1; th <= 2; th++) {
         ck_assert_int_ne(wf_test_run("%s expose --quiet --catalog %s --set readout.ncols=64 --set readout.nrows=64 "
-                                     "--threads %d --set paths.data=/nonexistent/wfisim-data --out %s/bad 2>%s/err3.txt",
-                                     bin, path, th, d, d), 0);
+                                     "--threads %d %s --out %s/bad 2>%s/err3.txt",
+                                     bin, path, th, nodata, d, d), 0);
         snprintf(err, sizeof err, "%s/err3.txt", d);
         char *m = wf_test_slurp(err, &n);
-        ck_assert_msg(m && strstr(m, "/nonexistent/wfisim-data"), "threads %d: message %s", th, m ? m : "");
+        ck_assert_msg(m && strstr(m, "nodata/roman/"), "threads %d: message %s", th, m ? m : "");
         if (th == 1) m1 = m;
         else {
             ck_assert_msg(strcmp(m, m1) == 0, "two threads: %s against %s", m, m1);
@@ -384,6 +391,255 @@ START_TEST(catalog_file_on_the_command_line)
         ck_assert(!exists(bad));
     }
     free(m1);
+}
+END_TEST
+
+/* A product's SCI and ERR: nc x nr, every value finite (ERR > 0); in ramp mode RESULTANTS is
+ * nres x nr x nc; every HDU's checksum verifies. SCI and ERR^2 are summed into sum, var. */
+static void check_product(const char *path, int nc, int nr, int nres, double *sum, double *var, long *n)
+{
+    fitsfile *f;
+    int status = 0, naxis = 0, hdus = 0;
+    long nax[3] = {0, 0, 0};
+    fits_open_file(&f, path, READONLY, &status);
+    ck_assert_msg(status == 0, "%s does not open", path);
+    double *sci = malloc((size_t)nc * nr * sizeof *sci), *err = malloc((size_t)nc * nr * sizeof *err);
+    long first[3] = {1, 1, 1};
+    const char *names[2] = {"SCI", "ERR"};
+    double *vals[2] = {sci, err};
+    for (int k = 0; k < 2; k++) {
+        fits_movnam_hdu(f, IMAGE_HDU, (char *)names[k], 0, &status);
+        fits_get_img_dim(f, &naxis, &status);
+        fits_get_img_size(f, 2, nax, &status);
+        ck_assert_msg(status == 0 && naxis == 2 && nax[0] == nc && nax[1] == nr, "%d x %d: %s is %ld x %ld (NAXIS %d)",
+                      nc, nr, names[k], nax[0], nax[1], naxis);
+        fits_read_pix(f, TDOUBLE, first, (long long)nc * nr, NULL, vals[k], NULL, &status);
+    }
+    ck_assert_int_eq(status, 0);
+    for (long i = 0; i < (long)nc * nr; i++) {
+        ck_assert_msg(isfinite(sci[i]) && isfinite(err[i]) && err[i] > 0, "%d x %d: pixel %ld: SCI %g ERR %g", nc, nr, i,
+                      sci[i], err[i]);
+        *sum += sci[i];
+        *var += err[i] * err[i];
+    }
+    *n += (long)nc * nr;
+    if (nres) {
+        fits_movnam_hdu(f, IMAGE_HDU, "RESULTANTS", 0, &status);
+        fits_get_img_dim(f, &naxis, &status);
+        fits_get_img_size(f, 3, nax, &status);
+        ck_assert_msg(status == 0 && naxis == 3 && nax[0] == nc && nax[1] == nr && nax[2] == nres,
+                      "%d x %d: RESULTANTS is %ld x %ld x %ld", nc, nr, nax[0], nax[1], nax[2]);
+    }
+    fits_get_num_hdus(f, &hdus, &status);
+    for (int h = 1; h <= hdus; h++) {
+        int dataok = 0, hduok = 0;
+        fits_movabs_hdu(f, h, NULL, &status);
+        fits_verify_chksum(f, &dataok, &hduok, &status);
+        ck_assert_msg(status == 0 && dataok == 1 && hduok == 1, "%d x %d: HDU %d checksum", nc, nr, h);
+    }
+    fits_close_file(f, &status);
+    free(sci);
+    free(err);
+}
+
+/* Every detector size of the documented range works (readout.ncols, readout.nrows 1..4088):
+ * each of 1..16 x 1..16 and odd shapes, in both modes, through the same expose -> assemble
+ * path as `wfisim expose` (in-process here, for speed), gives a product of its shape with
+ * finite SCI. (The META text was once written into a tile buffer, so a 1 x 1 detector
+ * could not describe itself.) The flat sky (IPC off: every pixel of a tiny detector is an
+ * edge; nonlinearity off: the single-frame SCI is not linearised) is recovered without bias
+ * over all of them, within 5 sigma of the products' own ERR. */
+static void shapes_in_mode(const char *mode)
+{
+    const char *d = wf_test_tmpdir();
+    double sky = 5.0, sum = 0, var = 0;
+    long n = 0;
+    int shapes[256 + 6][2], ns = 0;
+    for (int nc = 1; nc <= 16; nc++)
+        for (int nr = 1; nr <= 16; nr++) shapes[ns][0] = nc, shapes[ns++][1] = nr;
+    const int odd[6][2] = {{1, 300}, {300, 1}, {17, 3}, {3, 17}, {257, 2}, {2, 129}};
+    for (int k = 0; k < 6; k++) shapes[ns][0] = odd[k][0], shapes[ns++][1] = odd[k][1];
+    for (int k = 0; k < ns; k++) {
+        int nc = shapes[k][0], nr = shapes[k][1];
+        wf_config cfg;
+        wf_clock clock;
+        wf_config_defaults(&cfg);
+        char set[13][128];
+        snprintf(set[0], sizeof set[0], "readout.ncols=%d", nc);
+        snprintf(set[1], sizeof set[1], "readout.nrows=%d", nr);
+        snprintf(set[2], sizeof set[2], "exposure.mode=%s", mode);
+        snprintf(set[3], sizeof set[3], "run.out=%s/p", d);
+        snprintf(set[4], sizeof set[4], "scene.sky_rate=%g", sky);
+        snprintf(set[5], sizeof set[5], "scene.kind=grid");
+        snprintf(set[6], sizeof set[6], "scene.grid.flux=0");
+        snprintf(set[7], sizeof set[7], "detector.effects.ipc=false");
+        snprintf(set[8], sizeof set[8], "detector.effects.cosmic_rays=false");
+        snprintf(set[9], sizeof set[9], "run.quiet=true");
+        snprintf(set[12], sizeof set[12], "run.uncached_writes=false");
+        /* noise is keyed by pixel position: another seed per shape, or pixel (0, 0) would be
+         * the same draw in all of them */
+        snprintf(set[10], sizeof set[10], "seed=%d", k + 1);
+        /* the single-frame SCI is not linearised (ramp fits are): off, for a bias of 0 */
+        snprintf(set[11], sizeof set[11], "detector.effects.nonlinearity=false");
+        for (int i = 0; i < 13; i++) ck_assert_int_eq(wf_config_set(&cfg, set[i], "test"), WF_OK);
+        ck_assert_int_eq(wf_config_finish(&cfg, &clock), WF_OK);
+        wf_pipeline_job job;
+        memset(&job, 0, sizeof job);
+        job.cfg = &cfg;
+        job.clock = &clock;
+        job.version = "test";
+        wf_status st = wf_pipeline_expose(&job);
+        ck_assert_msg(st == WF_OK, "%s %d x %d: %s", mode, nc, nr, wf_error_message());
+        check_product(job.image_path, nc, nr, strcmp(mode, "ramp") ? 0 : clock.ma.nresultants, &sum, &var, &n);
+    }
+    double mean = sum / n, sigma = sqrt(var) / n;
+    double expect = sky * pow(sky, 0.0065 / log(10.0)) + 0.015;
+    ck_assert_msg(fabs(mean - expect) < 5.0 * sigma, "%s: mean rate %.5f over %ld pixels, expected %.5f +- %.5f",
+                  mode, mean, n, expect, sigma);
+}
+
+START_TEST(every_small_shape_single) { shapes_in_mode("single"); }
+END_TEST
+START_TEST(every_small_shape_ramp) { shapes_in_mode("ramp"); }
+END_TEST
+
+/* The same through the program, as the issue ran it: the smallest and thinnest detectors
+ * in both modes exit 0 with their product. */
+START_TEST(small_shapes_through_the_program)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    const int shapes[5][2] = {{1, 1}, {2, 2}, {8, 8}, {1, 300}, {300, 1}};
+    for (int m = 0; m < 2; m++)
+        for (int k = 0; k < 5; k++) {
+            const char *mode = m ? "ramp" : "single";
+            ck_assert_msg(wf_test_run("%s expose --quiet --mode %s --ma-table 4 --set scene.kind=grid --set readout.ncols=%d "
+                                      "--set readout.nrows=%d --out %s/%s%d", bin, mode, shapes[k][0], shapes[k][1], d,
+                                      mode, k) == 0, "%s %d x %d", mode, shapes[k][0], shapes[k][1]);
+            char p[4200];
+            double s = 0, v = 0;
+            long n = 0;
+            snprintf(p, sizeof p, "%s/%s%d/" FITS, d, mode, k);
+            check_product(p, shapes[k][0], shapes[k][1], m ? 9 : 0, &s, &v, &n); /* table 4: 9 resultants */
+        }
+}
+END_TEST
+
+/* A run that fails after its output folder was made (here: cosmic rays beyond what a tile
+ * can count) leaves no folder behind, neither the one asked for nor the parents it made;
+ * a folder that was there before stays. */
+START_TEST(failed_run_leaves_no_folder)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+#define DOOMED "--quiet --set scene.kind=grid --set readout.ncols=16 --set readout.nrows=16 --set detector.cr_rate=1e30"
+    ck_assert_int_eq(wf_test_run("%s expose " DOOMED " --out %s/new/deeper 2>%s/err.txt", bin, d, d), 2);
+    char p[4200];
+    snprintf(p, sizeof p, "%s/err.txt", d);
+    ck_assert_msg(wf_test_file_contains(p, "cosmic rays"), "the reason is not given");
+    snprintf(p, sizeof p, "%s/new", d);
+    ck_assert_msg(!exists(p), "%s left behind", p);
+    ck_assert_int_eq(wf_test_run("mkdir %s/old && %s expose " DOOMED " --out %s/old/deeper 2>/dev/null", d, bin, d), 2);
+    snprintf(p, sizeof p, "%s/old/deeper", d);
+    ck_assert_msg(!exists(p), "%s left behind", p);
+    snprintf(p, sizeof p, "%s/old", d);
+    ck_assert_msg(exists(p), "%s was there before and must stay", p);
+    /* the same run that succeeds makes them */
+    ck_assert_int_eq(wf_test_run("%s expose --quiet --set scene.kind=grid --set readout.ncols=16 --set readout.nrows=16 "
+                                 "--out %s/new/deeper", bin, d), 0);
+    snprintf(p, sizeof p, "%s/new/deeper/" FITS, d);
+    ck_assert(exists(p));
+}
+END_TEST
+
+/* --stream FILE is written as FILE.tmp and renamed when whole: a run that fails mid-stream
+ * (the file may not grow past 40 blocks: ulimit -f, SIGXFSZ ignored, so a write returns EFBIG
+ * as on a full disk) exits non-zero and leaves neither FILE nor FILE.tmp, and an older FILE
+ * stays as it was; a stream that is not a regular file (a FIFO read by `assemble`, a
+ * character device) is written in place, and the FIFO's product is the one of a file. */
+START_TEST(stream_file_whole_or_absent)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char s[4200], tmp[4300], err[4200];
+    snprintf(s, sizeof s, "%s/s.bin", d);
+    snprintf(tmp, sizeof tmp, "%s.tmp", s);
+    snprintf(err, sizeof err, "%s/err.txt", d);
+    ck_assert_int_eq(wf_test_run("%s expose " SMALL " --stream %s", bin, s), 0);
+    ck_assert(exists(s) && !exists(tmp));
+    size_t n0, n1;
+    char *good = wf_test_slurp(s, &n0);
+    ck_assert_msg(n0 > 41 * 1024, "the stream (%zu bytes) must be larger than the limit", n0);
+    ck_assert_int_ne(wf_test_run("sh -c \"trap '' XFSZ; ulimit -f 40; exec %s expose " SMALL " --seed 2 --stream %s 2>%s\"",
+                                 bin, s, err), 0);
+    ck_assert_msg(wf_test_file_contains(err, "File too large"), "the reason is not reported");
+    ck_assert_msg(!exists(tmp), "%s left behind", tmp);
+    char *after = wf_test_slurp(s, &n1);
+    ck_assert_msg(after && n1 == n0 && !memcmp(after, good, n0), "the older stream was changed");
+    free(after);
+    unlink(s);
+    ck_assert_int_ne(wf_test_run("sh -c \"trap '' XFSZ; ulimit -f 40; exec %s expose " SMALL " --stream %s 2>/dev/null\"",
+                                 bin, s), 0);
+    ck_assert_msg(!exists(s) && !exists(tmp), "a truncated stream is left behind");
+    /* not regular files: written in place */
+    ck_assert_int_eq(wf_test_run("%s expose " SMALL " --stream /dev/null", bin), 0);
+    struct stat sb;
+    ck_assert(stat("/dev/null", &sb) == 0 && S_ISCHR(sb.st_mode));
+    ck_assert(!exists("/dev/null.tmp"));
+    ck_assert_int_eq(wf_test_run("mkfifo %s/fifo && { %s assemble %s/fifo --quiet --out %s/viafifo & "
+                                 "%s expose " SMALL " --stream %s/fifo; e=$?; wait $! && [ $e -eq 0 ]; }",
+                                 d, bin, d, d, bin, d), 0);
+    FILE *f = fopen(s, "wb");
+    ck_assert(f && fwrite(good, 1, n0, f) == n0 && fclose(f) == 0);
+    ck_assert_int_eq(wf_test_run("%s assemble %s --quiet --out %s/viafile", bin, s, d), 0);
+    char a[4200], b[4200];
+    snprintf(a, sizeof a, "%s/viafifo/" FITS, d);
+    snprintf(b, sizeof b, "%s/viafile/" FITS, d);
+    assert_same_file(a, b);
+    free(good);
+}
+END_TEST
+
+/* One reading of filter names and of --data for every command: expose takes W149 as W146
+ * (as sn, psf and survey plan do) and writes W146; --data must name a folder even when the
+ * scene reads nothing from it (the grid scene), for expose, psf, sn and survey plan alike. */
+START_TEST(filter_alias_and_data_folder)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    ck_assert_int_eq(wf_test_run("%s expose --quiet --set scene.kind=grid --set readout.ncols=8 --set readout.nrows=8 "
+                                 "--filter w149 --out %s/w", bin, d), 0);
+    char p[4200], filter[FLEN_VALUE] = "";
+    snprintf(p, sizeof p, "%s/w/" FITS, d);
+    fitsfile *f;
+    int status = 0;
+    fits_open_file(&f, p, READONLY, &status);
+    fits_read_key_str(f, "FILTER", filter, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_str_eq(filter, "W146");
+    char file[4200], err[4200];
+    snprintf(file, sizeof file, "%s/afile", d);
+    snprintf(err, sizeof err, "%s/err.txt", d);
+    FILE *fp = fopen(file, "w");
+    fputs("not a folder\n", fp);
+    fclose(fp);
+    const char *cmds[] = {"expose --quiet --set scene.kind=grid --set readout.ncols=8 --set readout.nrows=8 --out %s/x",
+                          "psf --filter Y106 --sca 1 --out %s/x.fits",
+                          "sn lightcurve --z 0.5 --t0 61000 --band Y106 --mjd 61000 --model %s",
+                          "survey plan --quiet --out %s/plan.fits"};
+    for (int k = 0; k < 4; k++) {
+        char cmd[4400];
+        snprintf(cmd, sizeof cmd, cmds[k], d);
+        ck_assert_msg(wf_test_run("%s %s --data %s 2>%s", bin, cmd, file, err) == 2, "%s accepts a file as --data", cmd);
+        ck_assert_msg(wf_test_file_contains(err, "is not a directory"), "%s: no reason given", cmd);
+    }
+    snprintf(p, sizeof p, "%s/x", d);
+    ck_assert(!exists(p));
 }
 END_TEST
 
@@ -405,6 +661,15 @@ static Suite *suite(void)
     tcase_add_test(tc, thin_subarray);
     tcase_add_test(tc, catalog_file_on_the_command_line);
     suite_add_tcase(s, tc);
+    TCase *sh = tcase_create("edges"); /* CK_RUN_CASE=edges runs these alone */
+    tcase_set_timeout(sh, 600);
+    tcase_add_test(sh, every_small_shape_single);
+    tcase_add_test(sh, every_small_shape_ramp);
+    tcase_add_test(sh, small_shapes_through_the_program);
+    tcase_add_test(sh, failed_run_leaves_no_folder);
+    tcase_add_test(sh, stream_file_whole_or_absent);
+    tcase_add_test(sh, filter_alias_and_data_folder);
+    suite_add_tcase(s, sh);
     return s;
 }
 

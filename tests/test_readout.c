@@ -1,6 +1,7 @@
 /* The streaming readout: determinism across tile heights and threads, fixed memory, flux
  * conservation, direct vs per-read sampling, saturation, single-frame order, cosmic rays,
  * replay. Streams are decoded here with the packet reader, independent of the assembler. */
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -13,6 +14,7 @@
 #include "firmware/cosmic.h"
 #include "firmware/readout.h"
 #include "hal/packet.h"
+#include "hal/size.h"
 #include "tests/testutil.h"
 #include "tools/expose.h"
 
@@ -680,6 +682,184 @@ START_TEST(cosmic_ray_count)
 }
 END_TEST
 
+/* A tile whose cosmic-ray truth is larger than its resultants (a high rate on a small
+ * tile): the packet buffer holds the COSMIC packet too, and the hits all arrive. */
+START_TEST(cosmic_truth_larger_than_tile)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 16, 16);
+    cfg.det.cr_rate = 2e5;
+    double expect = wf_cosmic_expected_hits(&cfg.det, 16, 16, wf_clock_exposure_time(&clock));
+    size_t payload = (size_t)16 * 16 * 2 * (size_t)clock.ma.nresultants;
+    ck_assert_msg(expect * sizeof(wf_cosmic_record) > WF_READOUT_META_MAX && expect < 90000,
+                  "%.0f hits (%zu bytes of resultants) do not test it", expect, payload);
+    wf_scene_grid g = {16, 16, 0.4, 0.0, 1.0, 64};
+    wf_scene_source src;
+    wf_scene_grid_source(&g, &src);
+    decoded dd;
+    run_decoded(&cfg, &clock, &src, 1, &dd);
+    ck_assert_msg(fabs(dd.ncr - expect) < 5.0 * sqrt(expect), "%d hits, expected %.1f", dd.ncr, expect);
+    free_decoded(&dd);
+}
+END_TEST
+
+/* One readout instance in an arena of exactly its need, on a grid scene and a memory link
+ * (lm holds what it sent). */
+typedef struct instance {
+    size_t need;
+    void *mem;
+    wf_arena arena;
+    wf_scene_grid g;
+    wf_scene_source src;
+    wf_noise noise;
+    wf_link_memory lm;
+    wf_link link;
+    wf_readout *ro;
+} instance;
+
+static void instance_open(instance *in, const wf_readout_config *cfg, const wf_clock *clock)
+{
+    memset(in, 0, sizeof *in);
+    ck_assert_msg(wf_readout_arena_need(cfg, clock, &in->need) == WF_OK, "%s", wf_error_message());
+    in->mem = malloc(in->need);
+    wf_arena_init(&in->arena, in->mem, in->need, "instance");
+    in->g = test_grid(cfg->ncols, cfg->nrows);
+    wf_scene_grid_source(&in->g, &in->src);
+    in->noise = (wf_noise){WF_NOISE_PHILOX, 1, 1, 1};
+    wf_link_memory_open(&in->lm, &in->link);
+    ck_assert_msg(wf_readout_create(cfg, clock, &in->src, &in->noise, &in->link, &in->arena, &in->ro) == WF_OK,
+                  "%s", wf_error_message());
+}
+
+static void instance_close(instance *in)
+{
+    ck_assert(in->arena.high_water <= in->need);
+    wf_readout_destroy(in->ro);
+    wf_link_memory_close(&in->lm);
+    free(in->mem);
+}
+
+/* Checked size arithmetic (hal/size.h): a product or sum that would wrap saturates, and
+ * stays saturated; the arena's alignment cost and typed allocation refuse it. */
+START_TEST(size_arithmetic_saturates)
+{
+    ck_assert_uint_eq(wf_size_mul(3, 5), 15);
+    ck_assert_uint_eq(wf_size_mul(SIZE_MAX / 2 + 1, 2), WF_SIZE_OVERFLOW);
+    ck_assert_uint_eq(wf_size_mul(WF_SIZE_OVERFLOW, 0), WF_SIZE_OVERFLOW);
+    ck_assert_uint_eq(wf_size_mul3((size_t)1 << 30, (size_t)1 << 30, (size_t)1 << 30), WF_SIZE_OVERFLOW);
+    ck_assert_uint_eq(wf_size_add(SIZE_MAX - 10, 10), SIZE_MAX); /* exactly the top: taken as overflow too */
+    ck_assert_uint_eq(wf_size_add(SIZE_MAX - 10, 11), WF_SIZE_OVERFLOW);
+    ck_assert_uint_eq(wf_size_add(WF_SIZE_OVERFLOW, 0), WF_SIZE_OVERFLOW);
+    ck_assert_uint_eq(wf_size_from_double(5.7, 100), 5);
+    ck_assert_uint_eq(wf_size_from_double(100.0, 100), 100);
+    ck_assert_uint_eq(wf_size_from_double(100.5, 100), WF_SIZE_OVERFLOW);
+    ck_assert_uint_eq(wf_size_from_double(1e300, (size_t)INT_MAX), WF_SIZE_OVERFLOW);
+    ck_assert_uint_eq(wf_size_from_double(-1.0, 100), WF_SIZE_OVERFLOW);
+    ck_assert_uint_eq(wf_size_from_double(NAN, 100), WF_SIZE_OVERFLOW);
+    ck_assert_uint_eq(wf_arena_cost(65), 128);
+    ck_assert_uint_eq(wf_arena_cost(SIZE_MAX - 10), WF_SIZE_OVERFLOW); /* once wrapped to 0 */
+    static unsigned char block[4096];
+    wf_arena arena;
+    wf_arena_init(&arena, block, sizeof block, "test arena");
+    void *p;
+    ck_assert_int_eq(wf_arena_calloc(&arena, SIZE_MAX / 2, 3, "huge", &p), WF_ERR_NOMEM);
+    ck_assert_int_eq(wf_arena_alloc(&arena, SIZE_MAX - 10, "huge", &p), WF_ERR_NOMEM);
+    ck_assert_ptr_null(p);
+}
+END_TEST
+
+/* Frame and exposure times have physical bounds (hal/clock.h, docs/CONFIG.md): just inside
+ * they are sized, just outside (and absurd values such as 1e300, which once came out as a
+ * negative byte count) they are refused with the reason, never sized; an MA table may not
+ * name reads past WF_MA_MAX_READS (the readout indexes a table of that length by read), and
+ * cosmic rays beyond what a tile's buffers count are refused, not wrapped. */
+START_TEST(time_and_size_limits)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    size_t need;
+    small_config(&cfg, &clock, 64, 64);
+    clock.frame_time = WF_FRAME_TIME_MAX;
+    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_OK);
+    const double bad_frame[] = {nextafter(WF_FRAME_TIME_MAX, INFINITY), 1e300, INFINITY, NAN, 0.0, -1.0};
+    for (int i = 0; i < 6; i++) {
+        clock.frame_time = bad_frame[i];
+        ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_ERR_RANGE);
+        ck_assert_ptr_nonnull(strstr(wf_error_message(), "frame time"));
+    }
+    /* one resultant of read 2048: the longest table, a day at 42.1875 s a frame */
+    const int longest[1] = {WF_MA_MAX_READS};
+    ck_assert_int_eq(wf_ma_from_counts("longest", longest, 1, &clock.ma), WF_OK);
+    clock.frame_time = WF_EXPOSURE_TIME_MAX / WF_MA_MAX_READS;
+    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_OK);
+    clock.frame_time = nextafter(WF_EXPOSURE_TIME_MAX / WF_MA_MAX_READS, INFINITY);
+    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_ERR_RANGE);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "exposure time"));
+    clock.frame_time = WF_FRAME_TIME_DEFAULT;
+    clock.ma.read[clock.ma.nreads - 1] = WF_MA_MAX_READS; /* a read past the table */
+    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_ERR_RANGE);
+    ck_assert_int_eq(wf_ma_builtin("4", &clock.ma), WF_OK);
+    /* single frame */
+    cfg.mode = WF_MODE_SINGLE;
+    cfg.exptime = WF_EXPOSURE_TIME_MAX;
+    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_OK);
+    const double bad_exp[] = {nextafter(WF_EXPOSURE_TIME_MAX, INFINITY), 1e300, NAN, 0.0};
+    for (int i = 0; i < 4; i++) {
+        cfg.exptime = bad_exp[i];
+        ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_ERR_RANGE);
+    }
+    /* cosmic rays: a rate no tile can count is refused with its reason */
+    cfg.mode = WF_MODE_RAMP;
+    cfg.det.cr_rate = 1e30;
+    ck_assert_int_eq(wf_readout_arena_need(&cfg, &clock, &need), WF_ERR_RANGE);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "cosmic rays"));
+    /* the longest exposure at the default rate is sized, and its readout is made in it */
+    cfg.det.cr_rate = 5.0;
+    ck_assert_int_eq(wf_ma_from_counts("longest", longest, 1, &clock.ma), WF_OK);
+    clock.frame_time = WF_EXPOSURE_TIME_MAX / WF_MA_MAX_READS;
+    instance in;
+    instance_open(&in, &cfg, &clock);
+    ck_assert_int_eq(wf_readout_send_meta(in.ro, NULL), WF_OK);
+    instance_close(&in);
+}
+END_TEST
+
+/* The META text does not depend on the detector's size: a 1 x 1 detector sends the same
+ * lines as a large one, with host lines up to half of WF_READOUT_META_MAX; more is refused
+ * with its length, and the text's room is given back to the arena either way. */
+START_TEST(meta_fits_any_detector)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 1, 1);
+    cfg.tile_rows = 1;
+    cfg.compress = 0; /* the uncompressed text must fit one packet too */
+    instance in;
+    instance_open(&in, &cfg, &clock);
+    size_t mark = wf_arena_mark(&in.arena), half = WF_READOUT_META_MAX / 2;
+    char *extra = malloc(WF_READOUT_META_MAX + 1);
+    for (size_t i = 0; i < half; i++) extra[i] = i % 64 == 63 ? '\n' : 'x';
+    extra[half] = '\0';
+    ck_assert_int_eq(wf_readout_send_meta(in.ro, extra), WF_OK);
+    ck_assert_uint_eq(wf_arena_mark(&in.arena), mark);
+    /* the packet carries every byte: the fixed lines and the extra ones */
+    wf_packet_header h;
+    ck_assert_int_eq(wf_packet_header_read(in.lm.data, &h), WF_OK);
+    ck_assert_uint_eq(h.kind, WF_PK_META);
+    ck_assert_uint_gt(h.raw_len, half);
+    ck_assert_uint_eq(in.lm.len, WF_PACKET_HEADER_SIZE + h.raw_len); /* not deflated: the text as it is */
+    ck_assert(!memcmp(in.lm.data + in.lm.len - half, extra, half));
+    memset(extra, 'x', WF_READOUT_META_MAX);
+    extra[WF_READOUT_META_MAX] = '\0';
+    ck_assert_int_eq(wf_readout_send_meta(in.ro, extra), WF_ERR_RANGE);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "META text longer"));
+    ck_assert_uint_eq(wf_arena_mark(&in.arena), mark);
+    free(extra);
+    instance_close(&in);
+}
+END_TEST
+
 START_TEST(replay_equals_source)
 {
     wf_readout_config cfg;
@@ -859,6 +1039,10 @@ static Suite *suite(void)
     tcase_add_test(tc, saturation_defined);
     tcase_add_test(tc, single_frame_closed_form);
     tcase_add_test(tc, cosmic_ray_count);
+    tcase_add_test(tc, cosmic_truth_larger_than_tile);
+    tcase_add_test(tc, size_arithmetic_saturates);
+    tcase_add_test(tc, time_and_size_limits);
+    tcase_add_test(tc, meta_fits_any_detector);
     tcase_add_test(tc, replay_equals_source);
     tcase_add_test(tc, linear_rate_per_read);
     tcase_add_test(tc, linear_rate_direct);

@@ -239,6 +239,38 @@ START_TEST(lightcurve_command)
     ck_assert_int_eq(wf_test_run("%s sn lightcurve --data %s --z 0.7 --t0 61500 --band H158 --mjd 61500,abc 2>%s >/dev/null", bin,
                          data, out), 2);
     ck_assert(wf_test_file_contains(out, "abc"));
+    /* no dates at all, or an empty one, is an error before anything is printed */
+    const char *empty[] = {",,,", "", "61500,,61700", "61500,"};
+    for (int k = 0; k < 4; k++) {
+        char so[4300];
+        snprintf(so, sizeof so, "%s.stdout", out);
+        ck_assert_msg(wf_test_run("%s sn lightcurve --data %s --z 0.7 --t0 61500 --band H158 --mjd '%s' 2>%s >%s", bin,
+                                  data, empty[k], out, so) == 2, "--mjd '%s' accepted", empty[k]);
+        ck_assert_msg(wf_test_file_contains(out, "is empty"), "--mjd '%s': no reason", empty[k]);
+        size_t n = 1;
+        free(wf_test_slurp(so, &n));
+        ck_assert_msg(n == 0, "--mjd '%s': %zu bytes printed", empty[k], n);
+    }
+    /* an out-of-range value is named as given, not as the x0 it would have made */
+    const struct { const char *opts, *named; } bad[] = {
+        {"--x1 1e300 --c 1e300", "--x1 1e+300 is out of range"}, {"--c 1e300", "--c 1e+300 is out of range"},
+        {"--x1 -10.5", "--x1 -10.5 is out of range"},          {"--mu 1e300", "--mu 1e+300 is out of range"},
+        {"--alpha 1e300", "--alpha 1e+300 is out of range"},   {"--beta -21", "--beta -21 is out of range"},
+        {"--x0 0", "--x0 must be > 0"}};
+    for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
+        ck_assert_msg(wf_test_run("%s sn lightcurve --data %s --z 0.7 --t0 61500 --band H158 --mjd 61500 %s 2>%s >/dev/null",
+                                  bin, data, bad[k].opts, out) == 2, "%s accepted", bad[k].opts);
+        ck_assert_msg(wf_test_file_contains(out, bad[k].named), "%s: not named", bad[k].opts);
+        char *msg = wf_test_slurp(out, NULL); /* its first line: the usage text that follows names every option */
+        ck_assert_ptr_nonnull(msg);
+        if (strchr(msg, '\n')) *strchr(msg, '\n') = '\0';
+        ck_assert_msg(strstr(bad[k].opts, "--x0") || !strstr(msg, "--x0"), "%s: blames --x0: %s", bad[k].opts, msg);
+        free(msg);
+    }
+    /* the ends of the ranges are taken, and W149 is W146 here as in expose */
+    ck_assert_int_eq(wf_test_run("%s sn lightcurve --data %s --z 0.7 --t0 61500 --band W149 --mjd 61500 --x1 10 --c -2 "
+                                 "--alpha 10 --beta 20 > %s", bin, data, out), 0);
+    ck_assert(wf_test_file_contains(out, "band W146"));
 }
 END_TEST
 

@@ -647,6 +647,18 @@ START_TEST(bad_parameters)
     expect_set_error("survey.filters=Y106,Y106", WF_ERR_INPUT, "listed twice");
     expect_set_error("survey.filters=Y1,J2,H3,F4,K5,W6,R7,Z8,X9", WF_ERR_RANGE, "more than 8");
     expect_set_error("survey.filters=TOOLONGNAME", WF_ERR_INPUT, "longer than 7");
+    /* filters are read as every command reads them: a name that is none is refused here,
+     * not when the plan is rendered; W149 is W146, so the two are one filter */
+    expect_set_error("survey.filters=Y106,Q999", WF_ERR_INPUT, "unknown filter 'Q999'");
+    expect_set_error("survey.filters=W146,w149", WF_ERR_INPUT, "'W146' listed twice");
+    {
+        wf_survey_params q;
+        wf_survey_defaults(&q);
+        ck_assert_int_eq(wf_survey_set(&q, "survey.filters=w149,y106", NULL), WF_OK);
+        ck_assert_int_eq(q.nfilters, 2);
+        ck_assert_str_eq(q.filters[0], "W146");
+        ck_assert_str_eq(q.filters[1], "Y106");
+    }
     expect_set_error("survey.columns=5,0,5", WF_ERR_RANGE, "survey.columns");
 
     /* Cross-key checks happen when the plan is made. */

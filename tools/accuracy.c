@@ -1454,6 +1454,8 @@ int wf_cmd_accuracy(int argc, char **argv)
             snprintf(run.out, sizeof run.out, "%s", v);
         } else {
             data = v;
+            wf_status st = strcmp(v, "none") ? wf_config_check_dir("--data", v) : WF_OK;
+            if (st) return fail(st);
         }
     }
     if (!kind) return usage_error("%s", "give what to sweep: psf, galaxy, scene or all");

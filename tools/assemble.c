@@ -124,18 +124,16 @@ static wf_status fail(const assembler *a, wf_status code, const char *fmt, ...)
 
 static wf_status fail(const assembler *a, wf_status code, const char *fmt, ...)
 {
-    char detail[768], rows[48] = "";
+    char detail[768], rows[48];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(detail, sizeof detail, fmt, ap);
     va_end(ap);
     const wf_packet_header *h = &a->h;
-    if (h->row_count > 0 && h->kind != WF_PK_END)
-        snprintf(rows, sizeof rows, ", rows %" PRIu32 "-%" PRIu32, h->first_row,
-                 h->first_row + h->row_count - 1);
-    return wf_error(code, "%s: packet %ld (%s%s, exposure %" PRIu32 " SCA %u) at offset %llu: %s",
-                    a->name, a->packet, kind_name(h->kind), rows, h->exposure, (unsigned)h->sca,
-                    a->offset, detail);
+    wf_packet_rows_text(h, rows, sizeof rows);
+    return wf_error(code, "%s: packet %ld (%s%s%s, exposure %" PRIu32 " SCA %u) at offset %llu: %s",
+                    a->name, a->packet, kind_name(h->kind), rows[0] ? ", " : "", rows, h->exposure,
+                    (unsigned)h->sca, a->offset, detail);
 }
 
 static wf_status fail_fits(const assembler *a, const exposure *e, int status, const char *doing)

@@ -12,6 +12,9 @@
 #include <sys/stat.h>
 #include <yaml.h>
 
+#include "sim/bandpass.h"
+#include "sim/snpop.h"
+
 /* Enum keys store the index of the chosen name as an int, so the choice lists below must
  * stay in the order of the C enums and the enums must be int-sized. */
 _Static_assert(WF_MODE_RAMP == 0 && WF_MODE_SINGLE == 1, "exposure.mode choices follow wf_mode");
@@ -55,6 +58,9 @@ typedef struct key_desc {
     const char *doc_default;     /* what the doc shows instead of the value, or NULL */
     double lo, hi;               /* numeric bounds, used when has_lo / has_hi */
     unsigned char has_lo, has_hi, lo_open, nonempty;
+    unsigned char filter;        /* KT_STRING: a filter name as sim/bandpass.c reads it (W149
+                                  * is W146), stored under its one name */
+    unsigned char dir;           /* KT_STRING: empty, or an existing directory */
     const char *const *choices;  /* NULL-terminated, KT_ENUM and restricted KT_STRING */
     size_t off, size;            /* storage in wf_config */
     const char *doc;             /* one line */
@@ -65,8 +71,6 @@ typedef struct key_desc {
 #define ABOVE(v) .has_lo = 1, .lo_open = 1, .lo = (v)
 #define MAX(v) .has_hi = 1, .hi = (v)
 
-static const char *const filters[] = {"R062", "Z087", "Y106", "J129", "H158",
-                                      "F184", "K213", "W146", NULL};
 static const char *const modes[] = {"ramp", "single", NULL};
 static const char *const samplings[] = {"per-read", "direct", NULL};
 
@@ -86,7 +90,7 @@ static const key_desc keys[] = {
      .doc = "Exposure number: a noise key and the packet header's exposure id."},
     {.name = "exposure.sca", .type = KT_UINT, .unit = "", .def = "1", MIN(1), MAX(18),
      FIELD(ro.sca), .doc = "Sensor chip assembly simulated."},
-    {.name = "exposure.filter", .type = KT_STRING, .unit = "", .def = "Y106", .choices = filters,
+    {.name = "exposure.filter", .type = KT_STRING, .unit = "", .def = "Y106", .filter = 1,
      FIELD(filter), .doc = "Filter element (W146 is also called W149)."},
     {.name = "exposure.mode", .type = KT_ENUM, .unit = "", .def = "ramp", .choices = modes,
      FIELD(ro.mode),
@@ -96,8 +100,11 @@ static const key_desc keys[] = {
      .choices = samplings, FIELD(ro.sampling),
      .doc = "Ramp mode: draw every read (`per-read`) or each resultant at once (`direct`)."},
     {.name = "exposure.exptime", .type = KT_DOUBLE, .unit = "s", .def = "300", ABOVE(0),
-     FIELD(ro.exptime),
-     .doc = "Exposure time in single mode; ramp mode takes it from the MA table."},
+     MAX(WF_EXPOSURE_TIME_MAX), FIELD(ro.exptime),
+     .doc = "Exposure time in single mode; ramp mode takes it from the MA table (its last read, "
+            "within the same bound). At most a day, ~90x the longest built-in MA table (11: 977 s): "
+            "the cosmic-ray buffers grow with it (a full-width 64-row tile counts ~2x10^5 hits in a day "
+            "at the default rate)."},
 
     {.name = "readout.ncols", .type = KT_INT, .unit = "pixels", .def = "4088", MIN(1), MAX(4088),
      FIELD(ro.ncols), .doc = "Active columns read (a smaller SCA for quick runs)."},
@@ -107,7 +114,10 @@ static const key_desc keys[] = {
      FIELD(ro.tile_rows),
      .doc = "Rows per firmware tile; sets memory, never the result. Clamped to readout.nrows."},
     {.name = "readout.frame_time", .type = KT_DOUBLE, .unit = "s", .def = NULL, ABOVE(0),
-     FIELD(frame_time), .doc = "Time per full-frame read (romanisim's value; older tools 3.04)."},
+     MAX(WF_FRAME_TIME_MAX), FIELD(frame_time),
+     .doc = "Time per full-frame read (romanisim's value; older tools 3.04). At most 100 s, 30x "
+            "the flight value, room for what-if studies with every size derived from it finite; "
+            "the ramp's exposure time (reads x frame time) is held to a day too (exposure.exptime)."},
     {.name = "readout.ma_table", .type = KT_STRING, .unit = "", .def = "6", .nonempty = 1,
      FIELD(ma_table),
      .doc = "MultiAccum table: built-in Rev F `4`, `6`, `11`, or a table file (path from the "
@@ -280,31 +290,31 @@ static const key_desc keys[] = {
      .doc = "Lowest redshift generated."},
     {.name = "sn.zmax", .type = KT_DOUBLE, .unit = "", .def = "2.99", MIN(0), MAX(10), FIELD(sn.zmax),
      .doc = "Highest redshift generated."},
-    {.name = "sn.alpha", .type = KT_DOUBLE, .unit = "", .def = "0.14", MIN(-10), MAX(10), FIELD(sn.alpha),
+    {.name = "sn.alpha", .type = KT_DOUBLE, .unit = "", .def = "0.14", MIN(-WF_SNPOP_ALPHA_LIMIT), MAX(WF_SNPOP_ALPHA_LIMIT), FIELD(sn.alpha),
      .doc = "Stretch standardisation: x0 = 10^(-0.4 (mu - alpha x1 + beta c + delta)) / 1e-12."},
-    {.name = "sn.beta", .type = KT_DOUBLE, .unit = "", .def = "3.1", MIN(-20), MAX(20), FIELD(sn.beta),
+    {.name = "sn.beta", .type = KT_DOUBLE, .unit = "", .def = "3.1", MIN(-WF_SNPOP_BETA_LIMIT), MAX(WF_SNPOP_BETA_LIMIT), FIELD(sn.beta),
      .doc = "Colour standardisation."},
     {.name = "sn.sigma_int", .type = KT_DOUBLE, .unit = "mag", .def = "0.1", MIN(0), MAX(2), FIELD(sn.sigma_int),
      .doc = "Coherent intrinsic scatter (Gaussian sigma)."},
-    {.name = "sn.x1.peak", .type = KT_DOUBLE, .unit = "", .def = "0.973", MIN(-10), MAX(10), FIELD(sn.x1[0]),
+    {.name = "sn.x1.peak", .type = KT_DOUBLE, .unit = "", .def = "0.973", MIN(-WF_SNPOP_X1_LIMIT), MAX(WF_SNPOP_X1_LIMIT), FIELD(sn.x1[0]),
      .doc = "Stretch: peak of the asymmetric Gaussian (G10 high-z, Scolnic & Kessler 2016)."},
     {.name = "sn.x1.sigma_minus", .type = KT_DOUBLE, .unit = "", .def = "1.472", MIN(0), MAX(10), FIELD(sn.x1[1]),
      .doc = "Stretch: sigma below the peak."},
     {.name = "sn.x1.sigma_plus", .type = KT_DOUBLE, .unit = "", .def = "0.222", MIN(0), MAX(10), FIELD(sn.x1[2]),
      .doc = "Stretch: sigma above the peak."},
-    {.name = "sn.x1.min", .type = KT_DOUBLE, .unit = "", .def = "-3", MIN(-10), MAX(10), FIELD(sn.x1[3]),
+    {.name = "sn.x1.min", .type = KT_DOUBLE, .unit = "", .def = "-3", MIN(-WF_SNPOP_X1_LIMIT), MAX(WF_SNPOP_X1_LIMIT), FIELD(sn.x1[3]),
      .doc = "Stretch: lower truncation."},
-    {.name = "sn.x1.max", .type = KT_DOUBLE, .unit = "", .def = "2", MIN(-10), MAX(10), FIELD(sn.x1[4]),
+    {.name = "sn.x1.max", .type = KT_DOUBLE, .unit = "", .def = "2", MIN(-WF_SNPOP_X1_LIMIT), MAX(WF_SNPOP_X1_LIMIT), FIELD(sn.x1[4]),
      .doc = "Stretch: upper truncation."},
-    {.name = "sn.c.peak", .type = KT_DOUBLE, .unit = "", .def = "-0.054", MIN(-2), MAX(2), FIELD(sn.c[0]),
+    {.name = "sn.c.peak", .type = KT_DOUBLE, .unit = "", .def = "-0.054", MIN(-WF_SNPOP_C_LIMIT), MAX(WF_SNPOP_C_LIMIT), FIELD(sn.c[0]),
      .doc = "Colour: peak of the asymmetric Gaussian."},
     {.name = "sn.c.sigma_minus", .type = KT_DOUBLE, .unit = "", .def = "0.043", MIN(0), MAX(2), FIELD(sn.c[1]),
      .doc = "Colour: sigma below the peak."},
     {.name = "sn.c.sigma_plus", .type = KT_DOUBLE, .unit = "", .def = "0.101", MIN(0), MAX(2), FIELD(sn.c[2]),
      .doc = "Colour: sigma above the peak."},
-    {.name = "sn.c.min", .type = KT_DOUBLE, .unit = "", .def = "-0.3", MIN(-2), MAX(2), FIELD(sn.c[3]),
+    {.name = "sn.c.min", .type = KT_DOUBLE, .unit = "", .def = "-0.3", MIN(-WF_SNPOP_C_LIMIT), MAX(WF_SNPOP_C_LIMIT), FIELD(sn.c[3]),
      .doc = "Colour: lower truncation."},
-    {.name = "sn.c.max", .type = KT_DOUBLE, .unit = "", .def = "0.5", MIN(-2), MAX(2), FIELD(sn.c[4]),
+    {.name = "sn.c.max", .type = KT_DOUBLE, .unit = "", .def = "0.5", MIN(-WF_SNPOP_C_LIMIT), MAX(WF_SNPOP_C_LIMIT), FIELD(sn.c[4]),
      .doc = "Colour: upper truncation."},
     {.name = "sn.host.dztol", .type = KT_STRING, .unit = "", .def = "0.01,0,0", .nonempty = 1, FIELD(sn.dztol),
      .doc = "Host redshift tolerance a0,a1,a2: |dz| <= a0 + a1 z + a2 z^2 (SNANA HOSTLIB_DZTOL)."},
@@ -313,10 +323,10 @@ static const key_desc keys[] = {
     {.name = "sn.host.hostless", .type = KT_BOOL, .unit = "", .def = "false", FIELD(sn.hostless),
      .doc = "Generate without a host catalog (every SN hostless, placed uniformly)."},
 
-    {.name = "paths.data", .type = KT_STRING, .unit = "",
+    {.name = "paths.data", .type = KT_STRING, .unit = "", .dir = 1,
      .doc_default = "`$WFISIM_DATA`, else empty", FIELD(data_dir),
      .doc = "Directory of the shared data (`roman/`, `salt3/`, ...); empty: built-in values."},
-    {.name = "paths.reference", .type = KT_STRING, .unit = "",
+    {.name = "paths.reference", .type = KT_STRING, .unit = "", .dir = 1,
      .doc_default = "`$WFISIM_REFERENCE`, else empty", FIELD(reference_dir),
      .doc = "Directory of the reference outputs used by comparisons; empty: none."},
 };
@@ -496,6 +506,28 @@ static void choices_text(const char *const *choices, char *buf, size_t n)
                                  choices[i]);
 }
 
+/* The filter names sim/bandpass.c reads, for messages and the reference. */
+static void filters_text(char *buf, size_t n)
+{
+    size_t used = 0;
+    buf[0] = '\0';
+    for (int i = 0; i < WF_NFILTER; i++)
+        used += (size_t)snprintf(buf + used, used < n ? n - used : 0, "%s%s", i ? ", " : "",
+                                 wf_filter_name((wf_filter)i));
+    if (used < n) snprintf(buf + used, n - used, " (W149: W146)");
+}
+
+wf_status wf_config_check_dir(const char *what, const char *path)
+{
+    if (!path || !*path) return WF_OK;
+    struct stat sb;
+    if (stat(path, &sb) != 0)
+        return wf_error(WF_ERR_IO, "%s: '%s': %s", what, path, strerror(errno));
+    if (!S_ISDIR(sb.st_mode))
+        return wf_error(WF_ERR_INPUT, "%s: '%s' is not a directory", what, path);
+    return WF_OK;
+}
+
 static int choice_index(const char *const *choices, const char *text)
 {
     for (int i = 0; choices[i]; i++)
@@ -601,6 +633,23 @@ static wf_status set_from_text(wf_config *cfg, const key_desc *k, const char *te
             char c[256];
             choices_text(k->choices, c, sizeof c);
             return key_error(WF_ERR_INPUT, w, k->name, "'%.60s' is not one of %s", text, c);
+        }
+        if (k->filter) {
+            wf_filter f;
+            if (!wf_filter_lookup(text, &f)) {
+                char c[256];
+                filters_text(c, sizeof c);
+                return key_error(WF_ERR_INPUT, w, k->name, "'%.60s' is not one of %s", text, c);
+            }
+            text = wf_filter_name(f);
+        }
+        if (k->dir && *text) {
+            wf_status st = wf_config_check_dir(k->name, text);
+            if (st) {
+                char msg[2 * WF_PATH_MAX], at[WF_PATH_MAX + 32];
+                snprintf(msg, sizeof msg, "%s", wf_error_message());
+                return wf_error(st, "%s: %s", where_text(w, at, sizeof at), msg);
+            }
         }
         if (k->nonempty && !*text)
             return key_error(WF_ERR_INPUT, w, k->name, "must not be empty");
@@ -1074,6 +1123,12 @@ wf_status wf_config_finish(wf_config *cfg, wf_clock *clock)
         return wf_error(WF_ERR_RANGE,
                         "products.quantize_level %g: 0 (lossless) or at least 1 (a step no coarser than the noise)",
                         cfg->products.quantize_level);
+    double t = wf_clock_exposure_time(clock);
+    if (cfg->ro.mode == WF_MODE_RAMP && !(t <= WF_EXPOSURE_TIME_MAX))
+        return wf_error(WF_ERR_RANGE,
+                        "readout.ma_table %s: %d reads x readout.frame_time %g s = %g s, longer than "
+                        "the %g s an exposure may last", clock->ma.name, wf_ma_total_reads(&clock->ma),
+                        clock->frame_time, t, WF_EXPOSURE_TIME_MAX);
     cfg->ro.seed = cfg->seed;
     return WF_OK;
 }
@@ -1125,7 +1180,7 @@ static const char *type_text(const key_desc *k)
     case KT_INT: return "integer";
     case KT_UINT: return "unsigned";
     case KT_DOUBLE: return "number";
-    case KT_STRING: return k->choices ? "choice" : "string";
+    case KT_STRING: return k->choices || k->filter ? "choice" : "string";
     case KT_ENUM: return "choice";
     case KT_KERNEL: return "3x3 numbers";
     }
@@ -1169,6 +1224,10 @@ static void allowed_text(const key_desc *k, char *buf, size_t n)
     case KT_STRING:
         if (k->choices)
             choices_text(k->choices, buf, n);
+        else if (k->filter)
+            filters_text(buf, n);
+        else if (k->dir)
+            snprintf(buf, n, "empty, or a directory");
         else if (k->nonempty)
             snprintf(buf, n, "non-empty, < %zu characters", k->size);
         else

@@ -86,6 +86,11 @@ wf_status wf_config_set(wf_config *cfg, const char *assignment, const char *orig
  * clamps readout.tile_rows to readout.nrows and checks cross-key constraints. */
 wf_status wf_config_finish(wf_config *cfg, wf_clock *clock);
 
+/* A directory named by `what` (an option or key, for the message): NULL or "" is none;
+ * anything else must be an existing directory, whether or not the run reads from it
+ * (WF_ERR_INPUT for a file, WF_ERR_IO when it cannot be found). */
+wf_status wf_config_check_dir(const char *what, const char *path);
+
 /* Writes the Markdown reference of every key (docs/CONFIG.md is this output). */
 void wf_config_write_doc(FILE *out);
 

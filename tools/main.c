@@ -195,15 +195,16 @@ static int run_exposure(cli *c, int demo)
 static int cmd_assemble(cli *c)
 {
     if (!c->positional) { fprintf(stderr, "wfisim assemble: give a stream file or '-'\n"); return 2; }
-    wf_status st = wf_pipeline_make_dir(c->cfg.out_dir);
-    if (st) return fail("assemble", st);
     FILE *in = strcmp(c->positional, "-") ? fopen(c->positional, "rb") : stdin;
     if (!in) { wf_error(WF_ERR_IO, "%s: cannot open", c->positional); return fail("assemble", WF_ERR_IO); }
+    char made[WF_PATH_MAX];
+    wf_status st = wf_pipeline_make_dir_noting(c->cfg.out_dir, made);
     wf_assemble_options opt;
     wf_pipeline_assemble_options(&c->cfg, &opt);
     char path[WF_PATH_MAX] = "";
-    st = wf_assemble_stream(in, c->positional, &opt, path, sizeof path);
+    if (!st) st = wf_assemble_stream(in, c->positional, &opt, path, sizeof path);
     if (in != stdin) fclose(in);
+    if (st) wf_pipeline_unmake_dir(c->cfg.out_dir, made); /* a damaged stream leaves no empty folder */
     return st ? fail("assemble", st) : 0;
 }
 
@@ -271,7 +272,8 @@ static int cmd_stamp(cli *c)
     char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
     snprintf(path, sizeof path, "%s/stamp_%lld.fits", cfg->out_dir, id);
     fitsfile *f = NULL;
-    if (!st) st = wf_pipeline_make_dir(cfg->out_dir);
+    char made[WF_PATH_MAX] = "";
+    if (!st) st = wf_pipeline_make_dir_noting(cfg->out_dir, made);
     if (!st) st = wf_fits_begin(path, tmp, sizeof tmp, &f);
     if (!st) {
         int status = 0;
@@ -299,6 +301,7 @@ static int cmd_stamp(cli *c)
         fits_write_pix(f, TDOUBLE, first, (long long)nx * ny, pix, &status);
         st = wf_fits_finish(f, tmp, path, wf_fits_error(status, tmp, "writing the stamp"));
     }
+    if (st) wf_pipeline_unmake_dir(cfg->out_dir, made);
     if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s (%d x %d, %s %lld, %.4g e-/s)\n", path, nx, ny,
                                     info.kind ? "star" : "galaxy", info.id, info.flux);
     free(pix);
@@ -358,7 +361,8 @@ static int cmd_catalog(cli *c)
     char gpath[WF_PATH_MAX + 64], spath[WF_PATH_MAX + 64];
     snprintf(gpath, sizeof gpath, "%s/synthetic_galaxies.fits", c->cfg.out_dir);
     snprintf(spath, sizeof spath, "%s/synthetic_stars.fits", c->cfg.out_dir);
-    wf_status st = wf_pipeline_make_dir(c->cfg.out_dir);
+    char made[WF_PATH_MAX];
+    wf_status st = wf_pipeline_make_dir_noting(c->cfg.out_dir, made);
     if (!st) st = wf_synth_create(&sc, &syn);
     if (!st && !(st = wf_synth_generate_all(syn, &gal, &stars))) have = 1;
     if (!st) st = wf_catalog_write_fits(gpath, &gal);
@@ -371,6 +375,7 @@ static int cmd_catalog(cli *c)
         wf_catalog_free(&stars);
     }
     wf_synth_free(syn);
+    if (st) wf_pipeline_unmake_dir(c->cfg.out_dir, made);
     return st ? fail("catalog", st) : 0;
 }
 

@@ -25,18 +25,46 @@ void wf_pipeline_paths(const char *dir, unsigned exposure, unsigned sca, char *i
     snprintf(truth, cap, "%s/wfisim_e%06u_sca%02u_truth.fits", dir, exposure, sca);
 }
 
-wf_status wf_pipeline_make_dir(const char *dir)
+wf_status wf_pipeline_make_dir_noting(const char *dir, char *made)
 {
     char buf[WF_PATH_MAX];
+    if (made) made[0] = '\0';
+    if (strlen(dir) >= sizeof buf) return wf_error(WF_ERR_INPUT, "%.80s...: directory name too long", dir);
     snprintf(buf, sizeof buf, "%s", dir);
-    for (char *p = buf + 1; *p; p++)
-        if (*p == '/') {
+    /* every folder from the first one made down is new: the first is all undo needs */
+    for (char *p = buf + 1;; p++)
+        if (*p == '/' || !*p) {
+            char c = *p;
             *p = '\0';
-            if (mkdir(buf, 0777) != 0 && errno != EEXIST) return wf_error(WF_ERR_IO, "%s: cannot create directory", buf);
-            *p = '/';
+            if (mkdir(buf, 0777) == 0) {
+                if (made && !made[0]) snprintf(made, WF_PATH_MAX, "%s", buf);
+            } else if (errno != EEXIST) {
+                wf_pipeline_unmake_dir(dir, made);
+                return wf_error(WF_ERR_IO, "%s: cannot create directory: %s", buf, strerror(errno));
+            }
+            *p = c;
+            if (!c) break;
         }
-    if (mkdir(buf, 0777) != 0 && errno != EEXIST) return wf_error(WF_ERR_IO, "%s: cannot create directory", buf);
     return WF_OK;
+}
+
+wf_status wf_pipeline_make_dir(const char *dir) { return wf_pipeline_make_dir_noting(dir, NULL); }
+
+void wf_pipeline_unmake_dir(const char *dir, const char *made)
+{
+    if (!made || !made[0]) return;
+    char buf[WF_PATH_MAX];
+    snprintf(buf, sizeof buf, "%s", dir);
+    size_t keep = strlen(made);
+    for (;;) {
+        size_t n = strlen(buf);
+        while (n > 1 && buf[n - 1] == '/') buf[--n] = '\0';
+        /* rmdir takes only an empty folder: anything a run left in it stays */
+        if (n < keep || rmdir(buf) != 0) return;
+        char *slash = strrchr(buf, '/');
+        if (!slash) return;
+        *slash = '\0';
+    }
 }
 
 void wf_pipeline_grid(const wf_config *cfg, wf_scene_grid *g)
@@ -217,6 +245,53 @@ static wf_status gather_sne(const wf_pipeline_job *pj, const wf_scene_inputs *in
     return WF_OK;
 }
 
+/* Where `--stream FILE` goes. A file is written as FILE.tmp and renamed once the whole
+ * stream is out, removed on failure, as every product is: a full disk or a failed readout
+ * never leaves a truncated stream under FILE (an old FILE stays as it was). Standard output
+ * ("-") and what is not a regular file (a pipe, a FIFO, a character device) take the bytes
+ * as they come: they cannot be renamed. */
+typedef struct stream_out {
+    FILE *file;
+    const char *path;
+    char tmp[WF_PATH_MAX + 8]; /* "" when written in place */
+} stream_out;
+
+static wf_status stream_begin(const char *path, stream_out *so)
+{
+    memset(so, 0, sizeof *so);
+    so->path = path;
+    if (!strcmp(path, "-")) {
+        so->file = stdout;
+        return WF_OK;
+    }
+    struct stat sb;
+    int in_place = stat(path, &sb) == 0 && !S_ISREG(sb.st_mode);
+    if (!in_place && snprintf(so->tmp, sizeof so->tmp, "%s.tmp", path) >= (int)sizeof so->tmp)
+        return wf_error(WF_ERR_INPUT, "%.80s...: stream file name too long", path);
+    so->file = fopen(in_place ? path : so->tmp, "wb");
+    if (!so->file)
+        return wf_error(WF_ERR_IO, "%s: cannot create stream file: %s", in_place ? path : so->tmp, strerror(errno));
+    return WF_OK;
+}
+
+/* Flushes and closes; renames the temporary file over path when st and every write were
+ * good, else removes it. Returns the first failure. */
+static wf_status stream_end(stream_out *so, wf_status st)
+{
+    char why[1024];
+    snprintf(why, sizeof why, "%s", st ? wf_error_message() : "");
+    if (fflush(so->file) != 0 && !st) st = wf_error(WF_ERR_IO, "%s: write failed: %s", so->path, strerror(errno));
+    if (so->file != stdout && fclose(so->file) != 0 && !st)
+        st = wf_error(WF_ERR_IO, "%s: close failed: %s", so->path, strerror(errno));
+    if (so->tmp[0]) {
+        if (!st && rename(so->tmp, so->path) != 0)
+            st = wf_error(WF_ERR_IO, "%s: cannot rename %s to it: %s", so->path, so->tmp, strerror(errno));
+        if (st) remove(so->tmp);
+    }
+    if (st && why[0]) wf_error(st, "%s", why); /* the first failure's message, not a later one's */
+    return st;
+}
+
 /* The catalogs and the job's supernovae, read on a helper thread while the scene's optics are
  * built (wf_scene_prepare): with more than one thread the catalog (~15 ms for GalSim's
  * scene) is then off the set-up's serial path. */
@@ -255,7 +330,8 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
     wf_scene_sn *sne = NULL;
     size_t nsne = 0;
     char *extra = NULL;
-    const size_t extra_cap = 64 * 1024;
+    const size_t extra_cap = WF_READOUT_META_MAX / 2; /* the readout's own lines take the rest */
+    char made_dir[WF_PATH_MAX] = "";
     if (!scenes || !replays || !(extra = malloc(extra_cap))) { st = wf_error(WF_ERR_NOMEM, "out of memory"); goto done; }
     wf_pipeline_grid(cfg, &grid);
     int objects = !pj->replay && cfg->scene_kind != 2;
@@ -362,13 +438,11 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
     wf_link link;
     wf_link_stream ls;
     if (pj->stream) {
-        FILE *f = strcmp(pj->stream, "-") ? fopen(pj->stream, "wb") : stdout;
-        if (!f) { st = wf_error(WF_ERR_IO, "%s: cannot create stream file", pj->stream); goto done; }
-        wf_link_stream_open(&ls, f, pj->stream, &link);
+        stream_out so;
+        if ((st = stream_begin(pj->stream, &so))) goto done;
+        wf_link_stream_open(&ls, so.file, pj->stream, &link);
         job.link = &link;
-        st = wf_expose_run(&job);
-        if (fflush(f) != 0 && !st) st = wf_error(WF_ERR_IO, "%s: write failed", pj->stream);
-        if (f != stdout && fclose(f) != 0 && !st) st = wf_error(WF_ERR_IO, "%s: close failed", pj->stream);
+        st = stream_end(&so, wf_expose_run(&job));
         wf_link_stream_close(&ls);
         goto done;
     }
@@ -379,7 +453,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
      * pipe is wfisim's own (hal/link.h): an OS pipe cost ~5% of a GalSim-scene run in system
      * calls, kernel copies and wake-ups. Its 4 MiB ring holds a few tiles' packets. */
     job.ro.compress = 0;
-    if ((st = wf_pipeline_make_dir(cfg->out_dir))) goto done;
+    if ((st = wf_pipeline_make_dir_noting(cfg->out_dir, made_dir))) goto done;
     wf_link_pipe lp;
     if ((st = wf_link_pipe_open(&lp, (size_t)4 << 20, "in-process stream", &link))) goto done;
     assembler_thread at = {0};
@@ -425,6 +499,7 @@ done:
         if (!(pj->stream && (st = wf_pipeline_make_dir(cfg->out_dir)))) st = wf_scene_write_truth(objscene, tpath);
         if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s\n", tpath);
     }
+    if (st) wf_pipeline_unmake_dir(cfg->out_dir, made_dir);
     wf_scene_destroy(objscene);
     wf_pipeline_inputs_free(&inputs);
     free(sne);

@@ -11,6 +11,7 @@
 #include "sim/bandpass.h"
 #include "sim/psf.h"
 #include "sim/fitsout.h"
+#include "tools/config.h"
 
 static const char *usage =
     "usage: wfisim psf --filter F --sca N [--pupil-bin 1|2|4|8] [--oversample K]\n"
@@ -248,6 +249,7 @@ int wf_cmd_psf(int argc, char **argv)
     wf_psf_optics_default(&o);
     o.sca = a.sca, o.pupil_bin = a.bin, o.x = a.x, o.y = a.y;
     if ((st = wf_pupil_group_of_filter(a.filter, &o.group))) return fail(st);
+    if (a.data && strcmp(a.data, "none") && (st = wf_config_check_dir("--data", a.data))) return fail(st);
     const char *data = a.data ? a.data : getenv("WFISIM_DATA");
     if (data && *data && strcmp(data, "none")) {
         if (strlen(data) >= sizeof o.data_dir) {

@@ -127,6 +127,14 @@ static int seed_number(const char *flag, const char *text, uint64_t *out)
     return 0;
 }
 
+/* An option's value outside [-limit, limit]. */
+static int out_of_range(const char *flag, double v, double limit)
+{
+    char msg[160];
+    snprintf(msg, sizeof msg, "%s %g is out of range (-%g to %g)", flag, v, limit, limit);
+    return usage_error("%s", msg);
+}
+
 static int parse(int argc, char **argv, opts *o)
 {
     memset(o, 0, sizeof *o);
@@ -209,12 +217,17 @@ static int parse(int argc, char **argv, opts *o)
     /* the configuration's seed by default: the synthetic host field is then the one
      * `survey run` draws with the same configuration */
     if (!o->have_seed) o->seed = c->seed;
-    if (!o->data) o->data = c->data_dir;
+    if (o->data) {
+        wf_status st = wf_config_check_dir("--data", o->data); /* a folder whenever given */
+        if (st) return fail(st);
+    } else o->data = c->data_dir;
     if (!o->model && c->sn.model[0]) o->model = c->sn.model;
     if (isnan(o->h0)) o->h0 = c->sn.h0;
     if (isnan(o->om)) o->om = c->sn.om;
     if (isnan(o->alpha)) o->alpha = c->sn.alpha;
+    else if (!(fabs(o->alpha) <= WF_SNPOP_ALPHA_LIMIT)) return out_of_range("--alpha", o->alpha, WF_SNPOP_ALPHA_LIMIT);
     if (isnan(o->beta)) o->beta = c->sn.beta;
+    else if (!(fabs(o->beta) <= WF_SNPOP_BETA_LIMIT)) return out_of_range("--beta", o->beta, WF_SNPOP_BETA_LIMIT);
     if (isnan(o->sigma_int)) o->sigma_int = c->sn.sigma_int;
     if (isnan(o->zmin)) o->zmin = c->sn.zmin;
     if (isnan(o->zmax)) o->zmax = c->sn.zmax;
@@ -939,6 +952,34 @@ static int cmd_lightcurves(int argc, char **argv)
     return st ? fail(st) : 0;
 }
 
+/* The dates of --mjd: every comma-separated entry a finite number, at least one. */
+static int mjd_list(const char *text, double **out, size_t *n)
+{
+    size_t cap = 1;
+    for (const char *p = text; *p; p++) cap += *p == ',';
+    double *v = malloc(cap * sizeof *v);
+    if (!v) return fail(wf_error(WF_ERR_NOMEM, "out of memory for %zu dates", cap));
+    size_t k = 0;
+    for (const char *p = text;; k++) {
+        const char *e = strchr(p, ',');
+        size_t len = e ? (size_t)(e - p) : strlen(p);
+        char item[64];
+        if (!len || len >= sizeof item) {
+            fprintf(stderr, "wfisim sn: --mjd '%s': date %zu is %s\n", text, k + 1, len ? "too long" : "empty");
+            free(v);
+            return 2;
+        }
+        memcpy(item, p, len);
+        item[len] = '\0';
+        if (number("--mjd", item, &v[k])) { free(v); return 2; }
+        if (!e) break;
+        p = e + 1;
+    }
+    *out = v;
+    *n = k + 1;
+    return 0;
+}
+
 static int cmd_lightcurve(int argc, char **argv)
 {
     opts o;
@@ -948,12 +989,25 @@ static int cmd_lightcurve(int argc, char **argv)
         return usage_error("%s are required", "--z, --t0, --band and --mjd");
     if (isfinite(o.x0) && isfinite(o.mu)) return usage_error("%s", "give --x0 or --mu, not both");
     if (!(o.z > 0)) return usage_error("%s must be > 0", "--z");
+    /* the bounds of sn.x1.* and sn.c.*: beyond them the Tripp magnitude and the colour law
+     * overflow, and x0 or the flux would come out as 0 or inf under another option's name */
+    if (!(fabs(o.x1) <= WF_SNPOP_X1_LIMIT)) return out_of_range("--x1", o.x1, WF_SNPOP_X1_LIMIT);
+    if (!(fabs(o.c) <= WF_SNPOP_C_LIMIT)) return out_of_range("--c", o.c, WF_SNPOP_C_LIMIT);
+    if (isfinite(o.mu) && !(o.mu > 0 && o.mu <= WF_SNPOP_MU_MAX)) {
+        char msg[160];
+        snprintf(msg, sizeof msg, "--mu %g is out of range (above 0 to %g mag)", o.mu, WF_SNPOP_MU_MAX);
+        return usage_error("%s", msg);
+    }
+    if (isfinite(o.x0) && !(o.x0 > 0)) return usage_error("%s must be > 0", "--x0");
     wf_salt_interp interp = WF_SALT_INTERP_BICUBIC;
     if (o.interp && !strcmp(o.interp, "linear")) interp = WF_SALT_INTERP_LINEAR;
     else if (o.interp && strcmp(o.interp, "bicubic")) return usage_error("--interp '%s': bicubic or linear", o.interp);
+    double *mjds = NULL;
+    size_t nmjd = 0;
+    if ((rc = mjd_list(o.mjd, &mjds, &nmjd))) return rc;
     wf_filter f;
     wf_status st = wf_filter_parse(o.band, &f);
-    if (st) return fail(st);
+    if (st) { free(mjds); return fail(st); }
     wf_snpop pop;
     wf_snpop_default(&pop);
     pop.alpha = o.alpha, pop.beta = o.beta;
@@ -962,31 +1016,31 @@ static int cmd_lightcurve(int argc, char **argv)
         double mu = o.mu;
         if (!isfinite(mu)) {
             wf_cosmo c;
-            if ((st = wf_cosmo_init(&c, o.h0, o.om)) || (st = wf_cosmo_distance_modulus(&c, o.z, &mu))) return fail(st);
+            if ((st = wf_cosmo_init(&c, o.h0, o.om)) || (st = wf_cosmo_distance_modulus(&c, o.z, &mu))) {
+                free(mjds);
+                return fail(st);
+            }
         }
         /* SPEC 5 / SNANA SALT2x0calc with no intrinsic scatter */
-        if ((st = wf_snpop_x0(&pop, mu, o.x1, o.c, 0.0, &x0))) return fail(st);
+        if ((st = wf_snpop_x0(&pop, mu, o.x1, o.c, 0.0, &x0))) { free(mjds); return fail(st); }
     }
-    if (!(x0 > 0)) return usage_error("%s must be > 0", "--x0");
     wf_bandpass bp;
     wf_salt_model *m = NULL;
-    if ((st = wf_bandpass_load(f, o.data, &bp)) || (st = wf_salt_load(o.model, &m))) return fail(st);
+    if ((st = wf_bandpass_load(f, o.data, &bp)) || (st = wf_salt_load(o.model, &m))) { free(mjds); return fail(st); }
     wf_salt_params p = {o.z, o.t0, x0, o.x1, o.c};
     printf("# model %s, band %s (%s), z %.6g, t0 %.6f, x0 %.8g, x1 %.6g, c %.6g\n", wf_salt_name(m), wf_filter_name(f),
            bp.builtin ? "built-in top-hat" : "data", o.z, o.t0, x0, o.x1, o.c);
     printf("# mjd mag_ab flux_e_per_s flag\n");
-    char list[8192];
-    snprintf(list, sizeof list, "%s", o.mjd);
-    for (char *tok = strtok(list, ","); tok && !st; tok = strtok(NULL, ",")) {
-        double mjd, rate, mag;
+    for (size_t i = 0; i < nmjd && !st; i++) {
+        double rate, mag;
         unsigned flags;
-        if (number("--mjd", tok, &mjd)) { wf_salt_free(m); return 2; }
-        st = wf_salt_bandrate(m, &p, interp, &bp, mjd, &rate, &flags);
+        st = wf_salt_bandrate(m, &p, interp, &bp, mjds[i], &rate, &flags);
         mag = WF_SALT_MAG_NONE;
         if (!st && rate > 0) st = wf_bandpass_mag_ab(&bp, rate, &mag);
-        if (!st) printf("%.6f %.6f %.9g %u\n", mjd, mag, rate, flags);
+        if (!st) printf("%.6f %.6f %.9g %u\n", mjds[i], mag, rate, flags);
     }
     wf_salt_free(m);
+    free(mjds);
     return st ? fail(st) : 0;
 }
 

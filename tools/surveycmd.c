@@ -137,7 +137,10 @@ static int cmd_plan(int argc, char **argv)
             break;
         }
         i++;
-        if (!strcmp(a, "--data")) data = val;
+        if (!strcmp(a, "--data")) {
+            data = val;
+            if ((st = wf_config_check_dir("--data", data))) rc = fail(st);
+        }
         else if (!strcmp(a, "--out")) out = val;
         else if (!strcmp(a, "--set")) {
             st = wf_config_set(cfg, val, "--set"); /* survey.* keys included */
