@@ -569,6 +569,66 @@ START_TEST(test_full_ramp_coefficients)
 }
 END_TEST
 
+
+/* wf_rampfit_pixels against wf_rampfit_pixel, bit for bit: rates from none to saturating,
+ * cosmic rays from below to far above the jump threshold (so that the batch's prefilter meets
+ * jumps just under and just over it), saturated pixels between plain ones, in batches of
+ * every length from 1 to past the lane count; then a bad pixel's index. */
+START_TEST(test_pixels_match_pixel)
+{
+    const char *tables[3] = {"4", "6", "11"};
+    for (int k = 0; k < 3; k++) {
+        wf_clock clk = make_clock(tables[k]);
+        wf_rampfit_setup su;
+        ck_assert_int_eq(wf_rampfit_setup_init(&clk, READ_NOISE, &su), WF_OK);
+        const int m = su.nres, npix = 997, stride = m + 3;
+        const int total = wf_ma_total_reads(&clk.ma);
+        wf_noise noise = {.kind = WF_NOISE_PHILOX, .seed = 77u, .exposure = (uint32_t)k, .sca = 2};
+        double *res = calloc((size_t)npix * stride, sizeof *res);
+        int *first = malloc(npix * sizeof *first);
+        wf_rampfit_result *a = malloc(npix * sizeof *a), *b = malloc(npix * sizeof *b);
+        ck_assert(res && first && a && b);
+        int jumps = 0;
+        for (int p = 0; p < npix; p++) {
+            double rate = p % 5 == 0 ? 0.0 : 0.3 * pow(10.0, (p % 37) / 9.0);
+            /* charges around the threshold: 5 sigma of a difference is tens of e- here */
+            double cr = p % 3 == 0 ? 10.0 * (p % 29) : 0.0;
+            int cr_read = cr > 0.0 ? 1 + (p * 31) % (total - 1) : -1;
+            simulate_ramp(&clk, &noise, (uint32_t)p, rate, READ_NOISE, cr_read, cr, res + (size_t)p * stride);
+            first[p] = p % 11 == 4 ? (p / 11) % (m + 1) : m + (p % 2);
+        }
+        for (int p = 0; p < npix; p++) {
+            ck_assert_int_eq(wf_rampfit_pixel(&su, res + (size_t)p * stride, first[p], &a[p]), WF_OK);
+            jumps += a[p].njumps > 0;
+        }
+        ck_assert_int_gt(jumps, npix / 20);
+        for (int len = 1; len <= 19; len += 3) {
+            memset(b, 0xff, npix * sizeof *b);
+            for (int p0 = 0; p0 < npix; p0 += len) {
+                int n = npix - p0 < len ? npix - p0 : len, bad = 7;
+                ck_assert_int_eq(wf_rampfit_pixels(&su, res + (size_t)p0 * stride, stride, first + p0, n, b + p0, &bad),
+                                 WF_OK);
+                ck_assert_int_eq(bad, -1);
+            }
+            for (int p = 0; p < npix; p++)
+                ck_assert_msg(!memcmp(&a[p], &b[p], sizeof a[p]), "table %s pixel %d batch %d: %.17g vs %.17g",
+                              tables[k], p, len, a[p].rate, b[p].rate);
+        }
+        /* the first bad pixel is named, plain or not */
+        res[(size_t)13 * stride + 2] = NAN;
+        first[13] = m;
+        int bad = -1;
+        ck_assert_int_eq(wf_rampfit_pixels(&su, res, stride, first, 20, b, &bad), WF_ERR_INPUT);
+        ck_assert_int_eq(bad, 13);
+        ck_assert_int_eq(wf_rampfit_pixels(&su, res, m - 1, first, 20, b, &bad), WF_ERR_INPUT);
+        free(res);
+        free(first);
+        free(a);
+        free(b);
+    }
+}
+END_TEST
+
 static Suite *rampfit_suite(void)
 {
     Suite *s = suite_create("rampfit");
@@ -584,6 +644,7 @@ static Suite *rampfit_suite(void)
     tcase_add_test(tc, test_bad_arguments);
     tcase_add_test(tc, test_no_nan);
     tcase_add_test(tc, test_full_ramp_coefficients);
+    tcase_add_test(tc, test_pixels_match_pixel);
     suite_add_tcase(s, tc);
 
     TCase *mc = tcase_create("monte_carlo");

@@ -71,6 +71,7 @@ enum { HDU_PRIMARY = 1, HDU_SCI, HDU_ERR, HDU_DQ, HDU_RESULTANTS };
 typedef struct exposure {
     meta m;
     wf_rampfit_setup fit;
+    double *charge; /* ramp: the linearised charge, e-, of every 16-bit ADU value */
     fitsfile *f;
     char path[4096], tmp[4100];
     uint8_t *rows; /* ROW_* per row */
@@ -601,6 +602,15 @@ static int create_image(fitsfile *f, int in_part, int bitpix, int naxis, long *n
     return *status;
 }
 
+/* Inverse of q_meas = q + beta q^2 on the rising branch; past the turnover (where the
+ * forward law has no preimage) the turnover charge. Written as 2 q / (1 + sqrt(...)) so
+ * beta -> 0 has no cancellation. */
+static double linearise(double qm, double beta)
+{
+    double disc = 1.0 + 4.0 * beta * qm;
+    return 2.0 * qm / (1.0 + sqrt(disc > 0.0 ? disc : 0.0));
+}
+
 static void exposure_free(exposure *e)
 {
     if (!e) return;
@@ -622,6 +632,7 @@ static void exposure_free(exposure *e)
     free(e->rows);
     free(e->cr);
     free(e->cube);
+    free(e->charge);
     free(e->sci); /* the block of all three planes */
     free(e);
 }
@@ -658,6 +669,18 @@ static wf_status exposure_open(assembler *a, const void *payload, exposure **out
         snprintf(why, sizeof why, "%s", wf_error_message());
         st = fail(a, st, "%s", why);
         goto bad;
+    }
+    if (m->ramp) {
+        /* A resultant's charge depends on its ADU value alone: one table of all 65536 instead
+         * of a square root and a division for each of the cube's values (the same numbers) */
+        if (!(e->charge = malloc(65536 * sizeof *e->charge))) {
+            st = fail(a, WF_ERR_NOMEM, "out of memory for the charge table");
+            goto bad;
+        }
+        for (int adu = 0; adu < 65536; adu++) {
+            double v = (adu - m->bias) * m->gain;
+            e->charge[adu] = m->nonlinearity ? linearise(v, m->nl_beta) : v;
+        }
     }
     if (!(e->rows = calloc((size_t)m->nrows, 1))) {
         st = fail(a, WF_ERR_NOMEM, "cannot allocate row table of %ld rows", m->nrows);
@@ -799,39 +822,40 @@ static wf_status grow_cube(const assembler *a, exposure *e, size_t n)
     return st;
 }
 
-/* Inverse of q_meas = q + beta q^2 on the rising branch; past the turnover (where the
- * forward law has no preimage) the turnover charge. Written as 2 q / (1 + sqrt(...)) so
- * beta -> 0 has no cancellation. */
-static double linearise(double qm, double beta)
-{
-    double disc = 1.0 + 4.0 * beta * qm;
-    return 2.0 * qm / (1.0 + sqrt(disc > 0.0 ? disc : 0.0));
-}
 
-/* Fits one row: cube points at resultant 0 of the row, planes `stride` apart. */
+/* Fits one row: cube points at resultant 0 of the row, planes `stride` apart. Pixels go to
+ * the fitter a chunk at a time (wf_rampfit_pixels fits unsaturated ramps side by side). */
+#define FIT_CHUNK 32
 static wf_status fit_row(const assembler *a, const exposure *e, uint32_t y, const uint16_t *cube,
                          size_t stride, const uint8_t *sat, float *sci, float *err, uint32_t *dq)
 {
     const meta *m = &e->m;
     const int nres = e->fit.nres;
-    double q[WF_MA_MAX_RESULTANTS];
-    for (long x = 0; x < m->ncols; x++) {
-        for (int r = 0; r < nres; r++) {
-            double v = (cube[(size_t)r * stride + (size_t)x] - m->bias) * m->gain;
-            q[r] = m->nonlinearity ? linearise(v, m->nl_beta) : v;
+    double q[FIT_CHUNK * WF_MA_MAX_RESULTANTS];
+    int first_sat[FIT_CHUNK];
+    wf_rampfit_result res[FIT_CHUNK];
+    for (long x0 = 0; x0 < m->ncols; x0 += FIT_CHUNK) {
+        int n = m->ncols - x0 < FIT_CHUNK ? (int)(m->ncols - x0) : FIT_CHUNK;
+        for (int j = 0; j < n; j++) {
+            long x = x0 + j;
+            for (int r = 0; r < nres; r++)
+                q[j * nres + r] = e->charge[cube[(size_t)r * stride + (size_t)x]];
+            first_sat[j] = sat[x] < nres ? sat[x] : nres;
         }
-        int first_sat = sat[x] < nres ? sat[x] : nres;
-        wf_rampfit_result res;
-        wf_status st = wf_rampfit_pixel(&e->fit, q, first_sat, &res);
+        int bad;
+        wf_status st = wf_rampfit_pixels(&e->fit, q, nres, first_sat, n, res, &bad);
         if (st) {
             char why[512];
             snprintf(why, sizeof why, "%s", wf_error_message());
-            return fail(a, st, "ramp fit of pixel (x %ld, y %" PRIu32 "): %s", x, y, why);
+            return fail(a, st, "ramp fit of pixel (x %ld, y %" PRIu32 "): %s", x0 + (bad > 0 ? bad : 0), y, why);
         }
-        double var = (res.var_read > 0 ? res.var_read : 0) + (res.var_poisson > 0 ? res.var_poisson : 0);
-        sci[x] = (float)res.rate;
-        err[x] = (float)sqrt(var);
-        dq[x] = res.dq | (first_sat < nres ? WF_DQ_SATURATED : 0u);
+        for (int j = 0; j < n; j++) {
+            const wf_rampfit_result *r = &res[j];
+            double var = (r->var_read > 0 ? r->var_read : 0) + (r->var_poisson > 0 ? r->var_poisson : 0);
+            sci[x0 + j] = (float)r->rate;
+            err[x0 + j] = (float)sqrt(var);
+            dq[x0 + j] = r->dq | (first_sat[j] < nres ? WF_DQ_SATURATED : 0u);
+        }
     }
     return WF_OK;
 }

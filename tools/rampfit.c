@@ -361,6 +361,9 @@ static void single_resultant(const wf_rampfit_setup *su, const double *res, int 
     out->var_poisson = fmax(out->rate, 0.0) * out->poisson_coef;
 }
 
+static wf_status fit_pixel(const wf_rampfit_setup *setup, const double *resultants,
+                           int first_saturated, wf_rampfit_result *out);
+
 wf_status wf_rampfit_pixel(const wf_rampfit_setup *setup, const double *resultants,
                            int first_saturated, wf_rampfit_result *out)
 {
@@ -369,6 +372,154 @@ wf_status wf_rampfit_pixel(const wf_rampfit_setup *setup, const double *resultan
     wf_status st = check_setup(setup);
     if (st != WF_OK)
         return st;
+    return fit_pixel(setup, resultants, first_saturated, out);
+}
+
+/* The whole ramp of up to RF_LANES pixels at once, for pixels whose every resultant is usable
+ * and in range: the first fit_segment and jump test of wf_rampfit_pixel, with the same
+ * operations in the same order on each pixel, so the same bits. Pixel after pixel, the
+ * GLS's Thomas recursion is a chain of dependent divisions (~100 ns a pixel); side by side,
+ * the chains of several pixels overlap. A pixel whose ramp needs more (a jump above the
+ * threshold, a singular covariance is not one: it keeps the first-pass slope as fit_segment
+ * does) is marked for the one-pixel path. rn2_n[i] = rn2 / n_i. */
+#define RF_LANES 8
+static void fit_full_lanes(const wf_rampfit_setup *su, const double *const *R, int L,
+                           const double *rn2_n, wf_rampfit_result *out, int *redo)
+{
+    const int m = su->nres, k = m - 1;
+    const double rn2 = su->read_noise * su->read_noise;
+    const double *pn = su->pair_inv_n, *pt = su->pair_tau, *dt = su->pair_dt, *po = su->pair_off;
+    double rate[RF_LANES], snr[RF_LANES], prev_off[RF_LANES], num[RF_LANES], den[RF_LANES];
+    double cdiag[WF_MA_MAX_RESULTANTS][RF_LANES], x[WF_MA_MAX_RESULTANTS][RF_LANES];
+    int ok[RF_LANES];
+    for (int l = 0; l < L; l++) {
+        double slope0 = 0.0;
+        for (int i = 0; i < m; i++)
+            slope0 += su->full_c[0][i] * R[l][i];
+        snr[l] = slope0;
+        rate[l] = fmax(slope0, 0.0);
+        ok[l] = 1;
+        prev_off[l] = 0.0;
+        num[l] = den[l] = 0.0;
+    }
+    /* gls_slope, lane by lane within each step */
+    for (int i = 0; i < k; i++)
+        for (int l = 0; l < L; l++) {
+            double diag = rn2 * pn[i] + rate[l] * pt[i];
+            double off = i + 1 < k ? rate[l] * po[i] - rn2_n[i + 1] : 0.0;
+            double piv = diag - (i > 0 ? prev_off[l] * cdiag[i - 1][l] : 0.0);
+            if (!(piv > 1e-12 * diag))
+                ok[l] = 0; /* its result is not used; the arithmetic below stays harmless */
+            cdiag[i][l] = off / piv;
+            x[i][l] = (dt[i] - (i > 0 ? prev_off[l] * x[i - 1][l] : 0.0)) / piv;
+            prev_off[l] = off;
+        }
+    for (int i = k - 2; i >= 0; i--)
+        for (int l = 0; l < L; l++)
+            x[i][l] -= cdiag[i][l] * x[i + 1][l];
+    for (int i = 0; i < k; i++)
+        for (int l = 0; l < L; l++) {
+            num[l] += x[i][l] * (R[l][i + 1] - R[l][i]);
+            den[l] += x[i][l] * dt[i];
+        }
+    for (int l = 0; l < L; l++) {
+        if (ok[l] && den[l] > 0.0 && isfinite(num[l] / den[l]))
+            snr[l] = num[l] / den[l];
+        const double *t = su->tbar;
+        double signal = fmax(snr[l], 0.0) * (t[m - 1] - t[0]);
+        double noise = sqrt(rn2 + signal);
+        int level = cas22_level(noise > 0.0 ? signal / noise : 0.0);
+        const double *c = su->full_c[level];
+        seg_fit f;
+        f.start = 0;
+        f.end = k;
+        f.slope = 0.0;
+        for (int i = m - 1; i >= 0; i--)
+            f.slope += c[i] * R[l][i];
+        f.var_read = rn2 * su->full_cr[level];
+        f.pois_coef = fmax(su->full_cp[level], 0.0);
+        redo[l] = 0;
+        if (su->detect_jumps && m >= 3) {
+            /* worst_difference's z = d / sqrt(v) exceeds the (positive) threshold only where
+             * d > 0 and d^2 > thr^2 v; with a margin far above rounding, a pixel none of whose
+             * differences passes cannot have a jump, and any other goes the one-pixel way */
+            double thr = jump_threshold(su, f.slope), thr2 = thr * thr * (1.0 - 1e-9);
+            double r0 = fmax(f.slope, 0.0);
+            int hit = 0; /* without branches: d's sign is a coin toss on a flat ramp */
+            for (int i = 0; i < k; i++) {
+                double d = R[l][i + 1] - R[l][i] - f.slope * su->pair_dt[i];
+                hit |= (d > 0.0) & (d * d > thr2 * (rn2 * su->pair_inv_n[i] + r0 * su->pair_tau[i]));
+            }
+            redo[l] = hit;
+        }
+        if (!redo[l]) {
+            wf_rampfit_result res = {0};
+            combine(&f, 1, &res);
+            out[l] = res;
+        }
+    }
+}
+
+wf_status wf_rampfit_pixels(const wf_rampfit_setup *setup, const double *resultants, int stride,
+                            const int *first_saturated, int n, wf_rampfit_result *out, int *bad)
+{
+    if (bad)
+        *bad = -1;
+    if (!setup || (n > 0 && (!resultants || !first_saturated || !out)))
+        return wf_error(WF_ERR_INPUT, "wf_rampfit_pixels: NULL argument");
+    wf_status st = check_setup(setup);
+    if (st != WF_OK)
+        return st;
+    const int m = setup->nres;
+    if (stride < m)
+        return wf_error(WF_ERR_INPUT, "wf_rampfit_pixels: stride %d below %d resultants", stride, m);
+    const double rn2 = setup->read_noise * setup->read_noise;
+    double rn2_n[WF_MA_MAX_RESULTANTS];
+    for (int i = 0; i < m; i++)
+        rn2_n[i] = rn2 / setup->nreads[i];
+    const int lanes_ok = m >= 2 && setup->full_nres == m;
+    const double *lane[RF_LANES];
+    int idx[RF_LANES], redo[RF_LANES], L = 0;
+    for (int p = 0; p <= n; p++) {
+        if (p < n) {
+            const double *R = resultants + (size_t)p * (size_t)stride;
+            int plain = lanes_ok && first_saturated[p] >= m;
+            for (int r = 0; plain && r < m; r++)
+                plain = isfinite(R[r]) && fabs(R[r]) <= 1e30;
+            if (plain) {
+                lane[L] = R;
+                idx[L++] = p;
+                if (L < RF_LANES)
+                    continue;
+            } else if ((st = fit_pixel(setup, R, first_saturated[p], &out[p]))) {
+                if (bad)
+                    *bad = p;
+                return st;
+            } else if (L < RF_LANES) {
+                continue;
+            }
+        }
+        if (!L)
+            continue;
+        wf_rampfit_result tmp[RF_LANES];
+        fit_full_lanes(setup, lane, L, rn2_n, tmp, redo);
+        for (int l = 0; l < L; l++) {
+            if (!redo[l])
+                out[idx[l]] = tmp[l];
+            else if ((st = fit_pixel(setup, lane[l], m, &out[idx[l]]))) {
+                if (bad)
+                    *bad = idx[l];
+                return st;
+            }
+        }
+        L = 0;
+    }
+    return WF_OK;
+}
+
+static wf_status fit_pixel(const wf_rampfit_setup *setup, const double *resultants,
+                           int first_saturated, wf_rampfit_result *out)
+{
     if (first_saturated < 0)
         return wf_error(WF_ERR_INPUT, "ramp fit: first saturated resultant %d is negative",
                         first_saturated);

@@ -69,4 +69,11 @@ wf_status wf_rampfit_setup_init(const wf_clock *clock, double read_noise_e,
 wf_status wf_rampfit_pixel(const wf_rampfit_setup *setup, const double *resultants,
                            int first_saturated, wf_rampfit_result *out);
 
+/* wf_rampfit_pixel on n pixels, with the same results: pixel p's resultants at
+ * resultants[p * stride ...], its first saturated resultant first_saturated[p]. The setup is
+ * checked once, and unsaturated ramps are fitted several at a time. On an error *bad (when
+ * not NULL) is the pixel's index, else -1. */
+wf_status wf_rampfit_pixels(const wf_rampfit_setup *setup, const double *resultants, int stride,
+                            const int *first_saturated, int n, wf_rampfit_result *out, int *bad);
+
 #endif
