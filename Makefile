@@ -16,7 +16,7 @@ OPT     ?= -O2 -fvect-cost-model=dynamic
 CFLAGS  := -std=c11 -D_DEFAULT_SOURCE -Wall -Wextra -Werror -Wshadow \
            -Wstrict-prototypes -Wmissing-prototypes -g $(OPT) -I. \
            $(shell $(PKG_CONFIG) --cflags $(PKGS) 2>/dev/null)
-LDLIBS  := $(shell $(PKG_CONFIG) --libs $(PKGS) 2>/dev/null) -lpthread -lm
+LDLIBS  := $(shell $(PKG_CONFIG) --libs $(PKGS) 2>/dev/null) -lsep -lpthread -lm
 TEST_LDLIBS := $(shell $(PKG_CONFIG) --libs check 2>/dev/null)
 
 # The README's commands (demo, test, bench) install the packages first and only then build,
@@ -48,7 +48,7 @@ $(shell mkdir -p $(BUILD) && printf '%s\n' '$(FLAGS_NOW)' > $(FLAGS))
 endif
 endif
 
-LAYERS  := hal firmware sim tools
+LAYERS  := hal firmware sim tools analysis
 LIBSRC  := $(filter-out tools/main.c tools/survey_mpi.c,$(foreach d,$(LAYERS),$(wildcard $(d)/*.c)))
 LIBOBJ  := $(LIBSRC:%.c=$(BUILD)/%.o)
 LIB     := $(BUILD)/libwfisim.a

@@ -361,6 +361,16 @@ if [ -d "$DATA/salt3/salt3-k21" ]; then
     echo '```'
   } >>"$tmp"
 fi
+# ---- analysis: detection on a full SCA product -----------------------------------------
+{
+  echo
+  echo "## Analysis"
+  echo
+  echo "| case | command | wall s | CPU s | peak RSS MiB |"
+  echo "|---|---|---|---|---|"
+} >>"$tmp"
+bin/wfisim demo --quiet --set paths.data="$DATA" --set readout.ncols=$N --set readout.nrows=$N --out "$sd/demo"
+rssrow "detection of a full SCA (demo product, $N x $N, SExtractor defaults)" "wfisim detect wfisim_e000001_sca01.fits --out cat.fits" bin/wfisim detect --data "$DATA" "$sd/demo/wfisim_e000001_sca01.fits" --out "$sd/cat.fits"
 rm -rf "$sd"
 # ---- products a survey can keep: bytes per SCA-exposure and per tier ------------------
 bench/products.sh >>"$tmp"

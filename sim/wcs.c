@@ -617,3 +617,82 @@ wf_status wf_wcs_write_header(const wf_wcs *w, fitsfile *f, const char *path)
     }
     return wf_fits_error(status, path, "writing the WCS keywords");
 }
+
+/* A keyword that must be there: the message names the file and the keyword. */
+static wf_status read_key_req(fitsfile *f, const char *path, const char *key, double *v)
+{
+    int status = 0;
+    if (fits_read_key_dbl(f, key, v, NULL, &status)) {
+        fits_clear_errmsg();
+        return wf_error(WF_ERR_INPUT, "%s: no WCS: keyword %s is missing or not a number", path, key);
+    }
+    if (!isfinite(*v)) return wf_error(WF_ERR_INPUT, "%s: WCS keyword %s is not finite", path, key);
+    return WF_OK;
+}
+
+wf_status wf_wcs_read_header(fitsfile *f, const char *path, wf_wcs *out)
+{
+    wf_wcs w;
+    memset(&w, 0, sizeof w);
+    int status = 0;
+    char ctype[2][FLEN_VALUE];
+    const char *want[2] = {"RA---TAN", "DEC--TAN"};
+    for (int k = 0; k < 2; k++) {
+        char key[16];
+        snprintf(key, sizeof key, "CTYPE%d", k + 1);
+        if (fits_read_key_str(f, key, ctype[k], NULL, &status)) {
+            fits_clear_errmsg();
+            return wf_error(WF_ERR_INPUT, "%s: no WCS: keyword %s is missing", path, key);
+        }
+        if (strncmp(ctype[k], want[k], 8) || (ctype[k][8] && strcmp(ctype[k] + 8, "-SIP")))
+            return wf_error(WF_ERR_INPUT, "%s: %s = '%s': only %s or %s-SIP is read", path, key, ctype[k],
+                            want[k], want[k]);
+    }
+    int sip = !strcmp(ctype[0] + 8, "-SIP");
+    if (sip != !strcmp(ctype[1] + 8, "-SIP"))
+        return wf_error(WF_ERR_INPUT, "%s: CTYPE1 '%s' and CTYPE2 '%s' disagree about SIP", path, ctype[0], ctype[1]);
+    static const char *const keys[8] = {"CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "CD1_1", "CD1_2", "CD2_1", "CD2_2"};
+    double v[8];
+    wf_status st;
+    for (int k = 0; k < 8; k++)
+        if ((st = read_key_req(f, path, keys[k], &v[k]))) return st;
+    w.crpix[0] = v[0], w.crpix[1] = v[1], w.crval[0] = v[2], w.crval[1] = v[3];
+    w.cd[0][0] = v[4], w.cd[0][1] = v[5], w.cd[1][0] = v[6], w.cd[1][1] = v[7];
+    if (w.cd[0][0] * w.cd[1][1] - w.cd[0][1] * w.cd[1][0] == 0.0)
+        return wf_error(WF_ERR_INPUT, "%s: the CD matrix is singular", path);
+    if (fabs(w.crval[1]) > 90.0) return wf_error(WF_ERR_INPUT, "%s: CRVAL2 = %g is not a declination", path, w.crval[1]);
+    long nax[2] = {0, 0};
+    int naxis = 0;
+    if (fits_get_img_dim(f, &naxis, &status) || naxis != 2 || fits_get_img_size(f, 2, nax, &status)) {
+        fits_clear_errmsg();
+        return wf_error(WF_ERR_INPUT, "%s: the HDU with the WCS is not a 2-d image", path);
+    }
+    w.nx = (int)nax[0], w.ny = (int)nax[1];
+    if (sip) {
+        double order;
+        if ((st = read_key_req(f, path, "A_ORDER", &order))) return st;
+        if (order < 0 || order > WF_WCS_SIP_N - 1 || order != floor(order))
+            return wf_error(WF_ERR_INPUT, "%s: A_ORDER = %g: orders 0 to %d are read", path, order, WF_WCS_SIP_N - 1);
+        w.a_order = (int)order;
+        for (int i = 0; i <= w.a_order; i++)
+            for (int j = 0; i + j <= w.a_order; j++) {
+                char name[32];
+                snprintf(name, sizeof name, "A_%d_%d", i, j);
+                status = 0;
+                if (fits_read_key_dbl(f, name, &w.a[i][j], NULL, &status)) w.a[i][j] = 0.0; /* absent: 0 */
+                snprintf(name, sizeof name, "B_%d_%d", i, j);
+                status = 0;
+                if (fits_read_key_dbl(f, name, &w.b[i][j], NULL, &status)) w.b[i][j] = 0.0;
+            }
+        fits_clear_errmsg();
+    }
+    long sca = 0;
+    status = 0;
+    if (fits_read_key_lng(f, "SCA_NUM", &sca, NULL, &status)) sca = 0;
+    status = 0;
+    if (fits_read_key_dbl(f, "ORIENTAT", &w.pa_sca_deg, NULL, &status)) w.pa_sca_deg = 0.0;
+    fits_clear_errmsg();
+    w.sca = (int)sca;
+    *out = w;
+    return WF_OK;
+}

@@ -88,6 +88,13 @@ wf_status wf_wcs_fit_inverse(const wf_wcs *w, int ap_order, double ap[WF_WCS_SIP
  * names the file in messages. */
 wf_status wf_wcs_write_header(const wf_wcs *w, fitsfile *f, const char *path);
 
+/* Reads the WCS that wf_wcs_write_header writes (or any celestial TAN / TAN-SIP WCS with a CD
+ * matrix, e.g. a coadd's) from the current HDU of f: CTYPE1/2 must be RA---TAN[-SIP] /
+ * DEC--TAN[-SIP], CRPIX, CRVAL and CD1_1..CD2_2 present; A_ORDER, A_i_j and B_i_j when SIP
+ * (order <= 4); SCA_NUM and ORIENTAT when present (else 0); nx, ny from NAXIS1/2. A header
+ * without a WCS or with another projection is WF_ERR_INPUT naming `path` and the keyword. */
+wf_status wf_wcs_read_header(fitsfile *f, const char *path, wf_wcs *out);
+
 /* The gnomonic (TAN) projection about the tangent point (ra0, dec0), every argument in radians
  * (the units the WCS computes in: converting on the way would move its results by an ulp):
  * xi points east and eta north on the plane touching the unit sphere there, so hypot(xi, eta)

@@ -10,6 +10,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "analysis/detect.h"
 #include "hal/link.h"
 #include "hal/scene.h"
 #include "sim/catalog.h"
@@ -55,6 +56,8 @@ static const char *usage_text =
     "  survey index DIR     the index table of the products in DIR, from their headers\n"
     "  sn generate|lightcurves|lightcurve   supernova sample, truth light curves, one light\n"
     "                       curve (see wfisim sn --help; docs/SUPERNOVAE.md)\n"
+    "  detect IMAGE --out CAT.fits   objects of an image (SEP: SExtractor's background, filter,\n"
+    "                       deblending, aperture and Kron fluxes), see wfisim detect --help\n"
     "  config doc           print the reference of every configuration key (docs/CONFIG.md)\n"
     "  config check FILE    load a configuration file and report the first problem\n"
     "\n"
@@ -409,6 +412,7 @@ int main(int argc, char **argv)
     if (!strcmp(cmd, "psf")) return wf_cmd_psf(argc - 2, argv + 2);
     if (!strcmp(cmd, "accuracy")) return wf_cmd_accuracy(argc - 1, argv + 1);
     if (!strcmp(cmd, "sn")) return wf_cmd_sn(argc - 2, argv + 2);
+    if (!strcmp(cmd, "detect")) return wf_cmd_detect(argc - 2, argv + 2);
     if (!strcmp(cmd, "config")) {
         if (argc >= 3 && !strcmp(argv[2], "doc")) { wf_config_write_doc(stdout); return 0; }
         if (argc >= 4 && !strcmp(argv[2], "check")) {
