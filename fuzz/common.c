@@ -1,0 +1,71 @@
+/* Scratch files for the harnesses (fuzz/common.h). */
+#include "fuzz/common.h"
+
+#include <dirent.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static char dir[4096];
+
+static void remove_tree(const char *path)
+{
+    DIR *d = opendir(path);
+    if (!d) return;
+    struct dirent *e;
+    char p[8192];
+    while ((e = readdir(d))) {
+        if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
+        snprintf(p, sizeof p, "%s/%s", path, e->d_name);
+        if (unlink(p) != 0) remove_tree(p);
+    }
+    closedir(d);
+    rmdir(path);
+}
+
+static void cleanup(void)
+{
+    if (dir[0]) remove_tree(dir);
+}
+
+const char *fz_dir(void)
+{
+    if (!dir[0]) {
+        const char *tmp = getenv("TMPDIR");
+        snprintf(dir, sizeof dir, "%s/wfisim-fuzz-XXXXXX", tmp && *tmp ? tmp : "/tmp");
+        if (!mkdtemp(dir)) {
+            perror("fuzz: mkdtemp");
+            abort();
+        }
+        atexit(cleanup);
+    }
+    return dir;
+}
+
+const char *fz_write(const char *name, const uint8_t *data, size_t size, char *out)
+{
+    snprintf(out, 4096, "%s/%s", fz_dir(), name);
+    FILE *f = fopen(out, "wb");
+    if (!f || (size && fwrite(data, 1, size, f) != size) || fclose(f) != 0) {
+        perror("fuzz: scratch file");
+        abort();
+    }
+    return out;
+}
+
+void fz_clean(const char *sub)
+{
+    char p[4096];
+    snprintf(p, sizeof p, "%s/%s", fz_dir(), sub);
+    DIR *d = opendir(p);
+    if (!d) return;
+    struct dirent *e;
+    char f[8192];
+    while ((e = readdir(d))) {
+        if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
+        snprintf(f, sizeof f, "%s/%s", p, e->d_name);
+        unlink(f);
+    }
+    closedir(d);
+}
