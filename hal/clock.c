@@ -1,6 +1,7 @@
 #include "hal/clock.h"
 
 #include <ctype.h>
+#include <limits.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -88,6 +89,11 @@ wf_status wf_ma_load(const char *path, wf_ma_table *out)
             }
             if (a < 1 || b < a) {
                 st = wf_error(WF_ERR_RANGE, "%s:%d: bad read range %ld-%ld (reads count from 1)", path, lineno, a, b);
+                goto done;
+            }
+            if (b > INT_MAX) { /* read indices are ints; strtol's LONG_MAX is here too */
+                st = wf_error(WF_ERR_RANGE, "%s:%d: read %ld is beyond the last possible read %d",
+                              path, lineno, b, INT_MAX);
                 goto done;
             }
             if (count == 0) {
