@@ -137,7 +137,7 @@ $(BUILD)/bin/fuzz_%: fuzz/fuzz_%.c $(BUILD)/fuzz/common.o $(LIB) $(wildcard */*.
 fuzz-targets: $(FUZZBIN)
 
 fuzz fuzz-smoke:
-	@command -v $(FUZZ_CC) >/dev/null || { echo "make $@: needs $(FUZZ_CC) (apt-get install -y clang)" >&2; exit 1; }
+	@command -v $(FUZZ_CC) >/dev/null || $(INSTALL_DEPS) clang
 	+@$(MAKE) --no-print-directory FUZZ=1 fuzz-targets
-	@FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_JOBS=$(FUZZ_JOBS) fuzz/run.sh $(if $(filter fuzz-smoke,$@),--smoke) \
+	@FUZZ_CC=$(FUZZ_CC) FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_JOBS=$(FUZZ_JOBS) fuzz/run.sh $(if $(filter fuzz-smoke,$@),--smoke) \
 	    $(patsubst fuzz/%.c,build/fuzz/bin/%,$(wildcard fuzz/fuzz_*.c))

@@ -309,6 +309,19 @@ if [ -d "$DATA/salt3/salt3-k21" ]; then
   } >>"$tmp"
 fi
 rm -rf "$sd"
+# Fuzzing is not rerun here (minutes per target): the last committed `make fuzz` table.
+if [ -f docs/FUZZ.md ]; then
+  {
+    echo
+    echo "## Fuzzing"
+    echo
+    echo "Not rerun by \`make bench\`: the last committed \`make fuzz\` results (docs/FUZZ.md, written"
+    echo "by fuzz/run.sh; the harnesses and what they found: fuzz/README.md). \"seconds\" is the wall"
+    echo "time each target ran clean, \"cov\" libFuzzer's count of covered edges at the end."
+    echo
+    cat docs/FUZZ.md
+  } >>"$tmp"
+fi
 if [ -f docs/BENCHMARKS.notes.md ]; then echo >>"$tmp"; cat docs/BENCHMARKS.notes.md >>"$tmp"; fi
 mv "$tmp" "$out"
 echo "wrote $out" >&2
