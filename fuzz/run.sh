@@ -58,7 +58,8 @@ smoke=0
 [ "${1:-}" = --smoke ] && { smoke=1; shift; }
 [ $# -gt 0 ] || { echo "usage: fuzz/run.sh [--smoke] build/fuzz/bin/fuzz_T..." >&2; exit 2; }
 mkdir -p "$out/logs"
-rm -f "$out"/logs/*.row
+# the table keeps the last row of every target, so one target can be run again alone
+for bin in "$@"; do rm -f "$out/logs/${bin##*/fuzz_}.row"; done
 status=0
 printf '%s\n' "$@" | xargs -n 1 -P "$jobs" "$0" --one "$smoke" || status=1
 
@@ -70,9 +71,10 @@ commit=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
   if [ $smoke = 1 ]; then
     echo "Smoke run (each corpus input once), $(date -u '+%Y-%m-%d %H:%M UTC'), commit $commit."
   else
-    echo "\`make fuzz FUZZ_SECONDS=$secs FUZZ_JOBS=$jobs\` on $(date -u '+%Y-%m-%d') (commit $commit):"
-    echo "libFuzzer with ASan + UBSan ($cc), $(nproc) cores ($cpu), $jobs target(s) at a time,"
-    echo "each from its seed corpus (fuzz/corpus/) plus what earlier runs kept (build/fuzz/work/)."
+    echo "\`make fuzz FUZZ_SECONDS=$secs FUZZ_JOBS=$jobs\`, last run $(date -u '+%Y-%m-%d %H:%M UTC') at commit"
+    echo "$commit: libFuzzer with ASan + UBSan ($cc), $(nproc) cores ($cpu) shared with other"
+    echo "builds, $jobs target(s) at a time. Each row is that target's latest run, from its seed"
+    echo "corpus (fuzz/corpus/) plus what earlier runs kept (build/fuzz/work/)."
   fi
   echo
   echo "| target | seconds | CPU s | executions | exec/s | cov | features | peak RSS MiB | crash files | result |"
