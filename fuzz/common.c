@@ -69,3 +69,11 @@ void fz_clean(const char *sub)
     }
     closedir(d);
 }
+
+int fz_gzip_claims_too_much(const uint8_t *data, size_t size)
+{
+    if (size < 18 || data[0] != 0x1f || data[1] != 0x8b) return 0;
+    const uint8_t *t = data + size - 4; /* ISIZE, little-endian */
+    uint32_t isize = (uint32_t)t[0] | (uint32_t)t[1] << 8 | (uint32_t)t[2] << 16 | (uint32_t)t[3] << 24;
+    return isize > (64u << 20);
+}

@@ -22,11 +22,7 @@ if [ "${1:-}" = --one ]; then
   t=${bin##*/fuzz_}
   mkdir -p "$out/work/$t" "$out/crashes/$t" "$out/logs" "$out/tmp"
   log=$out/logs/$t.log
-  # Resident memory is held to 2 GiB; one request may reach 4.25 GiB, because cfitsio sizes
-  # a gzip'd FITS file's buffer from its trailer's length field (up to 4 GiB, untouched
-  # beyond what inflates) before it knows the data is short.
   common="-print_final_stats=1 -artifact_prefix=$out/crashes/$t/ -timeout=20 -rss_limit_mb=2048"
-  common="$common -malloc_limit_mb=4352"
   start=$(date +%s)
   TIMEFORMAT='%U %S'
   if [ "$smoke" = 1 ]; then
