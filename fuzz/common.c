@@ -9,7 +9,8 @@
 
 static char dir[4096];
 
-static void remove_tree(const char *path)
+/* Removes everything inside path (files, and directories with their contents). */
+static void empty_dir(const char *path)
 {
     DIR *d = opendir(path);
     if (!d) return;
@@ -18,15 +19,19 @@ static void remove_tree(const char *path)
     while ((e = readdir(d))) {
         if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
         snprintf(p, sizeof p, "%s/%s", path, e->d_name);
-        if (unlink(p) != 0) remove_tree(p);
+        if (unlink(p) != 0) {
+            empty_dir(p);
+            rmdir(p);
+        }
     }
     closedir(d);
-    rmdir(path);
 }
 
 static void cleanup(void)
 {
-    if (dir[0]) remove_tree(dir);
+    if (!dir[0]) return;
+    empty_dir(dir);
+    rmdir(dir);
 }
 
 const char *fz_dir(void)
@@ -58,16 +63,7 @@ void fz_clean(const char *sub)
 {
     char p[4096];
     snprintf(p, sizeof p, "%s/%s", fz_dir(), sub);
-    DIR *d = opendir(p);
-    if (!d) return;
-    struct dirent *e;
-    char f[8192];
-    while ((e = readdir(d))) {
-        if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
-        snprintf(f, sizeof f, "%s/%s", p, e->d_name);
-        unlink(f);
-    }
-    closedir(d);
+    empty_dir(p);
 }
 
 int fz_gzip_claims_too_much(const uint8_t *data, size_t size)

@@ -14,7 +14,7 @@ const char *fz_dir(void);
  * returned. Aborts on a write error, which is the harness's fault, not the parser's. */
 const char *fz_write(const char *name, const uint8_t *data, size_t size, char *out);
 
-/* Removes every file in fz_dir()/sub (products a parser wrote), keeping the directory. */
+/* Empties fz_dir()/sub (products a parser wrote), keeping the directory. */
 void fz_clean(const char *sub);
 
 /* 1 when data is gzip'd and its trailer says it inflates to more than 64 MiB. cfitsio takes
