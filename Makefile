@@ -4,11 +4,19 @@
 #   make demo       run the main job on the built-in default scene
 #   make test       build and run every test (SAN=1: under ASan+UBSan)
 #   make bench      benchmarks -> docs/BENCHMARKS.md
+#   make fuzz       libFuzzer harnesses (fuzz/), FUZZ_SECONDS each -> docs/FUZZ.md
 PKGS    := cfitsio fftw3 zlib libdeflate yaml-0.1
 CC      ?= cc
 PKG_CONFIG   ?= pkg-config
 INSTALL_DEPS ?= scripts/install-deps.sh
 SAN     ?= 0
+FUZZ    ?= 0
+FUZZ_CC ?= clang
+ifeq ($(FUZZ),1)
+# The fuzz build (make fuzz): clang's libFuzzer needs clang's coverage hooks in the code.
+CC      := $(FUZZ_CC)
+OPT     := -O1
+endif
 # -O2's vectoriser with -O3's cost model: loops of unknown length and possible aliasing get
 # vector versions too (5% fewer instructions over GalSim's scene). ISO C mode contracts no
 # multiply-add and nothing is reassociated, so the bits are those of plain -O2.
@@ -33,6 +41,11 @@ endif
 ifeq ($(SAN),1)
 BUILD   := build/san
 CFLAGS  += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all
+LDFLAGS += -fsanitize=address,undefined
+else ifeq ($(FUZZ),1)
+BUILD   := build/fuzz
+CFLAGS  += -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer \
+           -fno-sanitize-recover=all
 LDFLAGS += -fsanitize=address,undefined
 else
 BUILD   := build/rel
@@ -67,8 +80,9 @@ MPICC   ?= mpicc
 MPIPROG := $(patsubst %/wfisim,%/wfisim-mpi,$(PROG))
 HAVE_MPICC := $(shell command -v $(MPICC) 2>/dev/null)
 
-.PHONY: all demo test tests bench clean deps run-demo run-test run-bench
-.SECONDARY: $(TESTUTIL)
+.PHONY: all demo test tests bench clean deps run-demo run-test run-bench fuzz fuzz-smoke \
+        fuzz-targets
+.SECONDARY: $(TESTUTIL) $(BUILD)/fuzz/common.o
 all: $(PROG) $(if $(filter 1,$(MPI)),$(MPIPROG))
 
 # '+': runs under `make -n` too, so a dry run shows the build the installed packages give.
@@ -119,3 +133,27 @@ clean:
 $(BUILD)/bench/%: bench/%.c $(LIB) $(wildcard */*.h) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $< $(LIB) $(LDLIBS)
+
+# Fuzzing (fuzz/README.md): one libFuzzer harness per outside input. GCC-only code (vector
+# extensions clang lacks, no parser in it) is built by gcc without instrumentation.
+FUZZ_SECONDS ?= 60
+FUZZ_JOBS    ?= 1
+FUZZ_GCC     := hal/noise_batch.c firmware/detector.c sim/profile.c
+FUZZBIN := $(patsubst fuzz/%.c,$(BUILD)/bin/%,$(wildcard fuzz/fuzz_*.c))
+ifeq ($(FUZZ),1)
+$(FUZZ_GCC:%.c=$(BUILD)/%.o): $(BUILD)/%.o: %.c $(wildcard */*.h) $(FLAGS)
+	@mkdir -p $(dir $@)
+	gcc $(filter-out -fsanitize=% -fno-sanitize-recover=% $(OPT),$(CFLAGS)) -O2 -c $< -o $@
+endif
+
+$(BUILD)/bin/fuzz_%: fuzz/fuzz_%.c $(BUILD)/fuzz/common.o $(LIB) $(wildcard */*.h) $(FLAGS)
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(LDFLAGS) -fsanitize=fuzzer -o $@ $< $(BUILD)/fuzz/common.o $(LIB) $(LDLIBS)
+
+fuzz-targets: $(FUZZBIN)
+
+fuzz fuzz-smoke:
+	@command -v $(FUZZ_CC) >/dev/null || $(INSTALL_DEPS) clang
+	+@$(MAKE) --no-print-directory FUZZ=1 fuzz-targets
+	@FUZZ_CC=$(FUZZ_CC) FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_JOBS=$(FUZZ_JOBS) fuzz/run.sh $(if $(filter fuzz-smoke,$@),--smoke) \
+	    $(patsubst fuzz/%.c,build/fuzz/bin/%,$(wildcard fuzz/fuzz_*.c))

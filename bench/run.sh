@@ -374,6 +374,19 @@ rssrow "detection of a full SCA (demo product, $N x $N, SExtractor defaults)" "w
 rm -rf "$sd"
 # ---- products a survey can keep: bytes per SCA-exposure and per tier ------------------
 bench/products.sh >>"$tmp"
+# Fuzzing is not rerun here (minutes per target): the last committed `make fuzz` table.
+if [ -f docs/FUZZ.md ]; then
+  {
+    echo
+    echo "## Fuzzing"
+    echo
+    echo "Not rerun by \`make bench\`: the last committed \`make fuzz\` results (docs/FUZZ.md, written"
+    echo "by fuzz/run.sh; the harnesses and what they found: fuzz/README.md). \"seconds\" is the wall"
+    echo "time each target ran clean, \"cov\" libFuzzer's count of covered edges at the end."
+    echo
+    cat docs/FUZZ.md
+  } >>"$tmp"
+fi
 if [ -f docs/BENCHMARKS.notes.md ]; then echo >>"$tmp"; cat docs/BENCHMARKS.notes.md >>"$tmp"; fi
 mv "$tmp" "$out"
 echo "wrote $out" >&2

@@ -1,6 +1,7 @@
 #include "hal/clock.h"
 
 #include <ctype.h>
+#include <limits.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>

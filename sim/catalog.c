@@ -680,10 +680,20 @@ static wf_status read_fits(reader *r)
     int ncol = 0;
     long nrows = 0;
 
-    if (fits_open_table(&ff, r->path, READONLY, &status)) {
-        char text[FLEN_STATUS] = "";
-        fits_get_errstatus(status, text);
+    /* The first table, as fits_open_table finds it; but searched here, because cfitsio 4.2's
+     * fits_open_table loses its handle (16 bytes) when the header after the primary is
+     * damaged (found by fuzz/fuzz_catalog_fits.c). */
+    int hdutype = IMAGE_HDU;
+    if (!fits_open_file(&ff, r->path, READONLY, &status)) {
+        fits_get_hdu_type(ff, &hdutype, &status);
+        while (!status && hdutype == IMAGE_HDU) fits_movrel_hdu(ff, 1, &hdutype, &status);
+    }
+    if (status) {
+        char text[FLEN_STATUS] = "no table HDU in the file";
+        if (status != END_OF_FILE || !ff) fits_get_errstatus(status, text);
         fits_clear_errmsg();
+        int close_status = 0;
+        if (ff) fits_close_file(ff, &close_status);
         return wf_error(WF_ERR_IO, "%s: cannot open as a FITS table: %s", r->path, text);
     }
     if (fits_get_num_cols(ff, &ncol, &status) || fits_get_num_rows(ff, &nrows, &status)) {

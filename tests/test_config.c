@@ -439,6 +439,28 @@ START_TEST(test_ma_table_from_file)
 }
 END_TEST
 
+/* Read numbers past an int (found by fuzz/fuzz_matable.c: strtol's LONG_MAX, then one read
+ * more, overflowed) and past the reads an exposure may take are a range error naming the
+ * line, not a wrapped read index. */
+START_TEST(test_ma_table_huge_read)
+{
+    const char *const bad[] = {"1\n2-3\n99999999999999999999999\n", "1\n3000000000\n",
+                               "1\n2-9223372036854775807\n"};
+    for (int i = 0; i < 3; i++) {
+        const char *table = write_file("huge.ma", bad[i]);
+        wf_ma_table ma;
+        ck_assert_int_eq(wf_ma_load(table, &ma), WF_ERR_RANGE);
+        ck_assert_msg(strstr(wf_error_message(), "huge.ma:") &&
+                          strstr(wf_error_message(), "past the 2048 reads"),
+                      "%s", wf_error_message());
+    }
+    const char *ok = write_file("edge.ma", "1\n2048\n");
+    wf_ma_table ma;
+    ck_assert_int_eq(wf_ma_load(ok, &ma), WF_OK);
+    ck_assert_int_eq(ma.read[1], 2047);
+}
+END_TEST
+
 static char *slurp(FILE *f, size_t *len)
 {
     size_t cap = 1 << 16, n = 0;
@@ -606,6 +628,7 @@ static Suite *config_suite(void)
     tcase_add_test(tc, test_ma_table_from_file);
     tcase_add_test(tc, test_time_limits);
     tcase_add_test(tc, test_filter_alias_and_dirs);
+    tcase_add_test(tc, test_ma_table_huge_read);
     tcase_add_test(tc, test_survey_keys);
     tcase_add_test(tc, test_doc_matches_generated);
     suite_add_tcase(s, tc);
