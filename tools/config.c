@@ -193,8 +193,9 @@ static const key_desc keys[] = {
     {.name = "scene.kind", .type = KT_ENUM, .unit = "", .def = "synthetic", .choices = scene_kinds,
      FIELD(scene_kind),
      .doc = "`synthetic`: galaxies and stars generated from the seed around the pointing; "
-            "`catalog`: scene.catalog and scene.stars; `galsim`: a GalSim benchmark scene CSV in "
-            "scene.catalog; `grid`: sky plus a grid of Gaussian sources (scene.grid.*)."},
+            "`catalog`: scene.catalog and scene.stars (a GalSim benchmark scene in scene.catalog is "
+            "recognised by its columns and read as `galsim` reads it); `galsim`: a GalSim benchmark "
+            "scene CSV in scene.catalog; `grid`: sky plus a grid of Gaussian sources (scene.grid.*)."},
     {.name = "scene.catalog", .type = KT_STRING, .unit = "", .def = "", FIELD(catalog),
      .doc = "Galaxy catalog (FITS table or CSV, docs/CATALOGS.md), or the GalSim scene CSV."},
     {.name = "scene.stars", .type = KT_STRING, .unit = "", .def = "", FIELD(stars),
