@@ -99,7 +99,7 @@ static const key_desc keys[] = {
      FIELD(ro.ncols), .doc = "Active columns read (a smaller SCA for quick runs)."},
     {.name = "readout.nrows", .type = KT_INT, .unit = "pixels", .def = "4088", MIN(1), MAX(4088),
      FIELD(ro.nrows), .doc = "Active rows read."},
-    {.name = "readout.tile_rows", .type = KT_INT, .unit = "rows", .def = "64", MIN(1), MAX(4088),
+    {.name = "readout.tile_rows", .type = KT_INT, .unit = "rows", .def = "32", MIN(1), MAX(4088),
      FIELD(ro.tile_rows),
      .doc = "Rows per firmware tile; sets memory, never the result. Clamped to readout.nrows."},
     {.name = "readout.frame_time", .type = KT_DOUBLE, .unit = "s", .def = NULL, ABOVE(0),
