@@ -274,6 +274,14 @@ START_TEST(thin_subarray)
 }
 END_TEST
 
+/* SCA 1 at the demo's pointing (RA 71, Dec -53, PA 30), to place test objects by pixel */
+static void demo_wcs(wf_wcs *w)
+{
+    wf_focal_plane fp;
+    wf_wcs_focal_plane(NULL, &fp);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, 71.0, -53.0, 30.0, 1, w), WF_OK);
+}
+
 /* A catalog file through the command line: the objects the SCA sees are drawn and listed
  * in the truth, the others (far away, selected out by the sky index) are not. */
 START_TEST(catalog_file_on_the_command_line)
@@ -281,10 +289,8 @@ START_TEST(catalog_file_on_the_command_line)
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
-    wf_focal_plane fp;
     wf_wcs w;
-    wf_wcs_focal_plane(NULL, &fp);
-    ck_assert_int_eq(wf_wcs_for_sca(&fp, 71.0, -53.0, 30.0, 1, &w), WF_OK);
+    demo_wcs(&w);
     char path[4200];
     snprintf(path, sizeof path, "%s/gal.csv", d);
     FILE *f = fopen(path, "w");
@@ -409,10 +415,8 @@ START_TEST(galsim_scene_recognised_by_its_columns)
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
-    wf_focal_plane fp;
     wf_wcs w;
-    wf_wcs_focal_plane(NULL, &fp);
-    ck_assert_int_eq(wf_wcs_for_sca(&fp, 71.0, -53.0, 30.0, 1, &w), WF_OK);
+    demo_wcs(&w);
     char path[4200];
     snprintf(path, sizeof path, "%s/scene.csv.gz", d);
     gzFile gz = gzopen(path, "wb");
