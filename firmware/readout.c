@@ -881,6 +881,9 @@ wf_status wf_readout_run_tile(wf_readout *ro, int tile)
         st = cfg->sampling == WF_SAMPLE_DIRECT ? ramp_direct(ro, y0, y1, h0, h1)
                                                : ramp_per_read(ro, y0, y1, h0, h1);
         if (st) return st;
+        /* SATURATION ahead of its RESULTANTS: the assembler then fits each row from the
+         * resultants' packet as it arrives, and holds nothing of the tile after it */
+        if ((st = send(ro, WF_PK_SATURATION, y0, rows, 1, ro->sat, (size_t)rows * nc))) return st;
         int nres = ro->clock.ma.nresultants; /* planes are packed [nres][rows][nc] */
         if ((st = send(ro, WF_PK_RESULTANTS, y0, rows, nres, ro->res_out,
                        (size_t)nres * rows * nc * sizeof(uint16_t))))
@@ -889,6 +892,7 @@ wf_status wf_readout_run_tile(wf_readout *ro, int tile)
             (st = send(ro, WF_PK_COSMIC, y0, rows, ro->cosmic.ntruth, ro->cosmic.truth,
                        (size_t)ro->cosmic.ntruth * sizeof(wf_cosmic_record))))
             return st;
+        return WF_OK;
     }
     return send(ro, WF_PK_SATURATION, y0, rows, 1, ro->sat, (size_t)rows * nc);
 }

@@ -247,6 +247,11 @@ typedef struct reader {
     char band_col[WF_CATALOG_MAXBAND][NAMELEN];
     char band[WF_CATALOG_MAXBAND][WF_CATALOG_BANDLEN];
     wf_catalog *gal, *star, *sn;
+    /* wf_catalog_sniff: the header's names are kept here and the file is not read further */
+    int sniff;
+    char found[1024];
+    int lacks[3];                 /* per read_mode: how many required columns the file lacks */
+    char lacking[3][256];         /*   and their names */
 } reader;
 
 typedef struct rowval {
@@ -312,21 +317,58 @@ static wf_status missing(const reader *r, const char *aliases)
                     r->path, (int)len, aliases, list);
 }
 
+static const char *const HLR_OR_FWHM = "hlr|hlr_arcsec|hlr_disk|hlr_disk_arcsec|size|r_half|fwhm|fwhm_arcsec";
+static const char *const MAG_ANY = "mag_<band>";
+
+static int has_mag_column(char *const *names, int ncol)
+{
+    for (int c = 0; c < ncol; c++)
+        if (strncasecmp(names[c], "mag_", 4) == 0 && names[c][4]) return 1;
+    return 0;
+}
+
+/* The required columns a file of these names lacks for `mode`, as their alias lists in the
+ * order the reader reports them (miss may be NULL: the count alone). One rule for the
+ * readers' messages and for wf_catalog_sniff. */
+static int lacking_columns(char *const *names, int ncol, read_mode mode, const char **miss, int cap)
+{
+    int n = 0;
+    char found[NAMELEN];
+#define LACK(a)                            \
+    do {                                   \
+        if (miss && n < cap) miss[n] = (a); \
+        n++;                               \
+    } while (0)
+    for (int f = 0; f < NFIELD; f++)
+        if (field_required(mode, f) && find_column(names, ncol, FIELDS[f].aliases, found) < 0) LACK(FIELDS[f].aliases);
+    if (mode == MODE_GALAXY && find_column(names, ncol, FIELDS[F_HLR].aliases, found) < 0 &&
+        find_column(names, ncol, FIELDS[F_FWHM].aliases, found) < 0)
+        LACK(HLR_OR_FWHM);
+    if (find_column(names, ncol, ID_ALIASES, found) < 0) LACK(ID_ALIASES);
+    if (mode == MODE_SCENE && find_column(names, ncol, TYPE_ALIASES, found) < 0) LACK(TYPE_ALIASES);
+    if (!has_mag_column(names, ncol)) LACK(MAG_ANY);
+#undef LACK
+    return n;
+}
+
+static wf_status sniff_columns(reader *r, char *const *names, int ncol);
+
 static wf_status resolve_columns(reader *r, char *const *names, int ncol)
 {
-    for (int f = 0; f < NFIELD; f++) {
-        r->pos[f] = find_column(names, ncol, FIELDS[f].aliases, r->name[f]);
-        if (r->pos[f] < 0 && field_required(r->mode, f)) return missing(r, FIELDS[f].aliases);
+    if (r->sniff) return sniff_columns(r, names, ncol);
+    const char *miss[1];
+    if (lacking_columns(names, ncol, r->mode, miss, 1) > 0) {
+        if (miss[0] == MAG_ANY)
+            return wf_error(WF_ERR_INPUT,
+                            "%s: missing required column 'mag_<band>' (no magnitude column, e.g. "
+                            "mag_H158)",
+                            r->path);
+        return missing(r, miss[0]);
     }
-    if (r->mode == MODE_GALAXY && r->pos[F_HLR] < 0 && r->pos[F_FWHM] < 0)
-        return missing(r, "hlr|hlr_arcsec|hlr_disk|hlr_disk_arcsec|size|r_half|fwhm|fwhm_arcsec");
+    for (int f = 0; f < NFIELD; f++) r->pos[f] = find_column(names, ncol, FIELDS[f].aliases, r->name[f]);
     r->id_pos = find_column(names, ncol, ID_ALIASES, r->id_name);
-    if (r->id_pos < 0) return missing(r, ID_ALIASES);
     r->type_pos = -1;
-    if (r->mode == MODE_SCENE) {
-        r->type_pos = find_column(names, ncol, TYPE_ALIASES, r->type_name);
-        if (r->type_pos < 0) return missing(r, TYPE_ALIASES);
-    }
+    if (r->mode == MODE_SCENE) r->type_pos = find_column(names, ncol, TYPE_ALIASES, r->type_name);
     r->nband = 0;
     for (int c = 0; c < ncol; c++) {
         if (strncasecmp(names[c], "mag_", 4) != 0) continue;
@@ -346,11 +388,6 @@ static wf_status resolve_columns(reader *r, char *const *names, int ncol)
         snprintf(r->band[r->nband], WF_CATALOG_BANDLEN, "%s", band);
         r->nband++;
     }
-    if (r->nband == 0)
-        return wf_error(WF_ERR_INPUT,
-                        "%s: missing required column 'mag_<band>' (no magnitude column, e.g. "
-                        "mag_H158)",
-                        r->path);
     return WF_OK;
 }
 
@@ -368,6 +405,32 @@ static wf_status make_catalogs(reader *r)
     if (!st && r->star) st = wf_catalog_init(r->star, WF_CATALOG_STAR, r->nband, bands, 0, r->path);
     if (!st && r->sn) st = wf_catalog_init(r->sn, WF_CATALOG_STAR, r->nband, bands, 0, r->path);
     return st;
+}
+
+/* The header's names and, for each format, the required columns it lacks (first alias of
+ * each); reading stops at the header. */
+static wf_status sniff_columns(reader *r, char *const *names, int ncol)
+{
+    size_t k = 0;
+    r->found[0] = '\0';
+    for (int c = 0; c < ncol && k + 8 < sizeof r->found; c++)
+        k += (size_t)snprintf(r->found + k, sizeof r->found - k, "%s%s", c ? ", " : "", names[c]);
+    if (k + 8 >= sizeof r->found) snprintf(r->found + sizeof r->found - 8, 8, ", ...");
+    static const read_mode modes[3] = {MODE_GALAXY, MODE_STAR, MODE_SCENE};
+    for (int m = 0; m < 3; m++) {
+        const char *miss[NFIELD + 4];
+        int n = lacking_columns(names, ncol, modes[m], miss, NFIELD + 4);
+        r->lacks[m] = n;
+        size_t len = 0;
+        r->lacking[m][0] = '\0';
+        for (int i = 0; i < n && len + 24 < sizeof r->lacking[m]; i++) {
+            const char *a = miss[i];
+            int alen = (int)strcspn(a, "|");
+            len += (size_t)snprintf(r->lacking[m] + len, sizeof r->lacking[m] - len, "%s%.*s%s", i ? ", " : "", alen, a,
+                                    a == HLR_OR_FWHM ? " (or fwhm)" : "");
+        }
+    }
+    return WF_OK;
 }
 
 /* "file: row 12 (line 15)" — the line only where the file has lines. */
@@ -615,7 +678,7 @@ static wf_status read_csv(reader *r, gzFile gz)
         }
         if (ncol < 0) {
             ncol = nf;
-            if ((st = resolve_columns(r, fb.f, nf)) || (st = make_catalogs(r))) break;
+            if ((st = resolve_columns(r, fb.f, nf)) || (st = make_catalogs(r)) || r->sniff) break;
             continue;
         }
         row++;
@@ -712,7 +775,7 @@ static wf_status read_fits(reader *r)
         }
         if (!(names[c] = strdup(trim(value)))) goto nomem;
     }
-    if ((st = resolve_columns(r, names, ncol)) || (st = make_catalogs(r))) goto done;
+    if ((st = resolve_columns(r, names, ncol)) || (st = make_catalogs(r)) || r->sniff) goto done;
 
     if ((st = fits_check_numeric(r, ff, r->id_pos, r->id_name))) goto done;
     for (int f = 0; f < NFIELD; f++)
@@ -857,6 +920,39 @@ wf_status wf_catalog_read_galsim_scene(const char *path, wf_catalog *gal, wf_cat
     r.star = stars;
     r.sn = sne;
     return read_any(&r);
+}
+
+wf_status wf_catalog_sniff(const char *path, int accept, wf_catalog_format *out)
+{
+    reader r;
+    memset(&r, 0, sizeof r);
+    r.path = path;
+    r.mode = MODE_GALAXY;
+    r.sniff = 1;
+    wf_status st = read_any(&r);
+    if (st) return st;
+    /* lacks[] is indexed galaxy, star, scene; a file with a type column and the scene's
+     * columns holds several kinds of object, so the scene's reader is preferred to the
+     * galaxies' one, and a galaxy catalog's to a star catalog's (which needs the least) */
+    static const struct { int m; wf_catalog_format f; const char *what; } order[3] = {
+        {2, WF_CATALOG_FORMAT_SCENE, "a GalSim benchmark scene (scene.kind galsim or catalog: scene.catalog, --catalog)"},
+        {0, WF_CATALOG_FORMAT_GALAXIES, "a galaxy catalog (scene.kind catalog: scene.catalog, --catalog)"},
+        {1, WF_CATALOG_FORMAT_STARS, "a star catalog (scene.kind catalog: scene.stars, --stars)"},
+    };
+    for (int i = 0; i < 3; i++)
+        if ((accept & order[i].f) && r.lacks[order[i].m] == 0) {
+            *out = order[i].f;
+            return WF_OK;
+        }
+    char why[1200];
+    size_t len = 0;
+    for (int i = 0; i < 3; i++) {
+        int m = order[i].m;
+        if (r.lacks[m]) len += (size_t)snprintf(why + len, sizeof why - len, "%s%s needs %s", i ? "; " : "", order[i].what, r.lacking[m]);
+        else len += (size_t)snprintf(why + len, sizeof why - len, "%sit has the columns of %s, which is not read here", i ? "; " : "", order[i].what);
+        if (len >= sizeof why) break;
+    }
+    return wf_error(WF_ERR_INPUT, "%s: its columns (%s) fit no catalog format read here: %s (docs/CATALOGS.md)", path, r.found, why);
 }
 
 /* ------------------------------------------------------------------ writers */

@@ -94,6 +94,19 @@ wf_status wf_catalog_read_stars(const char *path, wf_catalog *out);
 wf_status wf_catalog_read_galsim_scene(const char *path, wf_catalog *gal, wf_catalog *stars,
                                        wf_catalog *sne);
 
+/* Which reader takes a file, from its column names alone (the CSV header row, or the FITS
+ * table's TTYPEn; the rows are not read): a GalSim benchmark scene (a type column and the
+ * scene's columns), a galaxy catalog or a star catalog, preferred in that order among the
+ * formats in `accept` (an OR of WF_CATALOG_FORMAT_*). A file that fits none of them is
+ * WF_ERR_INPUT naming the columns found and, for each format, the columns it lacks and the
+ * scene.kind or key that reads it. */
+typedef enum {
+    WF_CATALOG_FORMAT_GALAXIES = 1,
+    WF_CATALOG_FORMAT_STARS = 2,
+    WF_CATALOG_FORMAT_SCENE = 4
+} wf_catalog_format;
+wf_status wf_catalog_sniff(const char *path, int accept, wf_catalog_format *out);
+
 /* Writers with the canonical column names, so that the readers take the files back
  * exactly (CSV prints doubles with 17 and floats with 9 significant digits). The file is
  * written to path.tmp and renamed, so a failure never leaves a partial catalog. */

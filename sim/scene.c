@@ -608,6 +608,8 @@ wf_status wf_scene_prepare(const wf_scene_setup *setup, wf_scene **out)
     d.diffusion = setup->diffusion;
     d.threads = setup->threads;
     if ((st = wf_psf_draw(s->psf, &d, s->psf_pix))) goto bad;
+    wf_psf_free(s->psf); /* as the wide PSF's: the image is what the tables are made from */
+    s->psf = NULL;
     /* The image holds ~99% of the light within its 7" (the rest is far wings and spikes);
      * normalised, every object keeps its whole flux, the wings' share moved inside. */
     double psum = 0.0;

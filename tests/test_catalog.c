@@ -488,6 +488,93 @@ START_TEST(test_galsim_scene)
 }
 END_TEST
 
+/* The format is recognised from the columns alone: GalSim's scene format (gzip'd, with its
+ * type column), a galaxy catalog in CSV and in FITS, a star catalog; a file that fits none of
+ * the accepted formats is refused with the columns found and what each format needs. */
+static const char SCENE_CSV[] =
+    "id,type,ra_deg,dec_deg,mag_Y106,hlr_disk_arcsec,hlr_bulge_arcsec,bulge_frac,knot_frac_of_disk,"
+    "knot_seed,e1,e2,x_sca1,y_sca1\n"
+    "0,gal,70.8569774682,-52.9789483582,28.9659,0.25434,0.12717,0.10789,0.17903,1000003,0.00149,"
+    "-0.00763,1913.3591,1188.6704\n"
+    "1,star,70.9,-52.97,18.5,0,0,0,0,0,0,0,100.0,200.0\n";
+
+static void write_gz(const char *path, const char *text)
+{
+    gzFile gz = gzopen(path, "wb");
+    ck_assert_msg(gz != NULL, "cannot write %s", path);
+    ck_assert_int_eq(gzputs(gz, text), (int)strlen(text));
+    ck_assert_int_eq(gzclose(gz), Z_OK);
+}
+
+START_TEST(test_sniff)
+{
+    const int objects = WF_CATALOG_FORMAT_GALAXIES | WF_CATALOG_FORMAT_SCENE;
+    wf_catalog_format fmt = 0;
+    const char *scene = tmp_path("scene.csv.gz");
+    write_gz(scene, SCENE_CSV);
+    ck_assert_msg(wf_catalog_sniff(scene, objects, &fmt) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(fmt, WF_CATALOG_FORMAT_SCENE);
+    /* what the galaxy reader alone said of it: the message users met */
+    wf_catalog c;
+    ck_assert_int_eq(wf_catalog_read_galaxies(scene, &c), WF_ERR_INPUT);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "missing required column 'z'"));
+    /* the scene reader takes it: one galaxy, one star */
+    wf_catalog gal, stars, sne;
+    ck_assert_msg(wf_catalog_read_galsim_scene(scene, &gal, &stars, &sne) == WF_OK, "%s", wf_error_message());
+    ck_assert(gal.n == 1 && stars.n == 1 && sne.n == 0);
+    wf_catalog_free(&gal);
+    wf_catalog_free(&stars);
+    wf_catalog_free(&sne);
+
+    const char *galaxies = tmp_path("galaxies.csv");
+    write_text(galaxies, GOOD_CSV);
+    ck_assert_msg(wf_catalog_sniff(galaxies, objects, &fmt) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(fmt, WF_CATALOG_FORMAT_GALAXIES);
+    const char *fits = tmp_path("galaxies.fits");
+    write_fits_table(fits, 0);
+    ck_assert_msg(wf_catalog_sniff(fits, objects, &fmt) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(fmt, WF_CATALOG_FORMAT_GALAXIES);
+    /* a FITS table without a redshift: neither galaxies nor a scene (no type column) */
+    write_fits_table(fits, 3);
+    ck_assert_int_eq(wf_catalog_sniff(fits, objects, &fmt), WF_ERR_INPUT);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "galaxy catalog (scene.kind catalog: scene.catalog, --catalog) needs z;"));
+
+    /* a star catalog is one only where stars are accepted */
+    const char *star = tmp_path("stars.csv");
+    write_text(star, "ID,RA,Dec,mag_Y106\n5,71,-53,20\n");
+    ck_assert_msg(wf_catalog_sniff(star, WF_CATALOG_FORMAT_STARS | objects, &fmt) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(fmt, WF_CATALOG_FORMAT_STARS);
+    ck_assert_int_eq(wf_catalog_sniff(star, objects, &fmt), WF_ERR_INPUT);
+    const char *msg = wf_error_message();
+    ck_assert_ptr_nonnull(strstr(msg, "stars.csv: its columns (ID, RA, Dec, mag_Y106) fit no catalog format"));
+    ck_assert_ptr_nonnull(strstr(msg, "scene.kind galsim or catalog: scene.catalog, --catalog) needs hlr, hlr_bulge, "
+                                      "bulge_frac, knot_frac, e1, e2, type;"));
+    ck_assert_ptr_nonnull(strstr(msg, "needs z, bulge_frac, knot_frac, e1, e2, pa, hlr (or fwhm);"));
+    ck_assert_ptr_nonnull(strstr(msg, "it has the columns of a star catalog (scene.kind catalog: scene.stars, --stars)"));
+    printf("sniff: %s\n", msg);
+
+    /* a scene missing one column is no scene: the message names the column */
+    const char *half = tmp_path("half.csv");
+    write_text(half, "id,type,ra_deg,dec_deg,mag_Y106,hlr_disk_arcsec,hlr_bulge_arcsec,bulge_frac,e1,e2\n"
+                     "0,gal,70.85,-52.97,28.9,0.25,0.12,0.1,0.0,0.0\n");
+    ck_assert_int_eq(wf_catalog_sniff(half, objects, &fmt), WF_ERR_INPUT);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "--catalog) needs knot_frac;"));
+    /* an empty file and a missing one keep their readers' messages */
+    const char *empty = tmp_path("empty.csv");
+    write_text(empty, "# nothing\n");
+    ck_assert_int_eq(wf_catalog_sniff(empty, objects, &fmt), WF_ERR_INPUT);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "no header row"));
+    ck_assert_int_eq(wf_catalog_sniff(tmp_path("absent.csv"), objects, &fmt), WF_ERR_IO);
+
+    const char *ref = wf_test_reference_dir();
+    if (!ref) WF_SKIP("GalSim reference not found: the benchmark scene itself not sniffed");
+    char path[4096];
+    snprintf(path, sizeof path, "%s/scene_catalog_sca1_pointingA.csv.gz", ref);
+    ck_assert_msg(wf_catalog_sniff(path, objects, &fmt) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(fmt, WF_CATALOG_FORMAT_SCENE);
+}
+END_TEST
+
 /* ------------------------------------------------------------------ synthetic catalog */
 
 static double truncated_sigma(double sigma, double cut)
@@ -1184,6 +1271,7 @@ static Suite *catalog_suite(void)
     tcase_add_test(tc, test_writers_roundtrip);
     tcase_add_loop_test(tc, test_bad_input, 0, N_BAD);
     tcase_add_test(tc, test_galsim_scene);
+    tcase_add_test(tc, test_sniff);
     tcase_add_test(tc, test_synth_statistics);
     tcase_add_test(tc, test_synth_cells_independent);
     tcase_add_test(tc, test_synth_clustered);

@@ -67,7 +67,7 @@ START_TEST(test_defaults_are_spec_values)
     ck_assert_double_eq(cfg.ro.exptime, 300.0);
     ck_assert_int_eq(cfg.ro.ncols, 4088);
     ck_assert_int_eq(cfg.ro.nrows, 4088);
-    ck_assert_int_eq(cfg.ro.tile_rows, 64);
+    ck_assert_int_eq(cfg.ro.tile_rows, 32); /* the demo within 128 MiB (docs/BENCHMARKS.notes.md) */
     ck_assert_double_eq(cfg.frame_time, 3.16247);
     ck_assert_str_eq(cfg.ma_table, "6");
     ck_assert_int_eq(cfg.ro.compress, 1);

@@ -8,6 +8,7 @@
 #include <unistd.h>
 #include <math.h>
 #include <fitsio.h>
+#include <zlib.h>
 
 #include "sim/wcs.h"
 #include "tests/testutil.h"
@@ -277,6 +278,14 @@ START_TEST(thin_subarray)
 }
 END_TEST
 
+/* SCA 1 at the demo's pointing (RA 71, Dec -53, PA 30), to place test objects by pixel */
+static void demo_wcs(wf_wcs *w)
+{
+    wf_focal_plane fp;
+    wf_wcs_focal_plane(NULL, &fp);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, 71.0, -53.0, 30.0, 1, w), WF_OK);
+}
+
 /* A catalog file through the command line: the objects the SCA sees are drawn and listed
  * in the truth, the others (far away, selected out by the sky index) are not. */
 START_TEST(catalog_file_on_the_command_line)
@@ -284,10 +293,8 @@ START_TEST(catalog_file_on_the_command_line)
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
-    wf_focal_plane fp;
     wf_wcs w;
-    wf_wcs_focal_plane(NULL, &fp);
-    ck_assert_int_eq(wf_wcs_for_sca(&fp, 71.0, -53.0, 30.0, 1, &w), WF_OK);
+    demo_wcs(&w);
     char path[4200];
     snprintf(path, sizeof path, "%s/gal.csv", d);
     FILE *f = fopen(path, "w");
@@ -643,6 +650,86 @@ START_TEST(filter_alias_and_data_folder)
 }
 END_TEST
 
+static long table_rows(const char *path, const char *ext)
+{
+    fitsfile *t;
+    int status = 0;
+    long rows = -1;
+    fits_open_file(&t, path, READONLY, &status);
+    fits_movnam_hdu(t, BINARY_TBL, (char *)ext, 0, &status);
+    fits_get_num_rows(t, &rows, &status);
+    fits_close_file(t, &status);
+    ck_assert_msg(status == 0, "%s: no table %s", path, ext);
+    return rows;
+}
+
+/* `--catalog FILE` with a file in GalSim's benchmark-scene format (gzip'd, a type column, no
+ * redshift) is recognised by its columns and drawn as `scene.kind=galsim` draws it: the same
+ * image and truth, byte for byte. Then GalSim's own scene file, where ../shared has it. */
+START_TEST(galsim_scene_recognised_by_its_columns)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    wf_wcs w;
+    demo_wcs(&w);
+    char path[4200];
+    snprintf(path, sizeof path, "%s/scene.csv.gz", d);
+    gzFile gz = gzopen(path, "wb");
+    ck_assert_ptr_nonnull(gz);
+    gzprintf(gz, "id,type,ra_deg,dec_deg,mag_Y106,hlr_disk_arcsec,hlr_bulge_arcsec,bulge_frac,knot_frac_of_disk,"
+                 "knot_seed,e1,e2,x_sca1,y_sca1\n");
+    /* three galaxies, a star and an SN on a 128 x 128 corner of SCA 1, a galaxy far off it */
+    const double px[6] = {20, 60, 100, 64, 90, 3000}, py[6] = {30, 90, 110, 20, 64, 3000};
+    const char *type[6] = {"gal", "gal", "gal", "star", "sn", "gal"};
+    for (int i = 0; i < 6; i++) {
+        double ra, dec;
+        wf_wcs_pix2world(&w, px[i], py[i], &ra, &dec);
+        int gal = !strcmp(type[i], "gal");
+        gzprintf(gz, "%d,%s,%.10f,%.10f,%.2f,%s,%s,%s,%s,%d,%s,%s,%.4f,%.4f\n", 10 + i, type[i], ra, dec,
+                 gal ? 21.5 + 0.5 * i : 19.0, gal ? "0.4" : "0", gal ? "0.2" : "0", gal ? "0.3" : "0",
+                 gal ? "0.1" : "0", 1000 + i, gal ? "0.1" : "0", gal ? "-0.05" : "0", px[i] + 1, py[i] + 1);
+    }
+    ck_assert_int_eq(gzclose(gz), Z_OK);
+    const char *small = "--quiet --set readout.ncols=128 --set readout.nrows=128 --set readout.ma_table=4";
+    ck_assert_int_eq(wf_test_run("%s expose %s --catalog %s --out %s/a", bin, small, path, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose %s --set scene.kind=galsim --set scene.catalog=%s --out %s/b", bin,
+                                 small, path, d), 0);
+    char a[4300], b[4300];
+    snprintf(a, sizeof a, "%s/a/" FITS, d);
+    snprintf(b, sizeof b, "%s/b/" FITS, d);
+    assert_same_file(a, b);
+    snprintf(a, sizeof a, "%s/a/wfisim_e000001_sca01_truth.fits", d);
+    snprintf(b, sizeof b, "%s/b/wfisim_e000001_sca01_truth.fits", d);
+    assert_same_file(a, b);
+    ck_assert_int_eq(table_rows(a, "GALAXIES"), 3); /* what was drawn: the corner's galaxies */
+    ck_assert_int_eq(table_rows(a, "STARS"), 1);
+    ck_assert_int_eq(table_rows(a, "SNE"), 1);
+    /* a GalSim scene holds its own stars: a star file beside it is refused, not ignored */
+    ck_assert_int_ne(wf_test_run("%s expose %s --catalog %s --stars %s --out %s/c 2>/dev/null", bin, small, path,
+                                 path, d), 0);
+    snprintf(a, sizeof a, "%s/c/" FITS, d);
+    ck_assert(!exists(a));
+
+    const char *ref = wf_test_reference_dir();
+    if (!ref) WF_SKIP("GalSim reference not found: its scene file not drawn");
+    snprintf(path, sizeof path, "%s/scene_catalog_sca1_pointingA.csv.gz", ref);
+    const char *corner = "--quiet --mode single --set readout.ncols=1024 --set readout.nrows=1024";
+    ck_assert_int_eq(wf_test_run("%s expose %s --catalog %s --out %s/ra", bin, corner, path, d), 0);
+    ck_assert_int_eq(wf_test_run("%s expose %s --set scene.kind=galsim --set scene.catalog=%s --out %s/rb", bin,
+                                 corner, path, d), 0);
+    snprintf(a, sizeof a, "%s/ra/" FITS, d);
+    snprintf(b, sizeof b, "%s/rb/" FITS, d);
+    assert_same_file(a, b);
+    snprintf(a, sizeof a, "%s/ra/wfisim_e000001_sca01_truth.fits", d);
+    snprintf(b, sizeof b, "%s/rb/wfisim_e000001_sca01_truth.fits", d);
+    assert_same_file(a, b);
+    long ng = table_rows(a, "GALAXIES");
+    /* the corner is 1/16 of the SCA, which holds the scene's 8400 galaxies: ~525 */
+    ck_assert_msg(ng > 400 && ng < 700, "%ld galaxies drawn on a 1024 x 1024 corner", ng);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("program");
@@ -660,6 +747,7 @@ static Suite *suite(void)
     tcase_add_test(tc, object_scene_deterministic);
     tcase_add_test(tc, thin_subarray);
     tcase_add_test(tc, catalog_file_on_the_command_line);
+    tcase_add_test(tc, galsim_scene_recognised_by_its_columns);
     suite_add_tcase(s, tc);
     TCase *sh = tcase_create("edges"); /* CK_RUN_CASE=edges runs these alone */
     tcase_set_timeout(sh, 600);

@@ -80,6 +80,7 @@ static void decode(const unsigned char *buf, size_t len, decoded *d)
     wf_packet_reader rd;
     wf_packet_reader_open(&rd, f, "test stream");
     int eof = 0, ended = 0;
+    unsigned char *sat_seen = NULL;
     while (!eof) {
         wf_packet_header h;
         const void *p;
@@ -96,7 +97,13 @@ static void decode(const unsigned char *buf, size_t len, decoded *d)
             d->single = calloc(n, sizeof *d->single);
             d->sat = calloc(n, 1);
             d->cr = calloc(100000, sizeof *d->cr);
+            free(sat_seen);
+            sat_seen = calloc((size_t)d->nrows, 1);
         } else if (h.kind == WF_PK_RESULTANTS) {
+            /* a row's SATURATION comes ahead of its resultants, so that the assembler fits
+             * them from the packet and never holds or reads back a tile (tools/assemble.c) */
+            for (uint32_t y = 0; y < h.row_count; y++)
+                ck_assert_msg(sat_seen[h.first_row + y], "RESULTANTS of row %u before its SATURATION", h.first_row + y);
             d->nres = (int)h.nplanes;
             const uint16_t *v = p;
             for (uint32_t r = 0; r < h.nplanes; r++)
@@ -109,6 +116,7 @@ static void decode(const unsigned char *buf, size_t len, decoded *d)
             d->rows_seen += (int)h.row_count;
         } else if (h.kind == WF_PK_SATURATION) {
             memcpy(d->sat + (size_t)h.first_row * d->ncols, p, (size_t)h.row_count * h.ncols);
+            memset(sat_seen + h.first_row, 1, h.row_count);
         } else if (h.kind == WF_PK_COSMIC) {
             memcpy(d->cr + d->ncr, p, h.nplanes * sizeof *d->cr);
             d->ncr += (int)h.nplanes;
@@ -117,6 +125,7 @@ static void decode(const unsigned char *buf, size_t len, decoded *d)
         }
     }
     ck_assert(ended);
+    free(sat_seen);
     qsort(d->cr, (size_t)d->ncr, sizeof *d->cr, by_id);
     wf_packet_reader_close(&rd);
     fclose(f);

@@ -110,7 +110,7 @@ static const key_desc keys[] = {
      FIELD(ro.ncols), .doc = "Active columns read (a smaller SCA for quick runs)."},
     {.name = "readout.nrows", .type = KT_INT, .unit = "pixels", .def = "4088", MIN(1), MAX(4088),
      FIELD(ro.nrows), .doc = "Active rows read."},
-    {.name = "readout.tile_rows", .type = KT_INT, .unit = "rows", .def = "64", MIN(1), MAX(4088),
+    {.name = "readout.tile_rows", .type = KT_INT, .unit = "rows", .def = "32", MIN(1), MAX(4088),
      FIELD(ro.tile_rows),
      .doc = "Rows per firmware tile; sets memory, never the result. Clamped to readout.nrows."},
     {.name = "readout.frame_time", .type = KT_DOUBLE, .unit = "s", .def = NULL, ABOVE(0),
@@ -216,8 +216,9 @@ static const key_desc keys[] = {
     {.name = "scene.kind", .type = KT_ENUM, .unit = "", .def = "synthetic", .choices = scene_kinds,
      FIELD(scene_kind),
      .doc = "`synthetic`: galaxies and stars generated from the seed around the pointing; "
-            "`catalog`: scene.catalog and scene.stars; `galsim`: a GalSim benchmark scene CSV in "
-            "scene.catalog; `grid`: sky plus a grid of Gaussian sources (scene.grid.*)."},
+            "`catalog`: scene.catalog and scene.stars (a GalSim benchmark scene in scene.catalog is "
+            "recognised by its columns and read as `galsim` reads it); `galsim`: a GalSim benchmark "
+            "scene CSV in scene.catalog; `grid`: sky plus a grid of Gaussian sources (scene.grid.*)."},
     {.name = "scene.catalog", .type = KT_STRING, .unit = "", .def = "", FIELD(catalog),
      .doc = "Galaxy catalog (FITS table or CSV, docs/CATALOGS.md), or the GalSim scene CSV."},
     {.name = "scene.stars", .type = KT_STRING, .unit = "", .def = "", FIELD(stars),

@@ -73,7 +73,8 @@ static const char *usage_text =
     "  --ra D --dec D --pa D --sca N --filter F --mjd M --exptime S\n"
     "                       pointing (PA as galsim.roman.getWCS), SCA, filter, mid-time, and\n"
     "                       the single-frame exposure time (ramp mode: the MA table's)\n"
-    "  --catalog FILE [--stars FILE]   draw these catalogs (FITS or CSV, docs/CATALOGS.md)\n"
+    "  --catalog FILE [--stars FILE]   draw these catalogs (FITS or CSV, or a GalSim benchmark scene,\n"
+    "                       recognised by its columns; docs/CATALOGS.md)\n"
     "  --data DIR           Roman data directory (default $WFISIM_DATA; none: built-ins)\n"
     "  --quiet              no progress output\n";
 

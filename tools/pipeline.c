@@ -151,10 +151,19 @@ wf_status wf_pipeline_load_catalogs_in(const wf_config *cfg, const wf_skyregion 
         if (!st) in->have_gal = in->have_stars = 1;
         return st;
     }
-    if (cfg->scene_kind == 3) {
+    /* scene.kind catalog takes a GalSim benchmark scene too, recognised by its columns, and
+     * then reads it as scene.kind galsim does */
+    wf_catalog_format fmt = WF_CATALOG_FORMAT_SCENE;
+    if (cfg->scene_kind == 1 && cfg->catalog[0] &&
+        (st = wf_catalog_sniff(cfg->catalog, WF_CATALOG_FORMAT_GALAXIES | WF_CATALOG_FORMAT_SCENE, &fmt)))
+        return st;
+    if (cfg->scene_kind == 3 || (cfg->catalog[0] && fmt == WF_CATALOG_FORMAT_SCENE)) {
         if (!cfg->catalog[0]) return wf_error(WF_ERR_INPUT, "scene.kind galsim needs scene.catalog");
+        if (cfg->scene_kind == 1 && cfg->stars[0])
+            return wf_error(WF_ERR_INPUT, "%s is a GalSim benchmark scene, which holds its own stars: "
+                            "scene.stars (%s) is not read with it", cfg->catalog, cfg->stars);
         st = wf_catalog_read_galsim_scene(cfg->catalog, &in->gal, &in->stars, &in->sne);
-        if (!st) in->have_gal = in->have_stars = in->have_sne = 1;
+        if (!st) in->have_gal = in->have_stars = in->have_sne = in->galsim_scene = 1;
         return st;
     }
     if (!cfg->catalog[0] && !cfg->stars[0])
@@ -406,7 +415,8 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
                        "hdr.FILTER = %s / optical element\n"
                        "hdr.SCENE = %s / scene source\n"
                        "hdr.ORIGIN = wfisim %s / software\n",
-                       cfg->filter, pj->replay ? "replay" : kinds[cfg->scene_kind], pj->version ? pj->version : "?");
+                       cfg->filter, pj->replay ? "replay" : inputs.galsim_scene ? "galsim" : kinds[cfg->scene_kind],
+                       pj->version ? pj->version : "?");
     if (objects) {
         len += snprintf(extra + len, extra_cap - (size_t)len,
                         "hdr.RA_PNT = %.10f / [deg] boresight right ascension\n"

@@ -18,6 +18,7 @@
 typedef struct wf_scene_inputs {
     wf_catalog gal, stars, sne;
     int have_gal, have_stars, have_sne;
+    int galsim_scene; /* read as a GalSim benchmark scene (scene.kind galsim, or catalog by its columns) */
 } wf_scene_inputs;
 
 /* Reads (or generates) the catalogs of cfg's scene and keeps the rows whose stamps can reach
