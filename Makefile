@@ -47,7 +47,7 @@ $(shell mkdir -p $(BUILD) && printf '%s\n' '$(FLAGS_NOW)' > $(FLAGS))
 endif
 endif
 
-LAYERS  := hal firmware sim tools
+LAYERS  := hal firmware sim analysis tools
 LIBSRC  := $(filter-out tools/main.c,$(foreach d,$(LAYERS),$(wildcard $(d)/*.c)))
 LIBOBJ  := $(LIBSRC:%.c=$(BUILD)/%.o)
 LIB     := $(BUILD)/libwfisim.a

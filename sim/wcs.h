@@ -84,9 +84,15 @@ wf_status wf_wcs_fit_inverse(const wf_wcs *w, int ap_order, double ap[WF_WCS_SIP
 
 /* Writes the WCS into the current HDU of f: WCSAXES, CTYPE (RA---TAN-SIP / DEC--TAN-SIP, or
  * RA---TAN / DEC--TAN without SIP), CUNIT, CRPIX, CRVAL, CD, LONPOLE, RADESYS, A/B_ORDER and
- * A_i_j/B_i_j, AP/BP_ORDER and AP_i_j/BP_i_j (fitted here), ORIENTAT and SCA_NUM. `path`
+ * A_i_j/B_i_j, AP/BP_ORDER and AP_i_j/BP_i_j (fitted here), ORIENTAT and SCA_NUM (sca > 0 only). `path`
  * names the file in messages. */
 wf_status wf_wcs_write_header(const wf_wcs *w, fitsfile *f, const char *path);
+
+/* Reads the WCS of the current image HDU of f (NAXISn, CTYPE RA---TAN[-SIP]/DEC--TAN[-SIP],
+ * CRPIX, CRVAL, CD, A/B_ORDER and A_i_j/B_i_j; SCA_NUM and ORIENTAT when present): the
+ * headers wf_wcs_write_header writes and products carry. No WCS, another projection or a
+ * singular CD is WF_ERR_INPUT naming the file and HDU. */
+wf_status wf_wcs_read_header(fitsfile *f, const char *path, wf_wcs *out);
 
 /* The gnomonic (TAN) projection about the tangent point (ra0, dec0), every argument in radians
  * (the units the WCS computes in: converting on the way would move its results by an ulp):
