@@ -2,7 +2,7 @@
 # Installs the Debian packages wfisim builds and tests with, when any is missing.
 # As root it runs apt-get; otherwise it prints the exact command and fails.
 set -eu
-pkgs="build-essential pkg-config libcfitsio-dev libfftw3-dev zlib1g-dev libdeflate-dev check libyaml-dev python3-astropy python3-numpy python3-sncosmo"
+pkgs="build-essential pkg-config libcfitsio-dev libfftw3-dev zlib1g-dev libdeflate-dev check libyaml-dev python3-astropy python3-numpy python3-sncosmo python3-drizzle"
 missing=""
 for p in $pkgs; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
