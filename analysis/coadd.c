@@ -12,7 +12,7 @@
 #include <unistd.h>
 
 #define DEG (M_PI / 180.0)
-#define BLOCK_ROWS 128 /* input rows read and mapped at a time */
+#define BLOCK_ROWS 32 /* input rows read and mapped at a time */
 #define EDGE_STEP 8    /* pixels between the samples of a boundary mapped to the other grid */
 #define MARGIN 2.0     /* pixels added around a mapped boundary: the drop's half width + slack */
 
@@ -241,17 +241,36 @@ static wf_status add_input(wf_drizzle_tile *t, const wf_wcs *grid, const input *
     for (long r0 = y0; r0 <= y1 && !st; r0 += BLOCK_ROWS) {
         long r1 = r0 + BLOCK_ROWS - 1 < y1 ? r0 + BLOCK_ROWS - 1 : y1;
         int nr = (int)(r1 - r0 + 1);
-        if ((st = grow(s, (size_t)nr * nc, (size_t)(nr + 2) * (nc + 2)))) break;
-        if ((st = read_rect(f, in, in->hdu_sci, TFLOAT, x0, x1, r0, r1, s->sci)) ||
-            (st = read_rect(f, in, in->hdu_err, TFLOAT, x0, x1, r0, r1, s->err)) ||
-            (st = read_rect(f, in, in->hdu_dq, TUINT, x0, x1, r0, r1, s->dq)))
+        /* the columns of the block that can reach the tile, from the output rows of
+         * its corners every EDGE_STEP columns (near-affine: extremes at the corners) */
+        int ca = nc, cb = -1;
+        for (int c = 0; c < nc; c += EDGE_STEP) {
+            int ce = c + EDGE_STEP < nc ? c + EDGE_STEP : nc;
+            double lo = INFINITY, hi = -INFINITY;
+            for (int k = 0; k < 4; k++) {
+                double ox, oy;
+                map_point(iw, grid, (double)(x0 + (k & 1 ? ce : c - 1)), (double)(r0 + (k & 2 ? nr : -1)), &ox, &oy);
+                if (!isfinite(oy)) lo = -INFINITY, hi = INFINITY; /* unknown: keep */
+                lo = fmin(lo, oy);
+                hi = fmax(hi, oy);
+            }
+            if (hi + MARGIN < t->y0 - 0.5 || lo - MARGIN > t->y0 + t->ny - 0.5) continue;
+            if (c < ca) ca = c;
+            cb = ce - 1;
+        }
+        if (cb < ca) continue;
+        int mc = cb - ca + 1;
+        if ((st = grow(s, (size_t)nr * mc, (size_t)(nr + 2) * (mc + 2)))) break;
+        if ((st = read_rect(f, in, in->hdu_sci, TFLOAT, x0 + ca, x0 + cb, r0, r1, s->sci)) ||
+            (st = read_rect(f, in, in->hdu_err, TFLOAT, x0 + ca, x0 + cb, r0, r1, s->err)) ||
+            (st = read_rect(f, in, in->hdu_dq, TUINT, x0 + ca, x0 + cb, r0, r1, s->dq)))
             break;
         for (int r = -1; r <= nr; r++)
-            for (int c = -1; c <= nc; c++) {
-                size_t k = (size_t)(r + 1) * (nc + 2) + (size_t)(c + 1);
-                map_point(iw, grid, (double)(x0 + c), (double)(r0 + r), &s->ox[k], &s->oy[k]);
+            for (int c = -1; c <= mc; c++) {
+                size_t k = (size_t)(r + 1) * (mc + 2) + (size_t)(c + 1);
+                map_point(iw, grid, (double)(x0 + ca + c), (double)(r0 + r), &s->ox[k], &s->oy[k]);
             }
-        wf_drizzle_block b = {nr, nc, s->sci, s->err, s->dq, s->ox, s->oy};
+        wf_drizzle_block b = {nr, mc, mc, s->sci, s->err, s->dq, s->ox, s->oy};
         *drops += wf_drizzle_add(t, &b, o->pixfrac, o->dq_mask, id);
     }
     fits_close_file(f, &status);

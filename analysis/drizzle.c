@@ -159,7 +159,7 @@ long wf_drizzle_add(wf_drizzle_tile *t, const wf_drizzle_block *b, double pixfra
     long hits = 0;
     for (int r = 0; r < b->nr; r++)
         for (int c = 0; c < b->nc; c++) {
-            size_t p = (size_t)r * (size_t)b->nc + (size_t)c;
+            size_t p = (size_t)r * (size_t)b->stride + (size_t)c;
             double d = b->sci[p], e = b->err[p];
             if ((b->dq[p] & dq_mask) || !isfinite(d) || !isfinite(e) || !(e > 0)) continue;
             double x[4], y[4];

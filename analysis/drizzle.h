@@ -40,11 +40,11 @@ wf_status wf_drizzle_tile_alloc(wf_drizzle_tile *t, int nx, int max_rows);
 void wf_drizzle_tile_reset(wf_drizzle_tile *t, int y0, int ny);
 void wf_drizzle_tile_free(wf_drizzle_tile *t);
 
-/* One block of an input: nr rows by nc columns of SCI, ERR and DQ (row-major, stride nc),
- * and the output position of every pixel centre of the block with a one-pixel border:
+/* One block of an input: nr rows by nc columns of SCI, ERR and DQ (row-major, rows `stride`
+ * elements apart), and the output position of every pixel centre of the block with a one-pixel border:
  * ox/oy[(r + 1) * (nc + 2) + (c + 1)] for r = -1..nr, c = -1..nc. */
 typedef struct wf_drizzle_block {
-    int nr, nc;
+    int nr, nc, stride;
     const float *sci, *err;
     const uint32_t *dq;
     const double *ox, *oy;
