@@ -359,13 +359,20 @@ static wf_status write_tile(fitsfile *f, const char *tmp, const wf_drizzle_tile 
 
 wf_status wf_coadd_run(const char *const *paths, int n, const wf_coadd_opts *o, const char *out)
 {
+    wf_wcs grid;
+    wf_status st = wf_coadd_grid(o, &grid);
+    return st ? st : wf_coadd_run_grid(paths, n, o, &grid, out);
+}
+
+wf_status wf_coadd_run_grid(const char *const *paths, int n, const wf_coadd_opts *o, const wf_wcs *grid_in,
+                            const char *out)
+{
     if (n < 1) return wf_error(WF_ERR_INPUT, "coadd: no input products");
     if (!(o->pixfrac > 0 && o->pixfrac <= 1))
         return wf_error(WF_ERR_INPUT, "coadd: pixfrac %g is not in (0, 1]", o->pixfrac);
     if (o->tile_rows < 1) return wf_error(WF_ERR_INPUT, "coadd: tile rows %d is not positive", o->tile_rows);
-    wf_wcs grid;
-    wf_status st = wf_coadd_grid(o, &grid);
-    if (st) return st;
+    wf_wcs grid = *grid_in;
+    wf_status st = WF_OK;
     input *in = calloc((size_t)n, sizeof *in);
     if (!in) return wf_error(WF_ERR_NOMEM, "coadd: cannot allocate %d inputs", n);
     for (int i = 0; i < n && !st; i++) {

@@ -49,6 +49,11 @@ wf_status wf_coadd_grid(const wf_coadd_opts *o, wf_wcs *out);
  * WF_ERR_INPUT naming the file, and no product is written. */
 wf_status wf_coadd_run(const char *const *paths, int n, const wf_coadd_opts *o, const char *out);
 
+/* The same onto a given grid of nx x ny pixels (o's centre, size, scale and PA unused): any
+ * wf_wcs, e.g. a coadd's read back by wf_wcs_read_header (wfisim diff). */
+wf_status wf_coadd_run_grid(const char *const *paths, int n, const wf_coadd_opts *o, const wf_wcs *grid,
+                            const char *out);
+
 /* argv holds the options after "coadd". Returns 0 done, 1 failure, 2 bad usage or input. */
 int wf_cmd_coadd(int argc, char **argv);
 

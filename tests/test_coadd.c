@@ -2,7 +2,9 @@
  * hand-computed areas, flux conservation for a constant image and a point source, DQ
  * masking, inverse-variance weighting, products bit-identical whatever the tile height and
  * the order of the inputs, bad input refused with no product, the command's exit status,
- * and STScI's drizzle (python3-drizzle, tests/drizzle_reference.py) on the same inputs. */
+ * and STScI's drizzle (python3-drizzle, tests/drizzle_reference.py) on the same inputs;
+ * the difference image (analysis/diff.c): an epoch minus its own template is zero with
+ * ERR sqrt(2) x the template's, a source added to the epoch keeps its flux, bad input. */
 #include <fitsio.h>
 #include <math.h>
 #include <stdio.h>
@@ -11,6 +13,7 @@
 #include <unistd.h>
 
 #include "analysis/coadd.h"
+#include "analysis/diff.h"
 #include "analysis/drizzle.h"
 #include "sim/fitsout.h"
 #include "sim/wcs.h"
@@ -538,6 +541,132 @@ START_TEST(stsci_drizzle)
 }
 END_TEST
 
+/* ---- difference images ------------------------------------------------------------------- */
+
+/* An epoch minus a template made of that same epoch with the same kernel (pixfrac 1): zero
+ * wherever both have data, ERR sqrt(2) x the template's (two independent errors added). */
+START_TEST(diff_of_itself)
+{
+    product p;
+    product_init(&p, 50, 45, 0, 1);
+    noisy(&p, 7u);
+    p.rot = 21;
+    const char *e = tmp_path("de.fits"), *t = tmp_path("dt.fits"), *d = tmp_path("dd.fits");
+    write_product(&p, e);
+    wf_coadd_opts o = opts(80, 70);
+    o.pixfrac = 1.0;
+    const char *const paths[1] = {e};
+    ck_assert_int_eq(wf_coadd_run(paths, 1, &o, t), WF_OK);
+    ck_assert_int_eq(wf_diff_run(t, e, d, 1), WF_OK);
+    long nx, ny;
+    float *sci = read_plane(d, "SCI", TFLOAT, &nx, &ny);
+    float *err = read_plane(d, "ERR", TFLOAT, &nx, &ny);
+    float *terr = read_plane(t, "ERR", TFLOAT, &nx, &ny);
+    unsigned char *mask = read_plane(d, "MASK", TBYTE, &nx, &ny);
+    long good = 0;
+    for (long k = 0; k < nx * ny; k++) {
+        if (mask[k]) continue;
+        good++;
+        ck_assert_msg(sci[k] == 0.0f, "pixel %ld: %g", k, sci[k]);
+        ck_assert_msg(fabs(err[k] / terr[k] - sqrt(2.0)) < 1e-6, "pixel %ld: ERR ratio %g", k, err[k] / terr[k]);
+    }
+    ck_assert_msg(good > nx * ny / 2, "only %ld of %ld pixels with data", good, nx * ny);
+    ck_assert_int_eq(wf_fits_verify_checksums(d, 4), WF_OK);
+    free(sci);
+    free(err);
+    free(terr);
+    free(mask);
+    product_free(&p);
+}
+END_TEST
+
+/* A source of 500 e-/s added to one pixel of a later epoch: the difference holds exactly
+ * its flux (uniform ERR and pixfrac 1: the drizzle conserves a point source's flux). */
+START_TEST(diff_source_flux)
+{
+    product a, b;
+    product_init(&a, 40, 40, 0, 1);
+    product_init(&b, 40, 40, 0, 1);
+    srand(3);
+    for (int k = 0; k < 1600; k++) a.sci[k] = b.sci[k] = (float)(rand() / (double)RAND_MAX);
+    b.sci[18 * 40 + 22] += 500.0f;
+    b.exposure = 2;
+    b.mjd = 61100;
+    a.rot = b.rot = 9;
+    const char *pa = tmp_path("fa.fits"), *pb = tmp_path("fb.fits"), *t = tmp_path("ft.fits"), *d = tmp_path("fd.fits");
+    write_product(&a, pa);
+    write_product(&b, pb);
+    wf_coadd_opts o = opts(90, 90);
+    o.pixfrac = 1.0;
+    const char *const paths[1] = {pa};
+    ck_assert_int_eq(wf_coadd_run(paths, 1, &o, t), WF_OK);
+    ck_assert_int_eq(wf_diff_run(t, pb, d, 1), WF_OK);
+    long nx, ny;
+    float *sci = read_plane(d, "SCI", TFLOAT, &nx, &ny);
+    double sum = 0;
+    for (long k = 0; k < nx * ny; k++) sum += sci[k];
+    ck_assert_msg(fabs(sum - 500.0) < 1e-3, "difference flux %.6f of 500", sum);
+    free(sci);
+    product_free(&a);
+    product_free(&b);
+}
+END_TEST
+
+static void expect_diff_refused(const char *t, const char *e, const char *out, const char *needle)
+{
+    unlink(out);
+    ck_assert_int_eq(wf_diff_run(t, e, out, 1), WF_ERR_INPUT);
+    ck_assert_msg(strstr(wf_error_message(), needle), "message '%s' lacks '%s'", wf_error_message(), needle);
+    ck_assert_msg(access(out, F_OK) != 0, "%s written despite the error", out);
+    char tmp[600];
+    snprintf(tmp, sizeof tmp, "%s.tmp", out);
+    ck_assert(access(tmp, F_OK) != 0);
+    snprintf(tmp, sizeof tmp, "%s.epoch.fits", out);
+    ck_assert_msg(access(tmp, F_OK) != 0, "%s left behind", tmp);
+}
+
+START_TEST(diff_bad_input)
+{
+    product a, b;
+    product_init(&a, 30, 30, 1, 1);
+    product_init(&b, 30, 30, 1, 1);
+    b.filter = "J129";
+    b.exposure = 2;
+    const char *pa = tmp_path("xa.fits"), *pb = tmp_path("xb.fits"), *t = tmp_path("xt.fits");
+    const char *far = tmp_path("xfar.fits"), *d = tmp_path("xd.fits");
+    write_product(&a, pa);
+    write_product(&b, pb);
+    wf_coadd_opts o = opts(40, 40);
+    const char *const one[1] = {pa};
+    ck_assert_int_eq(wf_coadd_run(one, 1, &o, t), WF_OK);
+    /* a template elsewhere on the sky: made from a product there */
+    product c;
+    product_init(&c, 30, 30, 1, 1);
+    c.ra = RA0 + 1;
+    const char *pc = tmp_path("xc.fits");
+    write_product(&c, pc);
+    wf_coadd_opts of = o;
+    of.ra = RA0 + 1;
+    const char *const cfar[1] = {pc};
+    ck_assert_int_eq(wf_coadd_run(cfar, 1, &of, far), WF_OK);
+    expect_diff_refused(far, pa, d, "overlaps nothing");
+    expect_diff_refused(t, pb, d, "filter J129");
+    expect_diff_refused(pa, pa, d, "no WHT HDU");
+    const char *prog = wf_test_program();
+    if (prog) {
+        const char *log = tmp_path("xd.log");
+        ck_assert_int_eq(wf_test_run("'%s' diff --template '%s' --epoch '%s' --out '%s' 2>'%s'", prog, far, pa, d, log), 2);
+        ck_assert(wf_test_file_contains(log, "overlaps nothing"));
+        ck_assert(access(d, F_OK) != 0);
+        ck_assert_int_eq(wf_test_run("'%s' diff --template '%s' --out '%s' 2>'%s'", prog, t, d, log), 2);
+        ck_assert(wf_test_file_contains(log, "--epoch"));
+    }
+    product_free(&a);
+    product_free(&b);
+    product_free(&c);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("coadd");
@@ -554,6 +683,12 @@ static Suite *suite(void)
     tcase_add_test(tc, command);
     tcase_add_test(tc, stsci_drizzle);
     suite_add_tcase(s, tc);
+    TCase *td = tcase_create("diff");
+    tcase_set_timeout(td, 120);
+    tcase_add_test(td, diff_of_itself);
+    tcase_add_test(td, diff_source_flux);
+    tcase_add_test(td, diff_bad_input);
+    suite_add_tcase(s, td);
     return s;
 }
 
