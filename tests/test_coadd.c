@@ -213,6 +213,48 @@ static wf_coadd_opts opts(int nx, int ny)
     return o;
 }
 
+/* A TAN-SIP WCS written by wf_wcs_write_header reads back with every field and maps pixels
+ * to the same sky; a header without CTYPE is refused naming the HDU. */
+START_TEST(wcs_header_round_trip)
+{
+    wf_focal_plane fp;
+    wf_wcs_focal_plane_builtin(&fp);
+    wf_wcs w, r;
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, 71.0, -53.0, 30.0, 7, &w), WF_OK);
+    w.a_order = 3;
+    w.a[2][0] = 1.5e-6;
+    w.a[1][2] = -2.5e-9;
+    w.b[0][2] = 3.25e-6;
+    w.b[3][0] = 7e-10;
+    const char *path = tmp_path("hdr.fits");
+    fitsfile *f;
+    int status = 0;
+    unlink(path);
+    long naxes[2] = {WF_WCS_NPIX, WF_WCS_NPIX};
+    fits_create_file(&f, path, &status);
+    fits_create_img(f, BYTE_IMG, 2, naxes, &status);
+    ck_assert_int_eq(wf_wcs_write_header(&w, f, path), WF_OK);
+    ck_assert_int_eq(wf_wcs_read_header(f, path, &r), WF_OK);
+    ck_assert_int_eq(r.a_order, 3);
+    ck_assert_int_eq(r.sca, 7);
+    ck_assert_int_eq(r.nx, WF_WCS_NPIX);
+    ck_assert(r.a[2][0] == w.a[2][0] && r.a[1][2] == w.a[1][2] && r.b[0][2] == w.b[0][2] && r.b[3][0] == w.b[3][0]);
+    for (int k = 0; k < 4; k++) ck_assert(r.cd[k / 2][k % 2] == w.cd[k / 2][k % 2]);
+    ck_assert(r.crval[0] == w.crval[0] && r.crval[1] == w.crval[1] && r.crpix[0] == w.crpix[0]);
+    double ra1, dec1, ra2, dec2;
+    ck_assert_int_eq(wf_wcs_pix2world(&w, 3000.25, 17.5, &ra1, &dec1), WF_OK);
+    ck_assert_int_eq(wf_wcs_pix2world(&r, 3000.25, 17.5, &ra2, &dec2), WF_OK);
+    ck_assert(ra1 == ra2 && dec1 == dec2);
+    /* no WCS at all */
+    fits_create_img(f, BYTE_IMG, 2, naxes, &status);
+    fits_write_key_str(f, "EXTNAME", "SCI", "", &status);
+    ck_assert_int_eq(wf_wcs_read_header(f, path, &r), WF_ERR_INPUT);
+    ck_assert_msg(strstr(wf_error_message(), "SCI has no WCS"), "%s", wf_error_message());
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+}
+END_TEST
+
 /* ---- conservation ------------------------------------------------------------------------ */
 
 /* A constant image drizzled onto a finer rotated grid inside its footprint: every output
@@ -674,6 +716,7 @@ static Suite *suite(void)
     tcase_set_timeout(tc, 120);
     tcase_add_test(tc, overlap_by_hand);
     tcase_add_test(tc, drop_by_hand);
+    tcase_add_test(tc, wcs_header_round_trip);
     tcase_add_test(tc, constant_image_flux);
     tcase_add_test(tc, point_source_flux);
     tcase_add_test(tc, dq_masked);
