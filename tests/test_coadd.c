@@ -127,23 +127,20 @@ static void product_free(product *p)
     free(p->dq);
 }
 
+/* The product's grid: a TAN grid as the coadd makes them, at the input pixel scale. */
 static wf_wcs product_wcs(const product *p)
 {
+    wf_coadd_opts o;
+    wf_coadd_opts_default(&o);
+    o.ra = p->ra;
+    o.dec = p->dec;
+    o.nx = p->nx;
+    o.ny = p->ny;
+    o.pixscale = IN_SCALE;
+    o.pa = p->rot;
     wf_wcs w;
-    memset(&w, 0, sizeof w);
+    ck_assert_int_eq(wf_coadd_grid(&o, &w), WF_OK);
     w.sca = 1;
-    w.nx = p->nx;
-    w.ny = p->ny;
-    w.crpix[0] = 0.5 * (p->nx + 1);
-    w.crpix[1] = 0.5 * (p->ny + 1);
-    w.crval[0] = p->ra;
-    w.crval[1] = p->dec;
-    double s = IN_SCALE / 3600, c = cos(p->rot * M_PI / 180), n = sin(p->rot * M_PI / 180);
-    w.cd[0][0] = -s * c;
-    w.cd[0][1] = s * n;
-    w.cd[1][0] = s * n;
-    w.cd[1][1] = s * c;
-    w.pa_sca_deg = p->rot;
     return w;
 }
 
