@@ -61,7 +61,7 @@ $(shell mkdir -p $(BUILD) && printf '%s\n' '$(FLAGS_NOW)' > $(FLAGS))
 endif
 endif
 
-LAYERS  := hal firmware sim tools analysis
+LAYERS  := hal firmware sim analysis tools
 LIBSRC  := $(filter-out tools/main.c tools/survey_mpi.c,$(foreach d,$(LAYERS),$(wildcard $(d)/*.c)))
 LIBOBJ  := $(LIBSRC:%.c=$(BUILD)/%.o)
 LIB     := $(BUILD)/libwfisim.a

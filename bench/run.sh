@@ -11,7 +11,7 @@ case "${1-}" in
 esac
 cd "$(dirname "$0")/.."
 B=build/rel/bench
-make -s $B/bench_readout $B/bench_direct_error $B/bench_survey $B/bench_profile $B/bench_pages $B/bench_cores $B/rss bin/wfisim >/dev/null
+make -s $B/bench_readout $B/bench_direct_error $B/bench_survey $B/bench_profile $B/bench_pages $B/bench_cores $B/bench_coadd $B/rss bin/wfisim >/dev/null
 out=docs/BENCHMARKS.md
 REF="${WFISIM_REFERENCE:-../shared/reference}/galsim"
 DATA="${WFISIM_DATA:-../shared/data}"
@@ -371,6 +371,30 @@ fi
 } >>"$tmp"
 bin/wfisim demo --quiet --set paths.data="$DATA" --set readout.ncols=$N --set readout.nrows=$N --out "$sd/demo"
 rssrow "detection of a full SCA (demo product, $N x $N, SExtractor defaults)" "wfisim detect wfisim_e000001_sca01.fits --out cat.fits" bin/wfisim detect --data "$DATA" "$sd/demo/wfisim_e000001_sca01.fits" --out "$sd/cat.fits"
+# ---- analysis: coadd against the number of inputs --------------------------------------
+# Synthetic 1024 x 1024 products of SCA 1 (bench/bench_coadd.c: the SCA's WCS at dithered
+# pointings, sky and noise, 1 pixel in 500 flagged) drizzled onto one 2700 x 2700 grid at
+# 0.0575": the first 2, 8 and 32. Peak RSS must not grow with the number of inputs.
+cs=$(mktemp -d)
+CS=1024
+centre=$($B/bench_coadd "$cs" 32 $CS)
+{
+  echo
+  echo "## Coadd (drizzle, square kernel, pixfrac 0.7) against the number of inputs"
+  echo
+  echo "Inputs ${CS} x ${CS} (synthetic products, bench/bench_coadd.c), output 2700 x 2700 at 0.0575\", 256-row tiles."
+  echo
+  echo "| inputs | command | wall s | CPU s | input Mpixel / CPU-s | peak RSS MiB |"
+  echo "|---|---|---|---|---|---|"
+} >>"$tmp"
+for n in 2 8 32; do
+  ls "$cs"/wfisim_e*_sca01.fits | head -n $n >"$cs/list$n"
+  r=$($B/rss bin/wfisim coadd --quiet --center "$centre" --size 2700,2700 --out "$cs/coadd$n.fits" @"$cs/list$n" 2>&1 >/dev/null | grep '^rss:')
+  thr=$(awk -v n=$n -v s=$CS -v c="$(field "$r" cpu_s)" 'BEGIN {printf "%.2f", n * s * s / c / 1e6}')
+  echo "| $n | \`wfisim coadd --center RA,DEC --size 2700,2700 @list$n\` | $(field "$r" wall_s) | $(field "$r" cpu_s) | $thr | $(field "$r" peak_rss_MiB) |" >>"$tmp"
+  echo "  coadd of $n: $r" >&2
+done
+rm -rf "$cs"
 rm -rf "$sd"
 # ---- products a survey can keep: bytes per SCA-exposure and per tier ------------------
 bench/products.sh >>"$tmp"

@@ -3,7 +3,7 @@
 # As root it runs apt-get; otherwise it prints the exact command and fails.
 # Arguments name extra packages one job needs (make fuzz and CI: clang).
 set -eu
-pkgs="build-essential pkg-config libcfitsio-dev libfftw3-dev zlib1g-dev libdeflate-dev check libyaml-dev python3-astropy python3-numpy python3-sncosmo libopenmpi-dev openmpi-bin libsep-dev source-extractor $*"
+pkgs="build-essential pkg-config libcfitsio-dev libfftw3-dev zlib1g-dev libdeflate-dev check libyaml-dev python3-astropy python3-numpy python3-sncosmo libopenmpi-dev openmpi-bin libsep-dev source-extractor python3-drizzle $*"
 missing=""
 for p in $pkgs; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"

@@ -591,7 +591,7 @@ wf_status wf_wcs_write_header(const wf_wcs *w, fitsfile *f, const char *path)
     key_dbl(f, "CD2_2", w->cd[1][1], "[deg/pixel] d(Dec axis)/dy", &status);
     key_dbl(f, "LONPOLE", 180.0, "[deg] native longitude of the celestial pole", &status);
     key_dbl(f, "ORIENTAT", w->pa_sca_deg, "[deg] position angle of the image +y axis", &status);
-    fits_update_key_lng(f, "SCA_NUM", w->sca, "SCA number (1-18)", &status);
+    if (w->sca > 0) fits_update_key_lng(f, "SCA_NUM", w->sca, "SCA number (1-18)", &status);
     if (sip) {
         fits_update_key_lng(f, "A_ORDER", w->a_order, "SIP forward order, x", &status);
         fits_update_key_lng(f, "B_ORDER", w->a_order, "SIP forward order, y", &status);
@@ -618,81 +618,114 @@ wf_status wf_wcs_write_header(const wf_wcs *w, fitsfile *f, const char *path)
     return wf_fits_error(status, path, "writing the WCS keywords");
 }
 
-/* A keyword that must be there: the message names the file and the keyword. */
-static wf_status read_key_req(fitsfile *f, const char *path, const char *key, double *v)
+/* ---- reading a header ------------------------------------------------------------------- */
+
+static int read_dbl(fitsfile *f, const char *name, double *v, int *status)
 {
-    int status = 0;
-    if (fits_read_key_dbl(f, key, v, NULL, &status)) {
-        fits_clear_errmsg();
-        return wf_error(WF_ERR_INPUT, "%s: no WCS: keyword %s is missing or not a number", path, key);
-    }
-    if (!isfinite(*v)) return wf_error(WF_ERR_INPUT, "%s: WCS keyword %s is not finite", path, key);
-    return WF_OK;
+    if (*status) return *status;
+    fits_read_key_dbl(f, name, v, NULL, status);
+    return *status;
 }
 
 wf_status wf_wcs_read_header(fitsfile *f, const char *path, wf_wcs *out)
 {
     wf_wcs w;
     memset(&w, 0, sizeof w);
-    int status = 0;
-    char ctype[2][FLEN_VALUE];
-    const char *want[2] = {"RA---TAN", "DEC--TAN"};
-    for (int k = 0; k < 2; k++) {
-        char key[16];
-        snprintf(key, sizeof key, "CTYPE%d", k + 1);
-        if (fits_read_key_str(f, key, ctype[k], NULL, &status)) {
-            fits_clear_errmsg();
-            return wf_error(WF_ERR_INPUT, "%s: no WCS: keyword %s is missing", path, key);
-        }
-        if (strncmp(ctype[k], want[k], 8) || (ctype[k][8] && strcmp(ctype[k] + 8, "-SIP")))
-            return wf_error(WF_ERR_INPUT, "%s: %s = '%s': only %s or %s-SIP is read", path, key, ctype[k],
-                            want[k], want[k]);
-    }
-    int sip = !strcmp(ctype[0] + 8, "-SIP");
-    if (sip != !strcmp(ctype[1] + 8, "-SIP"))
-        return wf_error(WF_ERR_INPUT, "%s: CTYPE1 '%s' and CTYPE2 '%s' disagree about SIP", path, ctype[0], ctype[1]);
-    static const char *const keys[8] = {"CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "CD1_1", "CD1_2", "CD2_1", "CD2_2"};
-    double v[8];
-    wf_status st;
-    for (int k = 0; k < 8; k++)
-        if ((st = read_key_req(f, path, keys[k], &v[k]))) return st;
-    w.crpix[0] = v[0], w.crpix[1] = v[1], w.crval[0] = v[2], w.crval[1] = v[3];
-    w.cd[0][0] = v[4], w.cd[0][1] = v[5], w.cd[1][0] = v[6], w.cd[1][1] = v[7];
-    if (w.cd[0][0] * w.cd[1][1] - w.cd[0][1] * w.cd[1][0] == 0.0)
-        return wf_error(WF_ERR_INPUT, "%s: the CD matrix is singular", path);
-    if (fabs(w.crval[1]) > 90.0) return wf_error(WF_ERR_INPUT, "%s: CRVAL2 = %g is not a declination", path, w.crval[1]);
-    long nax[2] = {0, 0};
-    int naxis = 0;
-    if (fits_get_img_dim(f, &naxis, &status) || naxis != 2 || fits_get_img_size(f, 2, nax, &status)) {
+    int status = 0, naxis = 0;
+    long naxes[2] = {0, 0};
+    char hdu[FLEN_VALUE] = "";
+    if (fits_read_key_str(f, "EXTNAME", hdu, NULL, &status)) {
+        status = 0;
         fits_clear_errmsg();
-        return wf_error(WF_ERR_INPUT, "%s: the HDU with the WCS is not a 2-d image", path);
+        snprintf(hdu, sizeof hdu, "HDU");
     }
-    w.nx = (int)nax[0], w.ny = (int)nax[1];
+    if (fits_get_img_dim(f, &naxis, &status) || fits_get_img_size(f, 2, naxes, &status))
+        return wf_fits_error(status, path, "reading the image size");
+    if (naxis != 2 || naxes[0] < 1 || naxes[1] < 1)
+        return wf_error(WF_ERR_INPUT, "%s: %s: not a 2-D image (NAXIS %d)", path, hdu, naxis);
+    w.nx = (int)naxes[0];
+    w.ny = (int)naxes[1];
+    char c1[FLEN_VALUE] = "", c2[FLEN_VALUE] = "";
+    fits_read_key_str(f, "CTYPE1", c1, NULL, &status);
+    fits_read_key_str(f, "CTYPE2", c2, NULL, &status);
+    if (status == KEY_NO_EXIST) {
+        fits_clear_errmsg();
+        return wf_error(WF_ERR_INPUT, "%s: %s has no WCS (CTYPE1/CTYPE2 missing)", path, hdu);
+    }
+    if (status) return wf_fits_error(status, path, "reading CTYPE1/CTYPE2");
+    int sip = 0;
+    if (!strcmp(c1, "RA---TAN-SIP") && !strcmp(c2, "DEC--TAN-SIP")) sip = 1;
+    else if (strcmp(c1, "RA---TAN") || strcmp(c2, "DEC--TAN"))
+        return wf_error(WF_ERR_INPUT, "%s: %s: CTYPE '%s'/'%s' is not RA---TAN(-SIP)/DEC--TAN(-SIP), "
+                        "the only projection read", path, hdu, c1, c2);
+    read_dbl(f, "CRPIX1", &w.crpix[0], &status);
+    read_dbl(f, "CRPIX2", &w.crpix[1], &status);
+    read_dbl(f, "CRVAL1", &w.crval[0], &status);
+    read_dbl(f, "CRVAL2", &w.crval[1], &status);
+    read_dbl(f, "CD1_1", &w.cd[0][0], &status);
+    read_dbl(f, "CD1_2", &w.cd[0][1], &status);
+    read_dbl(f, "CD2_1", &w.cd[1][0], &status);
+    read_dbl(f, "CD2_2", &w.cd[1][1], &status);
+    if (status == KEY_NO_EXIST) {
+        char msg[FLEN_ERRMSG] = "";
+        fits_read_errmsg(msg);
+        fits_clear_errmsg();
+        return wf_error(WF_ERR_INPUT, "%s: %s: incomplete WCS (CRPIXi, CRVALi and CDi_j are all "
+                        "needed): %s", path, hdu, msg);
+    }
+    if (status) return wf_fits_error(status, path, "reading the WCS");
+    double lonpole = 180.0;
+    if (fits_read_key_dbl(f, "LONPOLE", &lonpole, NULL, &status) == KEY_NO_EXIST) {
+        status = 0;
+        fits_clear_errmsg();
+    }
+    if (status) return wf_fits_error(status, path, "reading LONPOLE");
+    if (lonpole != 180.0)
+        return wf_error(WF_ERR_INPUT, "%s: %s: LONPOLE %g (only 180, the TAN default, is read)", path, hdu, lonpole);
+    double det = w.cd[0][0] * w.cd[1][1] - w.cd[0][1] * w.cd[1][0];
+    if (!(fabs(det) > 0) || !isfinite(det) || !isfinite(w.crval[0]) || !(fabs(w.crval[1]) < 90.0))
+        return wf_error(WF_ERR_INPUT, "%s: %s: degenerate WCS (CD determinant %g, CRVAL %g %g)", path,
+                        hdu, det, w.crval[0], w.crval[1]);
     if (sip) {
-        double order;
-        if ((st = read_key_req(f, path, "A_ORDER", &order))) return st;
-        if (order < 0 || order > WF_WCS_SIP_N - 1 || order != floor(order))
-            return wf_error(WF_ERR_INPUT, "%s: A_ORDER = %g: orders 0 to %d are read", path, order, WF_WCS_SIP_N - 1);
-        w.a_order = (int)order;
+        long ao = 0, bo = 0;
+        fits_read_key_lng(f, "A_ORDER", &ao, NULL, &status);
+        fits_read_key_lng(f, "B_ORDER", &bo, NULL, &status);
+        if (status) return wf_fits_error(status, path, "reading A_ORDER/B_ORDER of a TAN-SIP WCS");
+        if (ao < 0 || ao >= WF_WCS_SIP_N || bo < 0 || bo >= WF_WCS_SIP_N)
+            return wf_error(WF_ERR_INPUT, "%s: %s: SIP order %ld/%ld is not 0..%d", path, hdu, ao, bo,
+                            WF_WCS_SIP_N - 1);
+        w.a_order = (int)(ao > bo ? ao : bo);
+        char name[32];
         for (int i = 0; i <= w.a_order; i++)
             for (int j = 0; i + j <= w.a_order; j++) {
-                char name[32];
-                snprintf(name, sizeof name, "A_%d_%d", i, j);
-                status = 0;
-                if (fits_read_key_dbl(f, name, &w.a[i][j], NULL, &status)) w.a[i][j] = 0.0; /* absent: 0 */
-                snprintf(name, sizeof name, "B_%d_%d", i, j);
-                status = 0;
-                if (fits_read_key_dbl(f, name, &w.b[i][j], NULL, &status)) w.b[i][j] = 0.0;
+                if (i + j < 2) continue;
+                for (int ab = 0; ab < 2; ab++) {
+                    double *c = ab ? &w.b[i][j] : &w.a[i][j];
+                    if (i + j > (ab ? bo : ao)) continue;
+                    snprintf(name, sizeof name, "%c_%d_%d", ab ? 'B' : 'A', i, j);
+                    if (fits_read_key_dbl(f, name, c, NULL, &status) == KEY_NO_EXIST) {
+                        status = 0; /* an absent term is zero (SIP convention) */
+                        fits_clear_errmsg();
+                        *c = 0;
+                    }
+                }
             }
-        fits_clear_errmsg();
+        if (status) return wf_fits_error(status, path, "reading the SIP coefficients");
+        if (w.a_order < 2) w.a_order = 0;
     }
     long sca = 0;
-    status = 0;
-    if (fits_read_key_lng(f, "SCA_NUM", &sca, NULL, &status)) sca = 0;
-    status = 0;
-    if (fits_read_key_dbl(f, "ORIENTAT", &w.pa_sca_deg, NULL, &status)) w.pa_sca_deg = 0.0;
-    fits_clear_errmsg();
+    if (fits_read_key_lng(f, "SCA_NUM", &sca, NULL, &status) == KEY_NO_EXIST) {
+        status = 0;
+        fits_clear_errmsg();
+    }
     w.sca = (int)sca;
+    /* the position angle of +y: the direction of the CD matrix's second column */
+    w.pa_sca_deg = atan2(w.cd[0][1], w.cd[1][1]) / DEG;
+    if (fits_read_key_dbl(f, "ORIENTAT", &w.pa_sca_deg, NULL, &status) == KEY_NO_EXIST) {
+        status = 0;
+        fits_clear_errmsg();
+    }
+    if (status) return wf_fits_error(status, path, "reading SCA_NUM/ORIENTAT");
     *out = w;
     return WF_OK;
 }

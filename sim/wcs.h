@@ -84,15 +84,14 @@ wf_status wf_wcs_fit_inverse(const wf_wcs *w, int ap_order, double ap[WF_WCS_SIP
 
 /* Writes the WCS into the current HDU of f: WCSAXES, CTYPE (RA---TAN-SIP / DEC--TAN-SIP, or
  * RA---TAN / DEC--TAN without SIP), CUNIT, CRPIX, CRVAL, CD, LONPOLE, RADESYS, A/B_ORDER and
- * A_i_j/B_i_j, AP/BP_ORDER and AP_i_j/BP_i_j (fitted here), ORIENTAT and SCA_NUM. `path`
+ * A_i_j/B_i_j, AP/BP_ORDER and AP_i_j/BP_i_j (fitted here), ORIENTAT and SCA_NUM (sca > 0 only). `path`
  * names the file in messages. */
 wf_status wf_wcs_write_header(const wf_wcs *w, fitsfile *f, const char *path);
 
-/* Reads the WCS that wf_wcs_write_header writes (or any celestial TAN / TAN-SIP WCS with a CD
- * matrix, e.g. a coadd's) from the current HDU of f: CTYPE1/2 must be RA---TAN[-SIP] /
- * DEC--TAN[-SIP], CRPIX, CRVAL and CD1_1..CD2_2 present; A_ORDER, A_i_j and B_i_j when SIP
- * (order <= 4); SCA_NUM and ORIENTAT when present (else 0); nx, ny from NAXIS1/2. A header
- * without a WCS or with another projection is WF_ERR_INPUT naming `path` and the keyword. */
+/* Reads the WCS of the current image HDU of f (NAXISn, CTYPE RA---TAN[-SIP]/DEC--TAN[-SIP],
+ * CRPIX, CRVAL, CD, A/B_ORDER and A_i_j/B_i_j; SCA_NUM and ORIENTAT when present): the
+ * headers wf_wcs_write_header writes and products carry. No WCS, another projection or a
+ * singular CD is WF_ERR_INPUT naming the file and HDU. */
 wf_status wf_wcs_read_header(fitsfile *f, const char *path, wf_wcs *out);
 
 /* The gnomonic (TAN) projection about the tangent point (ra0, dec0), every argument in radians

@@ -10,7 +10,7 @@ src=$(cd "$(dirname "$0")/.." && pwd)
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 mkdir "$tmp/tree" "$tmp/bin"
-(cd "$src" && cp -r Makefile hal firmware sim tools tests bench scripts "$tmp/tree/")
+(cd "$src" && cp -r Makefile hal firmware sim analysis tools tests bench scripts "$tmp/tree/")
 rm -rf "$tmp/tree/build"
 cat >"$tmp/bin/fake-install" <<EOS
 #!/bin/sh

@@ -26,6 +26,8 @@
 #include "tools/expose.h"
 #include "tools/pipeline.h"
 #include "tools/psfcmd.h"
+#include "analysis/coadd.h"
+#include "analysis/diff.h"
 #include "tools/sncmd.h"
 #include "tools/surveycmd.h"
 #include "tools/surveyrun.h"
@@ -46,6 +48,9 @@ static const char *usage_text =
     "  catalog [--seed N]   the synthetic field of that seed -> DIR/synthetic_{galaxies,stars}.fits\n"
     "  stamp --id ID        one catalog object's stamp (PSF, pixel, e-/s) -> DIR/stamp_ID.fits\n"
     "  psf --filter F --sca N --out F   a Roman PSF image (see wfisim psf --help)\n"
+    "  coadd --center RA,DEC --size NX,NY --out F PRODUCT...   drizzle products of one\n"
+    "                       filter onto a TAN grid (see wfisim coadd --help; docs/ANALYSIS.md)\n"
+    "  diff --template COADD --epoch PRODUCT --out F   epoch minus template on its grid\n"
     "  accuracy psf|galaxy|scene|all   error against CPU time of every rendering knob\n"
     "                       (docs/ACCURACY.md)\n"
     "  survey plan --out F  the deep-tier observation plan and its coverage map (docs/SURVEY.md)\n"
@@ -411,6 +416,8 @@ int main(int argc, char **argv)
     }
     if (!strcmp(cmd, "survey")) return wf_cmd_survey(argc - 2, argv + 2);
     if (!strcmp(cmd, "psf")) return wf_cmd_psf(argc - 2, argv + 2);
+    if (!strcmp(cmd, "coadd")) return wf_cmd_coadd(argc - 2, argv + 2);
+    if (!strcmp(cmd, "diff")) return wf_cmd_diff(argc - 2, argv + 2);
     if (!strcmp(cmd, "accuracy")) return wf_cmd_accuracy(argc - 1, argv + 1);
     if (!strcmp(cmd, "sn")) return wf_cmd_sn(argc - 2, argv + 2);
     if (!strcmp(cmd, "detect")) return wf_cmd_detect(argc - 2, argv + 2);
