@@ -22,6 +22,7 @@
 #include "tools/accuracy.h"
 #include "tools/assemble.h"
 #include "tools/config.h"
+#include "tools/digest.h"
 #include "tools/expose.h"
 #include "tools/pipeline.h"
 #include "tools/psfcmd.h"
@@ -30,6 +31,10 @@
 #include "tools/surveyrun.h"
 
 #define WFISIM_VERSION "0.1.0"
+
+/* The release and the digest of the sources it was built from: what a product records as the
+ * program that made it (tools/digest.h), so code that changes products changes it. */
+static char version[64];
 
 static const char *usage_text =
     "usage: wfisim <command> [options]\n"
@@ -46,7 +51,9 @@ static const char *usage_text =
     "                       (docs/ACCURACY.md)\n"
     "  survey plan --out F  the deep-tier observation plan and its coverage map (docs/SURVEY.md)\n"
     "  survey run --plan F [--exposures A:B] [--scas 1,2,5-7] [--sne SNE.fits]\n"
-    "                       render every (exposure, SCA) of the range; resumable\n"
+    "             [--on-change refuse|redo]\n"
+    "                       render every (exposure, SCA) of the range; resumable: a product\n"
+    "                       made from other inputs refuses the run (default) or is redone\n"
     "  sn generate|lightcurves|lightcurve   supernova sample, truth light curves, one light\n"
     "                       curve (see wfisim sn --help; docs/SUPERNOVAE.md)\n"
     "  config doc           print the reference of every configuration key (docs/CONFIG.md)\n"
@@ -82,7 +89,7 @@ typedef struct cli {
     const char *rates;
     const char *positional;
     const char *id;
-    const char *plan, *exposures, *scas, *sne, *model;
+    const char *plan, *exposures, *scas, *sne, *model, *on_change;
     int ma_table_given;
 } cli;
 
@@ -147,6 +154,7 @@ static int parse(int argc, char **argv, cli *c)
         else if (!strcmp(a, "--scas") && val) { c->scas = val; i++; }
         else if (!strcmp(a, "--sne") && val) { c->sne = val; i++; }
         else if (!strcmp(a, "--model") && val) { c->model = val; i++; }
+        else if (!strcmp(a, "--on-change") && val) { c->on_change = val; i++; }
         else if (a[0] == '-' && a[1] == '-') {
             fprintf(stderr, "wfisim: unknown option '%s' (see wfisim --help)\n", a);
             return 2;
@@ -178,7 +186,7 @@ static int run_exposure(cli *c, int demo)
     job.clock = &c->clock;
     job.stream = c->stream;
     job.replay = c->replay;
-    job.version = WFISIM_VERSION;
+    job.version = version;
     wf_status st = open_injector(c, &job.injector);
     if (!st) st = wf_pipeline_expose(&job);
     wf_sn_injector_free(job.injector);
@@ -308,7 +316,12 @@ static int cmd_survey_run(cli *c)
     opt.first = 0;
     opt.last = -1;
     opt.ma_table_given = c->ma_table_given;
-    opt.version = WFISIM_VERSION;
+    opt.version = version;
+    if (c->on_change && strcmp(c->on_change, "refuse") && strcmp(c->on_change, "redo")) {
+        fprintf(stderr, "wfisim survey run: --on-change '%s': expected refuse or redo\n", c->on_change);
+        return 2;
+    }
+    opt.redo_changed = c->on_change && !strcmp(c->on_change, "redo");
     wf_status st = WF_OK;
     if (c->exposures) st = wf_survey_parse_range(c->exposures, &opt.first, &opt.last);
     if (!st && c->scas) st = wf_survey_parse_scas(c->scas, opt.scas, &opt.nscas);
@@ -324,8 +337,9 @@ static int cmd_survey_run(cli *c)
     wf_sn_injector_free(opt.sne);
     if (st) return fail("survey run", st);
     if (!c->cfg.quiet)
-        fprintf(stderr, "wfisim survey: %ld products rendered (%ld replacing damaged ones), %ld already done; "
-                "%ld supernova images\n", stats.rendered, stats.redone, stats.skipped, stats.sne_drawn);
+        fprintf(stderr, "wfisim survey: %ld products rendered (%ld replacing damaged ones, %ld made from other inputs), "
+                "%ld already done; %ld supernova images\n", stats.rendered, stats.redone, stats.changed, stats.skipped,
+                stats.sne_drawn);
     return 0;
 }
 
@@ -378,7 +392,8 @@ int main(int argc, char **argv)
     if (argc < 2) { fputs(usage_text, stderr); return 2; }
     const char *cmd = argv[1];
     if (!strcmp(cmd, "--help") || !strcmp(cmd, "-h") || !strcmp(cmd, "help")) { fputs(usage_text, stdout); return 0; }
-    if (!strcmp(cmd, "--version")) { puts("wfisim " WFISIM_VERSION); return 0; }
+    snprintf(version, sizeof version, "%s+src.%s", WFISIM_VERSION, wf_digest_source());
+    if (!strcmp(cmd, "--version")) { printf("wfisim %s\n", version); return 0; }
     if (!strcmp(cmd, "survey") && argc >= 3 && !strcmp(argv[2], "run")) {
         cli c;
         int rc = parse(argc - 3, argv + 3, &c);

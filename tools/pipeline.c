@@ -326,6 +326,11 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         if (used + strlen(pj->meta_extra) + 1 > extra_cap) { st = wf_error(WF_ERR_INPUT, "extra header lines too long"); goto done; }
         memcpy(extra + used, pj->meta_extra, strlen(pj->meta_extra) + 1);
     }
+    /* what shapes the product, in its primary header: a resumed survey run compares it
+     * (tools/digest.h) */
+    wf_digest_inputs din = {cfg, pj->clock, pj->meta_extra, pj->replay, pj->injector, pj->sne, pj->nsne, pj->version};
+    if ((st = wf_digest_product(pj->digests, &din, &pj->digest))) goto done;
+    if ((st = wf_digest_meta(&pj->digest, cfg, extra, extra_cap))) goto done;
 
     wf_expose_job job = {0};
     job.ro = cfg->ro;
