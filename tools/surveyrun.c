@@ -321,6 +321,8 @@ wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt,
             wf_digest_found was;
             if (wf_digest_read(p->image, &was)) { state[at] = P_UNREADABLE; continue; } /* damaged: redone */
             state[at] = wf_digest_same(&was, &p->digest) ? P_SAME : P_CHANGED;
+            /* a digest damaged with the rest is damage, redone, not other inputs */
+            if (state[at] == P_CHANGED && !wf_survey_product_ok(p->image)) state[at] = P_UNREADABLE;
             if (state[at] == P_CHANGED && !changed++) {
                 char why[1536];
                 wf_digest_inputs in = {p->cfg, &p->clock, p->extra, NULL, opt->sne, NULL, 0, opt->version};
