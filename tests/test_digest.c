@@ -91,6 +91,16 @@ START_TEST(config_part)
         ck_assert_msg(strcmp(d.whole, base.whole), "%s did not move the digest", moves[i].set);
         ck_assert_msg(strcmp(d.part[moves[i].part], base.part[moves[i].part]), "%s: not in its part", moves[i].set);
     }
+    /* the header's lines: only keys off their defaults, each within one HISTORY card */
+    *other = *cfg;
+    ck_assert_int_eq(wf_config_set(other, "detector.ipc=[[0.01,0.02,0.01],[0.02,0.88,0.02],[0.01,0.02,0.01]]", NULL), WF_OK);
+    ck_assert_int_eq(wf_config_set(other, "psf.jitter=0.014", NULL), WF_OK);
+    char *lines;
+    ck_assert_int_eq(wf_digest_config_lines(other, &lines), WF_OK);
+    ck_assert_msg(!strncmp(lines, "detector.ipc ~ ", 15) && strstr(lines, "\npsf.jitter = 0.014\n"), "%s", lines);
+    ck_assert_int_eq((int)(strchr(lines, '\n') - lines), 15 + 16);
+    ck_assert_ptr_null(strstr(lines, "gain"));
+    free(lines);
     free(cfg);
     free(other);
 }

@@ -378,7 +378,7 @@ wf_status wf_digest_config_lines(const wf_config *cfg, char **out)
     wf_status st = wf_config_product_text(cfg, &now);
     if (!st) st = wf_config_product_text(def, &was);
     free(def);
-    char *lines = st ? NULL : malloc(strlen(now) + 1);
+    char *lines = st ? NULL : malloc(2 * strlen(now) + 64); /* a "KEY ~ <hex>" line may outgrow its KEY = VALUE */
     if (!st && !lines) st = wf_error(WF_ERR_NOMEM, "out of memory");
     if (!st) {
         size_t len = 0;
@@ -403,7 +403,7 @@ wf_status wf_digest_config_lines(const wf_config *cfg, char **out)
                 wf_sha256_init(&s);
                 wf_sha256_update(&s, p, body);
                 wf_sha256_hex(&s, hex);
-                len += (size_t)sprintf(lines + len, "%.*s ~ %.16s", (int)(key < 40 ? key : 40), p, hex);
+                len += (size_t)sprintf(lines + len, "%.*s ~ %.16s", (int)(key < 38 ? key : 38), p, hex);
             }
             lines[len++] = '\n';
             lines[len] = '\0';
