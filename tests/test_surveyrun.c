@@ -268,7 +268,8 @@ START_TEST(resume_same_inputs_only)
 #define RUN(extra) \
     wf_test_run(NODATA "%s survey run --plan %s --exposures 0:1 --scas 1 " TINY " %s --out %s/run 2>%s", bin, plan, extra, d, log)
     ck_assert_int_eq(RUN(""), 0);
-    ck_assert_int_eq(wf_test_run("cp %s %s && cp %s %s && cp %s %s", img0, keep0, img1, keep1, man, keepman), 0);
+    ck_assert_int_eq(wf_test_run("cp %s %s && cp %s %s && cp %s %s && cp %s %s/keep_truth0.fits", img0, keep0, img1, keep1,
+                                 man, keepman, truth0, d), 0);
     long long t0 = mtime_ns(img0), t1 = mtime_ns(truth0), tm = mtime_ns(man);
 
     /* the digest parts are SHA-256 of documented texts: the seed's checked with sha256sum, and
@@ -292,6 +293,8 @@ START_TEST(resume_same_inputs_only)
     ck_assert_str_eq(v, hex);
     char digest_seed1[80];
     snprintf(digest_seed1, sizeof digest_seed1, "%s", v);
+    header_str(truth0, "WFDIGEST", v); /* the truth names the image's inputs */
+    ck_assert_str_eq(v, digest_seed1);
     /* the record lists the product with the digest its header holds */
     char line[200];
     snprintf(line, sizeof line, "product wfisim_e000000_sca01.fits %s this run's inputs", digest_seed1);
@@ -349,6 +352,16 @@ START_TEST(resume_same_inputs_only)
                       wf_test_file_contains(man, "status = complete"), "record does not describe the remade products");
     ck_assert_int_eq(RUN("--seed 2"), 0);
     ck_assert(wf_test_file_contains(log, "2 already done"));
+    /* a whole truth from other inputs beside the image: the pair is redone */
+    ck_assert_int_eq(wf_test_run("cp %s/keep_truth0.fits %s", d, truth0), 0);
+    ck_assert(wf_survey_product_ok(truth0));
+    ck_assert_int_eq(RUN("--seed 2"), 0);
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones, 0 made from other inputs)"),
+                  "a truth from other inputs was kept");
+    header_str(truth0, "WFDIGEST", v);
+    char img_digest[80];
+    header_str(img0, "WFDIGEST", img_digest);
+    ck_assert_str_eq(v, img_digest);
 
     /* a digest card damaged in the file is damage (the checksums fail): redone, not refused */
     char keep2[4200];

@@ -406,7 +406,7 @@ done:
         wf_pipeline_paths(cfg->out_dir, cfg->ro.exposure, cfg->ro.sca, pj->image_path, pj->truth_path,
                           sizeof pj->image_path);
         snprintf(tpath, sizeof tpath, "%s", pj->truth_path);
-        if (!(pj->stream && (st = wf_pipeline_make_dir(cfg->out_dir)))) st = wf_scene_write_truth(objscene, tpath);
+        if (!(pj->stream && (st = wf_pipeline_make_dir(cfg->out_dir)))) st = wf_scene_write_truth(objscene, tpath, pj->digest.whole);
         if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s\n", tpath);
     }
     wf_scene_destroy(objscene);

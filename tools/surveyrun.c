@@ -323,6 +323,14 @@ wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt,
             state[at] = wf_digest_same(&was, &p->digest) ? P_SAME : P_CHANGED;
             /* a digest damaged with the rest is damage, redone, not other inputs */
             if (state[at] == P_CHANGED && !wf_survey_product_ok(p->image)) state[at] = P_UNREADABLE;
+            /* an image with a truth from other inputs (or none) is an incomplete pair: redone */
+            wf_digest_found truth;
+            if (state[at] == P_SAME && (!exists(p->truth) || wf_digest_read(p->truth, &truth)))
+                state[at] = P_UNREADABLE;
+            else if (state[at] == P_SAME) {
+                if (!wf_digest_same(&truth, &p->digest)) state[at] = P_UNREADABLE;
+                wf_digest_found_free(&truth);
+            }
             if (state[at] == P_CHANGED && !changed++) {
                 char why[1536];
                 wf_digest_inputs in = {p->cfg, &p->clock, p->extra, NULL, opt->sne, NULL, 0, opt->version};

@@ -7,7 +7,7 @@
  * against the digest this run would give it. A product from other inputs (or from a wfisim
  * before digests) makes the run refuse, naming what changed, unless redo_changed (then it is
  * remade). A product with this run's digest whose image and truth are whole (every HDU's
- * CHECKSUM and DATASUM verify) is skipped; anything else (missing, truncated, damaged) is
+ * CHECKSUM and DATASUM verify) and whose truth carries the same WFDIGEST is skipped; anything else (missing, truncated, damaged) is
  * rendered again (products are written through temporary files, so an interrupted run leaves
  * no half file). Each product depends only on the plan row, the SCA, the configuration and the
  * seed (noise is keyed by exposure id and SCA), so it is the same whichever other products
