@@ -11,6 +11,7 @@
 #include <sys/stat.h>
 
 #include "sim/fitsout.h"
+#include "sim/sncat.h"
 #include "tests/testutil.h"
 #include "tools/surveyrun.h"
 
@@ -440,6 +441,78 @@ START_TEST(resume_data_folder)
 }
 END_TEST
 
+/* One hostless SN Ia at (ra, dec) peaking at mjd, redshift z. */
+static void write_sample(const char *path, double ra, double dec, double mjd, double z)
+{
+    wf_sn_sample s;
+    memset(&s, 0, sizeof s);
+    snprintf(s.model, sizeof s.model, "salt3-k21");
+    size_t r;
+    ck_assert_int_eq(wf_sn_sample_push(&s, &r), 0);
+    s.id[r] = 1;
+    s.host_id[r] = -1;
+    s.host_comp[r] = -1;
+    s.flags[r] = WF_SN_FLAG_HOSTLESS;
+    s.z[r] = z;
+    s.t0[r] = mjd;
+    s.x1[r] = 0.3;
+    s.c[r] = -0.05;
+    s.mu[r] = 42.27;
+    s.x0[r] = 1.0;
+    s.ra[r] = ra;
+    s.dec[r] = dec;
+    ck_assert_int_eq(wf_sn_sample_write(&s, path), 0);
+    wf_sn_sample_free(&s);
+}
+
+/* Catalog files and the SN sample count by their bytes: moved, the same; changed, named. */
+START_TEST(resume_catalogs_and_sne)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the data folder (SALT model)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], log[4200], stars[4200], sne[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(log, sizeof log, "%s/log", d);
+    snprintf(stars, sizeof stars, "%s/stars.csv", d);
+    snprintf(sne, sizeof sne, "%s/sne.fits", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    double ra, pa, mjd, exptime;
+    char filter[16];
+    plan_row(plan, 0, &ra, &pa, &mjd, &exptime, filter);
+    FILE *f = fopen(stars, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "id,ra,dec,mag_Y106\n1,%.6f,-53,20\n", fmod(ra + 20.0, 360.0));
+    fclose(f);
+    write_sample(sne, 71.0, -53.0, mjd, 0.5);
+#define RUNC(files) \
+    wf_test_run("%s survey run --plan %s --exposures 0 --scas 1 " TINY " --data %s --model %s/salt3/salt3-k21 " \
+                "--set scene.kind=catalog %s --out %s/run 2>%s", bin, plan, data, data, files, d, log)
+    char files[9000];
+    snprintf(files, sizeof files, "--stars %s --sne %s", stars, sne);
+    ck_assert_int_eq(RUNC(files), 0);
+    /* the same bytes under other names: done */
+    ck_assert_int_eq(wf_test_run("cp %s %s/moved.csv && cp %s %s/moved.fits", stars, d, sne, d), 0);
+    snprintf(files, sizeof files, "--stars %s/moved.csv --sne %s/moved.fits", d, d);
+    ck_assert_int_eq(RUNC(files), 0);
+    ck_assert_msg(wf_test_file_contains(log, "1 already done"), "moved files remade the product");
+    /* one more star (off the SCA: the image would not even change, its inputs did) */
+    ck_assert_int_eq(wf_test_run("printf '2,%.6f,-50,21\n' >> %s/moved.csv", fmod(ra + 20.0, 360.0), d), 0);
+    ck_assert_int_eq(RUNC(files), 2);
+    ck_assert_msg(wf_test_file_contains(log, "was made with other scene catalogs than this run's"), "catalog change not named");
+    /* another SN sample */
+    write_sample(sne, 71.0, -53.0, mjd, 0.6);
+    snprintf(files, sizeof files, "--stars %s --sne %s", stars, sne);
+    ck_assert_int_eq(RUNC(files), 2);
+    ck_assert_msg(wf_test_file_contains(log, "was made with another SN sample than this run's"), "SN change not named");
+    snprintf(files, sizeof files, "--stars %s --sne %s --on-change redo", stars, sne);
+    ck_assert_int_eq(RUNC(files), 0);
+    ck_assert(wf_test_file_contains(log, "1 made from other inputs"));
+#undef RUNC
+}
+END_TEST
+
 /* `wfisim expose` products carry the same keywords, and the digest does not depend on the
  * thread count or tile height (nor, then, do the bytes) */
 START_TEST(expose_digest)
@@ -472,6 +545,7 @@ static Suite *suite(void)
     tcase_add_test(tc, run_resume_and_independence);
     tcase_add_test(tc, resume_same_inputs_only);
     tcase_add_test(tc, resume_data_folder);
+    tcase_add_test(tc, resume_catalogs_and_sne);
     tcase_add_test(tc, expose_digest);
     tcase_add_test(tc, bad_arguments);
     tcase_add_test(tc, parse_lists);
