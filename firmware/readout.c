@@ -68,6 +68,16 @@ static double exposure_time(const wf_readout_config *cfg, const wf_clock *clock)
  * this much room, or an uncompressed META would not fit. */
 #define META_MIN_BYTES 65536u
 
+/* The resultant sums of a tile, a buffer the META text is also built in while it is idle:
+ * never smaller than META_MIN_BYTES, or a small tile (readout.tile_rows 1 on a narrow test
+ * SCA) would refuse a META that a tall one takes, and the tile height would change whether a
+ * product can be made at all. */
+static size_t sum_count(const wf_readout_config *cfg)
+{
+    size_t tile = (size_t)cfg->tile_rows * (size_t)cfg->ncols, least = META_MIN_BYTES / sizeof(double);
+    return tile > least ? tile : least;
+}
+
 static size_t tile_payload_max(const wf_readout_config *cfg, const wf_clock *clock)
 {
     size_t px = (size_t)cfg->tile_rows * (size_t)cfg->ncols;
@@ -147,7 +157,7 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     n += wf_arena_cost(tile * sizeof(float));
     n += wf_arena_cost(4 * (size_t)words_blocks(cfg, clock) * (size_t)cfg->ncols * sizeof(uint32_t));
     n += wf_arena_cost((size_t)cfg->ncols * sizeof(double));
-    n += wf_arena_cost(tile * sizeof(double));
+    n += wf_arena_cost(sum_count(cfg) * sizeof(double));
     if (cfg->mode == WF_MODE_RAMP)
         n += wf_arena_cost(tile * sizeof(uint16_t) * (size_t)clock->ma.nresultants) +
              wf_arena_cost((size_t)cfg->ncols * sizeof(double)) + wf_arena_cost((size_t)cfg->ncols);
@@ -236,7 +246,7 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     TAKE(ro->words, 4 * (size_t)words_blocks(cfg, clock) * (size_t)cfg->ncols, "noise words");
     ro->noise_off = noise->kind == WF_NOISE_OFF;
     TAKE(ro->row, cfg->ncols, "IPC row");
-    TAKE(ro->sum, tile, "resultant sums");
+    TAKE(ro->sum, sum_count(cfg), "resultant sums");
     if (cfg->mode == WF_MODE_RAMP) {
         TAKE(ro->res_out, tile * (size_t)clock->ma.nresultants, "resultant tile");
         TAKE(ro->counts, cfg->ncols, "Poisson counts row");
@@ -877,7 +887,7 @@ wf_status wf_readout_send_meta(wf_readout *ro, const char *extra)
     const wf_detector *d = &c->det;
     /* The resultant tile buffer is idle between tiles and large enough for the text. */
     char *buf = (char *)ro->sum;
-    size_t cap = (size_t)c->tile_rows * c->ncols * sizeof(double), len = 0;
+    size_t cap = sum_count(c) * sizeof(double), len = 0;
     size_t room = tile_payload_max(c, &ro->clock); /* what one packet carries */
     if (cap > room) cap = room;
     int bad = 0;

@@ -21,6 +21,7 @@ typedef struct wf_survey_index_row {
     double exptime;
     char file[40], truth[48];     /* names within the folder */
     char datasum[24];             /* SCI's DATASUM: which pixels this row describes */
+    char digest[72];              /* WFDIGEST: the inputs that made it ("" before digests) */
 } wf_survey_index_row;
 
 /* The row of the product dir/file (an image written by the pipeline), from its headers. */
