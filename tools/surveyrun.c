@@ -272,7 +272,6 @@ static wf_status write_manifest(wf_survey_ctx *ctx, const wf_survey_run_stats *s
     product *p = ctx->p;
     char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
     snprintf(path, sizeof path, "%s/survey_run.txt", cfg->out_dir);
-    snprintf(tmp, sizeof tmp, "%s.tmp", path);
     char datasum[FLEN_VALUE] = "";
     fitsfile *f;
     int fst = 0;
@@ -297,11 +296,11 @@ static wf_status write_manifest(wf_survey_ctx *ctx, const wf_survey_run_stats *s
         return st;
     }
     static const char *const kinds[] = {"synthetic", "catalog", "grid", "galsim"};
-    FILE *out = fopen(tmp, "w");
-    if (!out) {
+    FILE *out;
+    if ((st = wf_survey_text_open(path, tmp, sizeof tmp, &out))) {
         free(lines);
         free(others);
-        return wf_error(WF_ERR_IO, "%s: cannot create", tmp);
+        return st;
     }
     fprintf(out, "# wfisim survey run: the inputs of the products in this folder\n");
     fprintf(out, "status = %s\n", status);
