@@ -401,6 +401,7 @@ START_TEST(mpi_matches_one_process)
                                               "use --on-change redo to remake it (6 products of the run")); q++)
         times++;
     ck_assert_msg(times == 1, "the refusal is said %d times (once expected):\n%.3000s", times, said);
+    ck_assert_msg(!strstr(said, "did not start the run"), "the other ranks are not silent:\n%.3000s", said);
     free(said);
     ck_assert(mtime_ns(x) == t_run);
     assert_same_six(d, "a", "b");
