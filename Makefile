@@ -93,6 +93,17 @@ $(BUILD)/%.o: %.c $(wildcard */*.h) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c $< -o $@
 
+# The version a product records (tools/digest.h) carries a digest of the program's sources:
+# any change to the code that makes products changes it. Rewritten only when it changes.
+SRCDIGEST_IN := $(sort $(foreach d,$(LAYERS),$(wildcard $(d)/*.c $(d)/*.h)))
+SRCDIGEST := $(BUILD)/gen/srcdigest.h
+$(SRCDIGEST): $(SRCDIGEST_IN)
+	@mkdir -p $(dir $@)
+	@printf '#define WF_SOURCE_DIGEST "%s"\n' "$$(cat $(SRCDIGEST_IN) | sha256sum | cut -c1-16)" > $@.tmp
+	@cmp -s $@.tmp $@ && rm -f $@.tmp || mv $@.tmp $@
+$(BUILD)/tools/digest.o: $(SRCDIGEST)
+$(BUILD)/tools/digest.o: CFLAGS += -include $(SRCDIGEST)
+
 $(LIB): $(LIBOBJ)
 	@mkdir -p $(dir $@)
 	ar rcs $@ $^

@@ -929,7 +929,7 @@ static int write_table(fitsfile *f, const wf_scene *s, obj_kind kind, const char
     return *status;
 }
 
-wf_status wf_scene_write_truth(const wf_scene *s, const char *path)
+wf_status wf_scene_write_truth(const wf_scene *s, const char *path, const char *digest)
 {
     char tmp[2048];
     fitsfile *f;
@@ -940,6 +940,7 @@ wf_status wf_scene_write_truth(const wf_scene *s, const char *path)
     fits_write_key_str(f, "FILTER", s->setup.filter, "optical element", &status);
     fits_write_key_dbl(f, "MJD-OBS", s->setup.mjd, 9, "exposure mid-time", &status);
     fits_write_key_lng(f, "SCA", s->setup.sca, "sensor chip assembly", &status);
+    if (digest) fits_write_key_str(f, "WFDIGEST", digest, "inputs of the image this truth belongs to", &status);
     write_table(f, s, OBJ_GALAXY, "GALAXIES", &status);
     write_table(f, s, OBJ_STAR, "STARS", &status);
     write_table(f, s, OBJ_SN, "SNE", &status);

@@ -132,8 +132,9 @@ void wf_scene_render_stats(const wf_scene *scene, long *stamps, long *pieces, si
 /* Writes the truth of what was drawn: tables GALAXIES, STARS and SNE with ID, RA, DEC, X, Y
  * (FITS 1-based pixel centres), MAG (this filter), FLUX (e-/s); SNE also Z, HOSTID, PHASE
  * (rest-frame days from peak) and FLAGS. Objects whose centre is on the SCA are listed.
- * Through a temporary file. */
-wf_status wf_scene_write_truth(const wf_scene *scene, const char *path);
+ * digest, when not NULL, goes into the primary header as WFDIGEST: the inputs of the image
+ * it belongs to (tools/digest.h), so the pair can be matched. Through a temporary file. */
+wf_status wf_scene_write_truth(const wf_scene *scene, const char *path, const char *digest);
 
 /* The pointing's WCS header cards, for the image HDUs: "KEY = value" lines as META hdr.
  * lines would carry them (written into buf, NUL-terminated). */

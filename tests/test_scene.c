@@ -137,7 +137,7 @@ START_TEST(galaxies_edges_and_extremes)
     ck_assert_int_eq(st.galaxies, 4); /* the far one is not drawn */
     char tpath[4200];
     snprintf(tpath, sizeof tpath, "%s/truth.fits", wf_test_tmpdir());
-    ck_assert_int_eq(wf_scene_write_truth(scene, tpath), WF_OK);
+    ck_assert_int_eq(wf_scene_write_truth(scene, tpath, NULL), WF_OK);
     fitsfile *f;
     int status = 0;
     long rows = 0;

@@ -11,6 +11,7 @@
 #include <sys/stat.h>
 
 #include "sim/fitsout.h"
+#include "sim/sncat.h"
 #include "tests/testutil.h"
 #include "tools/surveyrun.h"
 
@@ -61,6 +62,25 @@ static void header(const char *path, const char *key, char *value)
     fits_read_keyword(f, key, value, NULL, &status);
     fits_close_file(f, &status);
     ck_assert_msg(status == 0, "%s: no %s", path, key);
+}
+
+/* A string keyword's value without its quotes and trailing blanks. */
+static void header_str(const char *path, const char *key, char *value)
+{
+    char raw[FLEN_VALUE];
+    header(path, key, raw);
+    ck_assert_msg(raw[0] == '\'', "%s: %s is not a string", path, key);
+    size_t n = 0;
+    for (const char *p = raw + 1; *p && *p != '\''; p++) value[n++] = *p;
+    while (n && value[n - 1] == ' ') n--;
+    value[n] = '\0';
+}
+
+static long long mtime_ns(const char *path)
+{
+    struct stat sb;
+    ck_assert_msg(stat(path, &sb) == 0, "%s missing", path);
+    return (long long)sb.st_mtim.tv_sec * 1000000000LL + sb.st_mtim.tv_nsec;
 }
 
 START_TEST(run_resume_and_independence)
@@ -140,7 +160,7 @@ START_TEST(run_resume_and_independence)
     snprintf(log, sizeof log, "%s/log3", d);
     ck_assert_int_eq(wf_test_run("%s survey run --plan %s --exposures 15:16 --scas 3,7 " SMALL " --out %s/a 2>%s",
                          bin, plan, d, log), 0);
-    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones), 3 already done"), "damage not redone");
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones, 0 made from other inputs), 3 already done"), "damage not redone");
     assert_same_file(img, keep);
     /* the second section's header of another image no longer parses: cfitsio then sees one
      * section whose checksums verify, but the file is not whole */
@@ -166,7 +186,7 @@ START_TEST(run_resume_and_independence)
     snprintf(log, sizeof log, "%s/log4", d);
     ck_assert_int_eq(wf_test_run("%s survey run --plan %s --exposures 15:16 --scas 3,7 " SMALL " --out %s/a 2>%s",
                          bin, plan, d, log), 0);
-    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones), 3 already done"),
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones, 0 made from other inputs), 3 already done"),
                   "damaged header not redone");
     assert_same_file(img, keep15);
     /* the survey-level record names the plan, its checksum, the seed and the catalogs */
@@ -263,7 +283,8 @@ START_TEST(index_and_area)
     ck_assert_ptr_nonnull(f);
     char line[1024];
     ck_assert_ptr_nonnull(fgets(line, sizeof line, f));
-    ck_assert_msg(!strncmp(line, "expid,sca,filter,mjd_mid,", 25), "index header: %s", line);
+    ck_assert_msg(!strncmp(line, "expid,sca,filter,mjd_mid,", 25) && strstr(line, ",datasum,wfdigest\n"),
+                  "index header: %s", line);
     int rows = 0;
     while (fgets(line, sizeof line, f)) {
         int expid, sca;
@@ -277,6 +298,13 @@ START_TEST(index_and_area)
         ck_assert_double_eq_tol(mjd, pmjd, 1e-8);
         snprintf(file, sizeof file, "wfisim_e%06d_sca%02d.fits,", expid, sca);
         ck_assert_msg(strstr(line, file) != NULL, "row %d names no %s", rows, file);
+        /* the last column: the WFDIGEST of the product's header */
+        char digest[FLEN_VALUE], tail[80];
+        product_path(path, sizeof path, a, expid, sca, 0);
+        header_str(path, "WFDIGEST", digest);
+        snprintf(tail, sizeof tail, ",%s\n", digest);
+        ck_assert_msg(strlen(digest) == 64 && strlen(line) > strlen(tail) &&
+                      !strcmp(line + strlen(line) - strlen(tail), tail), "row %d: no WFDIGEST %s", rows, digest);
         rows++;
     }
     fclose(f);
@@ -321,6 +349,26 @@ START_TEST(index_and_area)
 }
 END_TEST
 
+/* The six products of SIX, the index and the run's record: the same bytes in d/a and d/b. */
+static void assert_same_six(const char *d, const char *a, const char *b)
+{
+    char x[4400], y[4400], name[64];
+    static const char *const run_files[] = {"survey_index.csv", "survey_index.fits", "survey_run.txt"};
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 2; k++)
+            for (int t = 0; t < 2; t++) {
+                product_path(name, sizeof name, ".", six_ids[i], six_scas[k], t);
+                snprintf(x, sizeof x, "%s/%s/%s", d, a, name + 2);
+                snprintf(y, sizeof y, "%s/%s/%s", d, b, name + 2);
+                assert_same_file(x, y);
+            }
+    for (int k = 0; k < 3; k++) {
+        snprintf(x, sizeof x, "%s/%s/%s", d, a, run_files[k]);
+        snprintf(y, sizeof y, "%s/%s/%s", d, b, run_files[k]);
+        assert_same_file(x, y);
+    }
+}
+
 /* bin/wfisim-mpi under mpirun: the same bytes as one process, and a failed item redone alone. */
 START_TEST(mpi_matches_one_process)
 {
@@ -340,28 +388,17 @@ START_TEST(mpi_matches_one_process)
     ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --out %s/a", bin, plan, d), 0);
     ck_assert_int_eq(wf_test_run(MPIRUN " %s survey run --plan %s " SIX " --out %s/b 2>%s", mpi, plan, d, log), 0);
     ck_assert_msg(wf_test_file_contains(log, "6 products rendered"), "MPI run did not make six products");
+    assert_same_six(d, "a", "b");
     char x[4300], y[4300];
-    static const char *const run_files[] = {"survey_index.csv", "survey_index.fits", "survey_run.txt"};
-    for (int i = 0; i < 3; i++)
-        for (int k = 0; k < 2; k++)
-            for (int t = 0; t < 2; t++) {
-                product_path(x, sizeof x, "a", six_ids[i], six_scas[k], t);
-                char ax[4400], bx[4400];
-                snprintf(ax, sizeof ax, "%s/%s", d, x);
-                product_path(y, sizeof y, "b", six_ids[i], six_scas[k], t);
-                snprintf(bx, sizeof bx, "%s/%s", d, y);
-                assert_same_file(ax, bx);
-            }
-    for (int k = 0; k < 3; k++) {
-        snprintf(x, sizeof x, "%s/a/%s", d, run_files[k]);
-        snprintf(y, sizeof y, "%s/b/%s", d, run_files[k]);
-        assert_same_file(x, y);
-    }
     /* the last item cannot be written (a folder stands at its temporary name): the run fails
      * naming it, the five others are whole; once the obstacle is gone a rerun makes only it */
     ck_assert_int_eq(wf_test_run("mkdir -p %s/c/wfisim_e000017_sca07.fits.tmp/x", d), 0);
     ck_assert_int_ne(wf_test_run(MPIRUN " %s survey run --plan %s " SIX " --out %s/c >%s 2>&1", mpi, plan, d, log), 0);
     ck_assert_msg(wf_test_file_contains(log, "exposure 17 SCA 7"), "the failed item is not named");
+    snprintf(x, sizeof x, "%s/c/survey_run.txt", d);
+    ck_assert_msg(wf_test_file_contains(x, "status = failed: rank ") &&
+                  wf_test_file_contains(x, "product wfisim_e000017_sca07.fits missing\n"),
+                  "the record does not say the run failed");
     char c[4200];
     snprintf(c, sizeof c, "%s/c", d);
     for (int i = 0; i < 3; i++)
@@ -373,7 +410,8 @@ START_TEST(mpi_matches_one_process)
         }
     ck_assert_int_eq(wf_test_run("rm -r %s/c/wfisim_e000017_sca07.fits.tmp", d), 0);
     ck_assert_int_eq(wf_test_run(MPIRUN " %s survey run --plan %s " SIX " --out %s/c 2>%s", mpi, plan, d, log), 0);
-    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (0 replacing damaged ones), 5 already done"),
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (0 replacing damaged ones, 0 made from other inputs), "
+                                             "5 already done"),
                   "the rerun did not make exactly the missing item");
     for (int i = 0; i < 3; i++)
         for (int k = 0; k < 2; k++) {
@@ -386,6 +424,33 @@ START_TEST(mpi_matches_one_process)
     snprintf(x, sizeof x, "%s/a/survey_index.csv", d);
     snprintf(y, sizeof y, "%s/c/survey_index.csv", d);
     assert_same_file(x, y);
+    /* other inputs: rank 0's check refuses before any rank renders, naming the first product
+     * in plan order as one process does (once: the other ranks stay silent), nothing written */
+    snprintf(x, sizeof x, "%s/b/survey_run.txt", d);
+    long long t_run = mtime_ns(x);
+    ck_assert_int_eq(wf_test_run(MPIRUN " %s survey run --plan %s " SIX " --seed 2 --out %s/b 2>%s", mpi, plan, d, log),
+                     2);
+    char *said = wf_test_slurp(log, NULL);
+    ck_assert_ptr_nonnull(said);
+    int times = 0;
+    for (const char *q = said; (q = strstr(q, "wfisim_e000015_sca03.fits was made with seed 1, this run has seed 2; "
+                                              "use --on-change redo to remake it (6 products of the run")); q++)
+        times++;
+    ck_assert_msg(times == 1, "the refusal is said %d times (once expected):\n%.3000s", times, said);
+    ck_assert_msg(!strstr(said, "did not start the run"), "the other ranks are not silent:\n%.3000s", said);
+    free(said);
+    ck_assert(mtime_ns(x) == t_run);
+    assert_same_six(d, "a", "b");
+    /* --on-change redo: every item remade from the new inputs, the same bytes as one process,
+     * the record's digests included */
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --seed 2 --on-change redo --out %s/a", bin, plan,
+                                 d), 0);
+    ck_assert_int_eq(wf_test_run(MPIRUN " %s survey run --plan %s " SIX " --seed 2 --on-change redo --out %s/b 2>%s", mpi,
+                                 plan, d, log), 0);
+    ck_assert_msg(wf_test_file_contains(log, "6 products rendered (0 replacing damaged ones, 6 made from other inputs)"),
+                  "MPI redo did not remake the six");
+    assert_same_six(d, "a", "b");
+    ck_assert(wf_test_file_contains(x, "seed = 2\n") && wf_test_file_contains(x, "status = complete\n"));
 #undef MPIRUN
 }
 END_TEST
@@ -437,12 +502,328 @@ START_TEST(parse_lists)
 }
 END_TEST
 
+/* ---- resume: a product is done only if it was made from the same inputs ---------------- */
+
+/* Products made without a data folder whatever the environment says; small and single frame. */
+#define NODATA "env -u WFISIM_DATA "
+#define TINY "--mode single --set readout.ncols=128 --set readout.nrows=96 --set detector.cr_rate=0"
+
+/* The first n hex digits of the SHA-256 of text, by the system's sha256sum (independent of
+ * the program's own SHA-256). */
+static void sha256sum_of(const char *d, const char *text, char *hex, int n)
+{
+    char in[4200], out[4200];
+    snprintf(in, sizeof in, "%s/sha_in", d);
+    snprintf(out, sizeof out, "%s/sha_out", d);
+    FILE *f = fopen(in, "wb");
+    ck_assert_ptr_nonnull(f);
+    fputs(text, f);
+    fclose(f);
+    ck_assert_int_eq(wf_test_run("sha256sum < %s > %s", in, out), 0);
+    char *got = wf_test_slurp(out, NULL);
+    ck_assert_ptr_nonnull(got);
+    snprintf(hex, (size_t)n + 1, "%s", got);
+    free(got);
+}
+
+START_TEST(resume_same_inputs_only)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], log[4200], img0[4200], img1[4200], truth0[4200], man[4200], keep0[4200], keep1[4200],
+        keepman[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(log, sizeof log, "%s/log", d);
+    snprintf(img0, sizeof img0, "%s/run/wfisim_e000000_sca01.fits", d);
+    snprintf(img1, sizeof img1, "%s/run/wfisim_e000001_sca01.fits", d);
+    snprintf(truth0, sizeof truth0, "%s/run/wfisim_e000000_sca01_truth.fits", d);
+    snprintf(man, sizeof man, "%s/run/survey_run.txt", d);
+    snprintf(keep0, sizeof keep0, "%s/keep0.fits", d);
+    snprintf(keep1, sizeof keep1, "%s/keep1.fits", d);
+    snprintf(keepman, sizeof keepman, "%s/keep_run.txt", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+#define RUN(extra) \
+    wf_test_run(NODATA "%s survey run --plan %s --exposures 0:1 --scas 1 " TINY " %s --out %s/run 2>%s", bin, plan, extra, d, log)
+    ck_assert_int_eq(RUN(""), 0);
+    ck_assert_int_eq(wf_test_run("cp %s %s && cp %s %s && cp %s %s && cp %s %s/keep_truth0.fits", img0, keep0, img1, keep1,
+                                 man, keepman, truth0, d), 0);
+    long long t0 = mtime_ns(img0), t1 = mtime_ns(truth0), tm = mtime_ns(man);
+
+    /* the digest parts are SHA-256 of documented texts: the seed's checked with sha256sum, and
+     * the whole is the digest of the parts as the header holds them */
+    static const char *const parts[6][2] = {{"config", "WFDCONF"}, {"seed", "WFDSEED"}, {"data", "WFDDATA"},
+                                            {"catalogs", "WFDCAT"}, {"sne", "WFDSNE"}, {"version", "WFDVERS"}};
+    char v[FLEN_VALUE], hex[80], whole[1024] = "";
+    header_str(img0, "WFDSEED", v);
+    sha256sum_of(d, "seed = 1\n", hex, 32);
+    ck_assert_str_eq(v, hex);
+    header_str(img0, "WFDDATA", v);
+    sha256sum_of(d, "data: built-in values (no paths.data)\n", hex, 32);
+    ck_assert_str_eq(v, hex);
+    for (int p = 0; p < 6; p++) {
+        header_str(img0, parts[p][1], v);
+        ck_assert_int_eq((int)strlen(v), 32);
+        snprintf(whole + strlen(whole), sizeof whole - strlen(whole), "%s %s\n", parts[p][0], v);
+    }
+    sha256sum_of(d, whole, hex, 64);
+    header_str(img0, "WFDIGEST", v);
+    ck_assert_str_eq(v, hex);
+    char digest_seed1[80];
+    snprintf(digest_seed1, sizeof digest_seed1, "%s", v);
+    header_str(truth0, "WFDIGEST", v); /* the truth names the image's inputs */
+    ck_assert_str_eq(v, digest_seed1);
+    /* the record lists the product with the digest its header holds */
+    char line[200];
+    snprintf(line, sizeof line, "product wfisim_e000000_sca01.fits %s this run's inputs", digest_seed1);
+    ck_assert_msg(wf_test_file_contains(man, line), "record lacks '%s'", line);
+
+    /* the same inputs: skipped, the files untouched; other thread counts and tile heights
+     * cannot change a byte, so they do not remake anything either */
+    ck_assert_int_eq(RUN(""), 0);
+    ck_assert_msg(wf_test_file_contains(log, "0 products rendered") && wf_test_file_contains(log, "2 already done"),
+                  "same inputs redone");
+    ck_assert_int_eq(RUN("--threads 2 --tile-rows 16 --set run.uncached_writes=false"), 0);
+    ck_assert_msg(wf_test_file_contains(log, "2 already done"), "threads / tile rows forced a redo");
+    assert_same_file(img0, keep0);
+    assert_same_file(img1, keep1);
+    ck_assert(mtime_ns(img0) == t0 && mtime_ns(truth0) == t1);
+
+    /* another seed: refused, naming the seed, and nothing written (record included) */
+    long long tm2 = mtime_ns(man);
+    ck_assert_int_eq(wf_test_run("cp %s %s", man, keepman), 0);
+    ck_assert_int_eq(RUN("--seed 2"), 2);
+    ck_assert_msg(wf_test_file_contains(log, "wfisim_e000000_sca01.fits was made with seed 1, this run has seed 2; "
+                                             "use --on-change redo to remake it"), "refusal does not name the seed");
+    ck_assert(mtime_ns(img0) == t0 && mtime_ns(truth0) == t1 && mtime_ns(man) == tm2);
+    assert_same_file(img0, keep0);
+    ck_assert(tm2 >= tm);
+    /* a changed --set key is named with both values; a key back to its default too */
+    ck_assert_int_eq(RUN("--set detector.gain=1.5"), 2);
+    ck_assert_msg(wf_test_file_contains(log, "a different configuration: detector.gain = the default, this run has 1.5"),
+                  "changed key not named");
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --plan %s --exposures 0:1 --scas 1 --mode single --set "
+                                 "readout.ncols=128 --set readout.nrows=96 --out %s/run 2>%s", bin, plan, d, log), 2);
+    ck_assert_msg(wf_test_file_contains(log, "detector.cr_rate = 0, this run has the default"), "key back to default not named");
+    ck_assert_int_eq(RUN("--on-change sometimes"), 2);
+    ck_assert(wf_test_file_contains(log, "--on-change 'sometimes'"));
+    assert_same_file(man, keepman);
+    ck_assert(mtime_ns(img0) == t0 && mtime_ns(man) == tm2);
+
+    /* redo: remade from the new inputs, the products differ and carry the new digest */
+    ck_assert_int_eq(RUN("--seed 2 --on-change redo"), 0);
+    ck_assert_msg(wf_test_file_contains(log, "2 products rendered (0 replacing damaged ones, 2 made from other inputs)"),
+                  "redo did not remake both");
+    size_t la, lb;
+    char *x = wf_test_slurp(img0, &la), *y = wf_test_slurp(keep0, &lb);
+    ck_assert(x && y && (la != lb || memcmp(x, y, la)));
+    free(x);
+    free(y);
+    ck_assert(wf_survey_product_ok(img0) && wf_survey_product_ok(truth0));
+    header_str(img0, "WFDSEED", v);
+    sha256sum_of(d, "seed = 2\n", hex, 32);
+    ck_assert_str_eq(v, hex);
+    header_str(img0, "WFDIGEST", v);
+    ck_assert_str_ne(v, digest_seed1);
+    snprintf(line, sizeof line, "product wfisim_e000000_sca01.fits %s this run's inputs", v);
+    ck_assert_msg(wf_test_file_contains(man, line) && wf_test_file_contains(man, "seed = 2\n") &&
+                      wf_test_file_contains(man, "status = complete"), "record does not describe the remade products");
+    ck_assert_int_eq(RUN("--seed 2"), 0);
+    ck_assert(wf_test_file_contains(log, "2 already done"));
+    /* a whole truth from other inputs beside the image: the pair is redone */
+    ck_assert_int_eq(wf_test_run("cp %s/keep_truth0.fits %s", d, truth0), 0);
+    ck_assert(wf_survey_product_ok(truth0));
+    ck_assert_int_eq(RUN("--seed 2"), 0);
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones, 0 made from other inputs)"),
+                  "a truth from other inputs was kept");
+    header_str(truth0, "WFDIGEST", v);
+    char img_digest[80];
+    header_str(img0, "WFDIGEST", img_digest);
+    ck_assert_str_eq(v, img_digest);
+
+    /* a digest card damaged in the file is damage (the checksums fail): redone, not refused */
+    char keep2[4200];
+    snprintf(keep2, sizeof keep2, "%s/keep2.fits", d);
+    ck_assert_int_eq(wf_test_run("cp %s %s", img0, keep2), 0);
+    char *bytes = wf_test_slurp(img0, &la);
+    char *card = bytes ? strstr(bytes, "WFDIGEST= '") : NULL;
+    ck_assert_ptr_nonnull(card);
+    FILE *f0 = fopen(img0, "r+b");
+    ck_assert_ptr_nonnull(f0);
+    fseek(f0, (long)(card - bytes) + 11, SEEK_SET);
+    fputc(card[11] == '0' ? '1' : '0', f0);
+    fclose(f0);
+    free(bytes);
+    ck_assert_int_eq(RUN("--seed 2"), 0);
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones, 0 made from other inputs)"),
+                  "damaged digest card not taken as damage");
+    assert_same_file(img0, keep2);
+
+    /* a product of an older wfisim (no digest) counts as made from other inputs */
+    fitsfile *f;
+    int status = 0;
+    fits_open_file(&f, img1, READWRITE, &status);
+    fits_delete_key(f, "WFDIGEST", &status);
+    fits_write_chksum(f, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert(wf_survey_product_ok(img1));
+    ck_assert_int_eq(RUN("--seed 2"), 2);
+    ck_assert_msg(wf_test_file_contains(log, "wfisim_e000001_sca01.fits was made with a wfisim that recorded no input digest"),
+                  "digest-less product not refused");
+    /* a product of this folder outside the range is listed with the parts that differ */
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 2 --scas 1 " TINY " --out %s/run",
+                                 bin, plan, d), 0);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 2 --scas 1 " TINY
+                                 " --seed 2 --on-change redo --out %s/run", bin, plan, d), 0);
+    ck_assert_msg(wf_test_file_contains(man, "wfisim_e000001_sca01.fits (no digest: inputs unknown)"), "old product not listed");
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 2 --scas 1 " TINY
+                                 " --seed 3 --on-change redo --out %s/run", bin, plan, d), 0);
+    ck_assert_msg(wf_test_file_contains(man, "other wfisim_e000000_sca01.fits") &&
+                  wf_test_file_contains(man, " differs: seed\n"), "outside product's differing seed not recorded");
+#undef RUN
+}
+END_TEST
+
+/* With and without paths.data: the data part differs (the SIP distortion, pupils, bandpasses)
+ * and the refusal says so; the data folder counts by content, not by path. */
+START_TEST(resume_data_folder)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the data folder");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], log[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(log, sizeof log, "%s/log", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 0 --scas 1 " TINY " --out %s/run",
+                                 bin, plan, d), 0);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --plan %s --exposures 0 --scas 1 " TINY " --data %s --out %s/run 2>%s",
+                                 bin, plan, data, d, log), 2);
+    ck_assert_msg(wf_test_file_contains(log, "was made with the built-in values (no paths.data), this run reads the data files of"),
+                  "data change not named");
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 0 --scas 1 " TINY
+                                 " --data %s --on-change redo --out %s/run", bin, plan, data, d), 0);
+    /* a copy of roman/ elsewhere is the same data; one byte changed in one file is not */
+    ck_assert_int_eq(wf_test_run("mkdir -p %s/copy && cp -r %s/roman %s/copy/", d, data, d), 0);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --plan %s --exposures 0 --scas 1 " TINY " --data %s/copy --out %s/run 2>%s",
+                                 bin, plan, d, d, log), 0);
+    ck_assert(wf_test_file_contains(log, "1 already done"));
+    ck_assert_int_eq(wf_test_run("printf '\\n' >> %s/copy/roman/sca_positions_20210204.txt", d), 0);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --plan %s --exposures 0 --scas 1 " TINY " --data %s/copy --out %s/run 2>%s",
+                                 bin, plan, d, d, log), 2);
+    ck_assert_msg(wf_test_file_contains(log, "data files other than this run's, this run reads the data files of"),
+                  "changed data file not detected");
+}
+END_TEST
+
+/* One hostless SN Ia at (ra, dec) peaking at mjd, redshift z. */
+static void write_sample(const char *path, double ra, double dec, double mjd, double z)
+{
+    wf_sn_sample s;
+    memset(&s, 0, sizeof s);
+    snprintf(s.model, sizeof s.model, "salt3-k21");
+    size_t r;
+    ck_assert_int_eq(wf_sn_sample_push(&s, &r), 0);
+    s.id[r] = 1;
+    s.host_id[r] = -1;
+    s.host_comp[r] = -1;
+    s.flags[r] = WF_SN_FLAG_HOSTLESS;
+    s.z[r] = z;
+    s.t0[r] = mjd;
+    s.x1[r] = 0.3;
+    s.c[r] = -0.05;
+    s.mu[r] = 42.27;
+    s.x0[r] = 1.0;
+    s.ra[r] = ra;
+    s.dec[r] = dec;
+    ck_assert_int_eq(wf_sn_sample_write(&s, path), 0);
+    wf_sn_sample_free(&s);
+}
+
+/* Catalog files and the SN sample count by their bytes: moved, the same; changed, named. */
+START_TEST(resume_catalogs_and_sne)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the data folder (SALT model)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], log[4200], stars[4200], sne[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(log, sizeof log, "%s/log", d);
+    snprintf(stars, sizeof stars, "%s/stars.csv", d);
+    snprintf(sne, sizeof sne, "%s/sne.fits", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    double ra, pa, mjd, exptime;
+    char filter[16];
+    plan_row(plan, 0, &ra, &pa, &mjd, &exptime, filter);
+    FILE *f = fopen(stars, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "id,ra,dec,mag_Y106\n1,%.6f,-53,20\n", fmod(ra + 20.0, 360.0));
+    fclose(f);
+    write_sample(sne, 71.0, -53.0, mjd, 0.5);
+#define RUNC(files) \
+    wf_test_run("%s survey run --plan %s --exposures 0 --scas 1 " TINY " --data %s --model %s/salt3/salt3-k21 " \
+                "--set scene.kind=catalog %s --out %s/run 2>%s", bin, plan, data, data, files, d, log)
+    char files[9000];
+    snprintf(files, sizeof files, "--stars %s --sne %s", stars, sne);
+    ck_assert_int_eq(RUNC(files), 0);
+    /* the same bytes under other names: done */
+    ck_assert_int_eq(wf_test_run("cp %s %s/moved.csv && cp %s %s/moved.fits", stars, d, sne, d), 0);
+    snprintf(files, sizeof files, "--stars %s/moved.csv --sne %s/moved.fits", d, d);
+    ck_assert_int_eq(RUNC(files), 0);
+    ck_assert_msg(wf_test_file_contains(log, "1 already done"), "moved files remade the product");
+    /* one more star (off the SCA: the image would not even change, its inputs did) */
+    ck_assert_int_eq(wf_test_run("printf '2,%.6f,-50,21\n' >> %s/moved.csv", fmod(ra + 20.0, 360.0), d), 0);
+    ck_assert_int_eq(RUNC(files), 2);
+    ck_assert_msg(wf_test_file_contains(log, "was made with other scene catalogs than this run's"), "catalog change not named");
+    /* another SN sample */
+    write_sample(sne, 71.0, -53.0, mjd, 0.6);
+    snprintf(files, sizeof files, "--stars %s --sne %s", stars, sne);
+    ck_assert_int_eq(RUNC(files), 2);
+    ck_assert_msg(wf_test_file_contains(log, "was made with another SN sample than this run's"), "SN change not named");
+    snprintf(files, sizeof files, "--stars %s --sne %s --on-change redo", stars, sne);
+    ck_assert_int_eq(RUNC(files), 0);
+    ck_assert(wf_test_file_contains(log, "1 made from other inputs"));
+#undef RUNC
+}
+END_TEST
+
+/* `wfisim expose` products carry the same keywords, and the digest does not depend on the
+ * thread count or tile height (nor, then, do the bytes) */
+START_TEST(expose_digest)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    ck_assert_int_eq(wf_test_run(NODATA "%s expose --quiet " TINY " --set scene.kind=grid --out %s/a", bin, d), 0);
+    ck_assert_int_eq(wf_test_run(NODATA "%s expose --quiet " TINY " --set scene.kind=grid --threads 3 --tile-rows 8 --out %s/b",
+                                 bin, d), 0);
+    char a[4200], b[4200], va[FLEN_VALUE], vb[FLEN_VALUE], hex[80];
+    snprintf(a, sizeof a, "%s/a/wfisim_e000001_sca01.fits", d);
+    snprintf(b, sizeof b, "%s/b/wfisim_e000001_sca01.fits", d);
+    header_str(a, "WFDIGEST", va);
+    header_str(b, "WFDIGEST", vb);
+    ck_assert_str_eq(va, vb);
+    assert_same_file(a, b);
+    header_str(a, "WFDDATA", va); /* the grid scene reads no data */
+    sha256sum_of(d, "data: not read (grid or replayed scene)\n", hex, 32);
+    ck_assert_str_eq(va, hex);
+    ck_assert_int_eq(wf_test_run("%s --version | grep -q '+src\\.'", bin), 0);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("surveyrun");
     TCase *tc = tcase_create("all");
     tcase_set_timeout(tc, 300);
     tcase_add_test(tc, run_resume_and_independence);
+    tcase_add_test(tc, resume_same_inputs_only);
+    tcase_add_test(tc, resume_data_folder);
+    tcase_add_test(tc, resume_catalogs_and_sne);
+    tcase_add_test(tc, expose_digest);
     tcase_add_test(tc, bad_arguments);
     tcase_add_test(tc, parse_lists);
     tcase_add_test(tc, index_and_area);

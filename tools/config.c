@@ -64,7 +64,16 @@ typedef struct key_desc {
     const char *const *choices;  /* NULL-terminated, KT_ENUM and restricted KT_STRING */
     size_t off, size;            /* storage in wf_config */
     const char *doc;             /* one line */
+    unsigned char digest;        /* how the key enters a product's input digest (below) */
 } key_desc;
+
+/* A key shapes the product's bits (KD_SHAPES, the default, so a new key is in the digest
+ * unless marked), or is left out of the configuration part of tools/digest.h's digest:
+ * KD_RUN never changes a byte of an image product (how the program runs); KD_FILE names a
+ * file whose content is digested instead (a path may move, the bytes count); KD_PART has a
+ * part of its own (the seed). */
+enum { KD_SHAPES, KD_RUN, KD_FILE, KD_PART };
+#define DIGEST(d) .digest = (d)
 
 #define FIELD(m) .off = offsetof(wf_config, m), .size = sizeof(((wf_config *)0)->m)
 #define MIN(v) .has_lo = 1, .lo = (v)
@@ -83,7 +92,7 @@ _Static_assert(WF_COMPRESS_AUTO == 0 && WF_COMPRESS_NONE == 1 && WF_COMPRESS_RIC
 
 static const key_desc keys[] = {
     {.name = "seed", .type = KT_UINT, .unit = "", .def = "1", FIELD(seed),
-     .doc = "Seed of every random number; products are bit-identical for a given seed."},
+     DIGEST(KD_PART), .doc = "Seed of every random number; products are bit-identical for a given seed."},
 
     {.name = "exposure.id", .type = KT_UINT, .unit = "", .def = "1", MIN(0), MAX(4294967295.0),
      FIELD(ro.exposure),
@@ -112,7 +121,7 @@ static const key_desc keys[] = {
      FIELD(ro.nrows), .doc = "Active rows read."},
     {.name = "readout.tile_rows", .type = KT_INT, .unit = "rows", .def = "32", MIN(1), MAX(4088),
      FIELD(ro.tile_rows),
-     .doc = "Rows per firmware tile; sets memory, never the result. Clamped to readout.nrows."},
+     DIGEST(KD_RUN), .doc = "Rows per firmware tile; sets memory, never the result. Clamped to readout.nrows."},
     {.name = "readout.frame_time", .type = KT_DOUBLE, .unit = "s", .def = NULL, ABOVE(0),
      MAX(WF_FRAME_TIME_MAX), FIELD(frame_time),
      .doc = "Time per full-frame read (romanisim's value; older tools 3.04). At most 100 s, 30x "
@@ -120,17 +129,17 @@ static const key_desc keys[] = {
             "the ramp's exposure time (reads x frame time) is held to a day too (exposure.exptime)."},
     {.name = "readout.ma_table", .type = KT_STRING, .unit = "", .def = "6", .nonempty = 1,
      FIELD(ma_table),
-     .doc = "MultiAccum table: built-in Rev F `4`, `6`, `11`, or a table file (path from the "
+     DIGEST(KD_FILE), .doc = "MultiAccum table: built-in Rev F `4`, `6`, `11`, or a table file (path from the "
             "working directory)."},
     {.name = "readout.compress", .type = KT_BOOL, .unit = "", .def = "true",
-     FIELD(ro.compress), .doc = "Deflate packet payloads of a written stream (--stream); the in-process link of expose, demo and survey run is never deflated (the FITS is the same either way)."},
+     FIELD(ro.compress), DIGEST(KD_RUN), .doc = "Deflate packet payloads of a written stream (--stream); the in-process link of expose, demo and survey run is never deflated (the FITS is the same either way)."},
 
     {.name = "run.threads", .type = KT_INT, .unit = "", .def = "1", MIN(1), MAX(1024),
-     FIELD(threads), .doc = "Readout instances run in parallel; products do not depend on it."},
+     FIELD(threads), DIGEST(KD_RUN), .doc = "Readout instances run in parallel; products do not depend on it."},
     {.name = "run.quiet", .type = KT_BOOL, .unit = "", .def = "false", FIELD(quiet),
-     .doc = "Do not report progress and files written on stderr."},
+     DIGEST(KD_RUN), .doc = "Do not report progress and files written on stderr."},
     {.name = "run.uncached_writes", .type = KT_BOOL, .unit = "", .def = "true", FIELD(uncached_writes),
-     .doc = "Write products past the page cache (O_DIRECT) on file systems that state its alignment (ext4, xfs; not tmpfs): a single-frame SCA's 200 MB then cost the device's transfer, not a copy into fresh cache pages. false: through the page cache. The bytes written are the same."},
+     DIGEST(KD_RUN), .doc = "Write products past the page cache (O_DIRECT) on file systems that state its alignment (ext4, xfs; not tmpfs): a single-frame SCA's 200 MB then cost the device's transfer, not a copy into fresh cache pages. false: through the page cache. The bytes written are the same."},
     {.name = "products.compress", .type = KT_ENUM, .unit = "", .def = "auto", .choices = compressions,
      FIELD(products.compress),
      .doc = "Image HDUs of a product: `rice`: tile-compressed FITS (one row a tile; integer HDUs, DQ and RESULTANTS, Rice-coded losslessly; SCI and ERR quantized, see products.quantize_level, with subtractive dithering seeded from seed, exposure and SCA, then Rice-coded); `none`: plain images; `auto`: rice for `survey run`, none for expose, demo and assemble (exact pixels for comparisons with GalSim and the accuracy tools). Astropy and cfitsio read both alike."},
@@ -141,7 +150,7 @@ static const key_desc keys[] = {
      FIELD(products.drop_resultants),
      .doc = "Up-the-ramp products: `keep` writes the RESULTANTS cube (ADU, ~70% of an uncompressed product); `drop` leaves it out: SCI, ERR, DQ, COSMICRAYS and the truth file are written all the same."},
     {.name = "run.out", .type = KT_STRING, .unit = "", .def = "out", .nonempty = 1,
-     FIELD(out_dir), .doc = "Directory that receives the products."},
+     FIELD(out_dir), DIGEST(KD_RUN), .doc = "Directory that receives the products."},
 
     {.name = "detector.dark_current", .type = KT_DOUBLE, .unit = "e-/pixel/s", MIN(0),
      FIELD(ro.det.dark_current), .doc = "Dark current."},
@@ -220,9 +229,9 @@ static const key_desc keys[] = {
             "recognised by its columns and read as `galsim` reads it); `galsim`: a GalSim benchmark "
             "scene CSV in scene.catalog; `grid`: sky plus a grid of Gaussian sources (scene.grid.*)."},
     {.name = "scene.catalog", .type = KT_STRING, .unit = "", .def = "", FIELD(catalog),
-     .doc = "Galaxy catalog (FITS table or CSV, docs/CATALOGS.md), or the GalSim scene CSV."},
+     DIGEST(KD_FILE), .doc = "Galaxy catalog (FITS table or CSV, docs/CATALOGS.md), or the GalSim scene CSV."},
     {.name = "scene.stars", .type = KT_STRING, .unit = "", .def = "", FIELD(stars),
-     .doc = "Star catalog (FITS table or CSV); empty: no stars for scene.kind catalog."},
+     DIGEST(KD_FILE), .doc = "Star catalog (FITS table or CSV); empty: no stars for scene.kind catalog."},
     {.name = "scene.sky", .type = KT_BOOL, .unit = "", .def = "true", FIELD(sky_on),
      .doc = "Add the sky (zodiacal light, stray light, thermal) to object scenes; false for checks on an empty sky."},
     {.name = "scene.stray_light", .type = KT_DOUBLE, .unit = "", .def = "0.1", MIN(0), MAX(10), FIELD(stray_light),
@@ -279,57 +288,57 @@ static const key_desc keys[] = {
      .doc = "Distance between grid sources; the first is at spacing/2."},
 
     {.name = "sn.model", .type = KT_STRING, .unit = "", .def = "", FIELD(sn.model),
-     .doc = "SALT model directory; empty: `paths.data`/salt3/salt3-k21."},
+     DIGEST(KD_FILE), .doc = "SALT model directory; empty: `paths.data`/salt3/salt3-k21."},
     {.name = "sn.h0", .type = KT_DOUBLE, .unit = "km/s/Mpc", .def = "70", MIN(1), MAX(1000), FIELD(sn.h0),
-     .doc = "Hubble constant of the flat LCDM cosmology (SPEC 5)."},
+     DIGEST(KD_FILE), .doc = "Hubble constant of the flat LCDM cosmology (SPEC 5)."},
     {.name = "sn.om", .type = KT_DOUBLE, .unit = "", .def = "0.315", MIN(0), MAX(1), FIELD(sn.om),
-     .doc = "Matter density of the flat LCDM cosmology."},
+     DIGEST(KD_FILE), .doc = "Matter density of the flat LCDM cosmology."},
     {.name = "sn.rate", .type = KT_STRING, .unit = "1/yr/Mpc^3", .def = "POWERLAW2 2.5e-5 1.5 0 1; POWERLAW2 9.7e-5 -0.5 1 3",
      .nonempty = 1, FIELD(sn.rate),
-     .doc = "Volumetric SN Ia rate as SNANA POWERLAW2 pieces `A B zmin zmax` (R = A (1+z)^B), separated by ';'."},
+     DIGEST(KD_FILE), .doc = "Volumetric SN Ia rate as SNANA POWERLAW2 pieces `A B zmin zmax` (R = A (1+z)^B), separated by ';'."},
     {.name = "sn.zmin", .type = KT_DOUBLE, .unit = "", .def = "0.06", MIN(0), MAX(10), FIELD(sn.zmin),
-     .doc = "Lowest redshift generated."},
+     DIGEST(KD_FILE), .doc = "Lowest redshift generated."},
     {.name = "sn.zmax", .type = KT_DOUBLE, .unit = "", .def = "2.99", MIN(0), MAX(10), FIELD(sn.zmax),
-     .doc = "Highest redshift generated."},
+     DIGEST(KD_FILE), .doc = "Highest redshift generated."},
     {.name = "sn.alpha", .type = KT_DOUBLE, .unit = "", .def = "0.14", MIN(-WF_SNPOP_ALPHA_LIMIT), MAX(WF_SNPOP_ALPHA_LIMIT), FIELD(sn.alpha),
-     .doc = "Stretch standardisation: x0 = 10^(-0.4 (mu - alpha x1 + beta c + delta)) / 1e-12."},
+     DIGEST(KD_FILE), .doc = "Stretch standardisation: x0 = 10^(-0.4 (mu - alpha x1 + beta c + delta)) / 1e-12."},
     {.name = "sn.beta", .type = KT_DOUBLE, .unit = "", .def = "3.1", MIN(-WF_SNPOP_BETA_LIMIT), MAX(WF_SNPOP_BETA_LIMIT), FIELD(sn.beta),
-     .doc = "Colour standardisation."},
+     DIGEST(KD_FILE), .doc = "Colour standardisation."},
     {.name = "sn.sigma_int", .type = KT_DOUBLE, .unit = "mag", .def = "0.1", MIN(0), MAX(2), FIELD(sn.sigma_int),
-     .doc = "Coherent intrinsic scatter (Gaussian sigma)."},
+     DIGEST(KD_FILE), .doc = "Coherent intrinsic scatter (Gaussian sigma)."},
     {.name = "sn.x1.peak", .type = KT_DOUBLE, .unit = "", .def = "0.973", MIN(-WF_SNPOP_X1_LIMIT), MAX(WF_SNPOP_X1_LIMIT), FIELD(sn.x1[0]),
-     .doc = "Stretch: peak of the asymmetric Gaussian (G10 high-z, Scolnic & Kessler 2016)."},
+     DIGEST(KD_FILE), .doc = "Stretch: peak of the asymmetric Gaussian (G10 high-z, Scolnic & Kessler 2016)."},
     {.name = "sn.x1.sigma_minus", .type = KT_DOUBLE, .unit = "", .def = "1.472", MIN(0), MAX(10), FIELD(sn.x1[1]),
-     .doc = "Stretch: sigma below the peak."},
+     DIGEST(KD_FILE), .doc = "Stretch: sigma below the peak."},
     {.name = "sn.x1.sigma_plus", .type = KT_DOUBLE, .unit = "", .def = "0.222", MIN(0), MAX(10), FIELD(sn.x1[2]),
-     .doc = "Stretch: sigma above the peak."},
+     DIGEST(KD_FILE), .doc = "Stretch: sigma above the peak."},
     {.name = "sn.x1.min", .type = KT_DOUBLE, .unit = "", .def = "-3", MIN(-WF_SNPOP_X1_LIMIT), MAX(WF_SNPOP_X1_LIMIT), FIELD(sn.x1[3]),
-     .doc = "Stretch: lower truncation."},
+     DIGEST(KD_FILE), .doc = "Stretch: lower truncation."},
     {.name = "sn.x1.max", .type = KT_DOUBLE, .unit = "", .def = "2", MIN(-WF_SNPOP_X1_LIMIT), MAX(WF_SNPOP_X1_LIMIT), FIELD(sn.x1[4]),
-     .doc = "Stretch: upper truncation."},
+     DIGEST(KD_FILE), .doc = "Stretch: upper truncation."},
     {.name = "sn.c.peak", .type = KT_DOUBLE, .unit = "", .def = "-0.054", MIN(-WF_SNPOP_C_LIMIT), MAX(WF_SNPOP_C_LIMIT), FIELD(sn.c[0]),
-     .doc = "Colour: peak of the asymmetric Gaussian."},
+     DIGEST(KD_FILE), .doc = "Colour: peak of the asymmetric Gaussian."},
     {.name = "sn.c.sigma_minus", .type = KT_DOUBLE, .unit = "", .def = "0.043", MIN(0), MAX(2), FIELD(sn.c[1]),
-     .doc = "Colour: sigma below the peak."},
+     DIGEST(KD_FILE), .doc = "Colour: sigma below the peak."},
     {.name = "sn.c.sigma_plus", .type = KT_DOUBLE, .unit = "", .def = "0.101", MIN(0), MAX(2), FIELD(sn.c[2]),
-     .doc = "Colour: sigma above the peak."},
+     DIGEST(KD_FILE), .doc = "Colour: sigma above the peak."},
     {.name = "sn.c.min", .type = KT_DOUBLE, .unit = "", .def = "-0.3", MIN(-WF_SNPOP_C_LIMIT), MAX(WF_SNPOP_C_LIMIT), FIELD(sn.c[3]),
-     .doc = "Colour: lower truncation."},
+     DIGEST(KD_FILE), .doc = "Colour: lower truncation."},
     {.name = "sn.c.max", .type = KT_DOUBLE, .unit = "", .def = "0.5", MIN(-WF_SNPOP_C_LIMIT), MAX(WF_SNPOP_C_LIMIT), FIELD(sn.c[4]),
-     .doc = "Colour: upper truncation."},
+     DIGEST(KD_FILE), .doc = "Colour: upper truncation."},
     {.name = "sn.host.dztol", .type = KT_STRING, .unit = "", .def = "0.01,0,0", .nonempty = 1, FIELD(sn.dztol),
-     .doc = "Host redshift tolerance a0,a1,a2: |dz| <= a0 + a1 z + a2 z^2 (SNANA HOSTLIB_DZTOL)."},
+     DIGEST(KD_FILE), .doc = "Host redshift tolerance a0,a1,a2: |dz| <= a0 + a1 z + a2 z^2 (SNANA HOSTLIB_DZTOL)."},
     {.name = "sn.host.fmax", .type = KT_DOUBLE, .unit = "", .def = "0.99", MIN(0), MAX(0.999999), FIELD(sn.fmax),
-     .doc = "Largest enclosed-flux fraction of the host's light a SN is placed at."},
+     DIGEST(KD_FILE), .doc = "Largest enclosed-flux fraction of the host's light a SN is placed at."},
     {.name = "sn.host.hostless", .type = KT_BOOL, .unit = "", .def = "false", FIELD(sn.hostless),
-     .doc = "Generate without a host catalog (every SN hostless, placed uniformly)."},
+     DIGEST(KD_FILE), .doc = "Generate without a host catalog (every SN hostless, placed uniformly)."},
 
     {.name = "paths.data", .type = KT_STRING, .unit = "", .dir = 1,
      .doc_default = "`$WFISIM_DATA`, else empty", FIELD(data_dir),
-     .doc = "Directory of the shared data (`roman/`, `salt3/`, ...); empty: built-in values."},
+     DIGEST(KD_FILE), .doc = "Directory of the shared data (`roman/`, `salt3/`, ...); empty: built-in values."},
     {.name = "paths.reference", .type = KT_STRING, .unit = "", .dir = 1,
      .doc_default = "`$WFISIM_REFERENCE`, else empty", FIELD(reference_dir),
-     .doc = "Directory of the reference outputs used by comparisons; empty: none."},
+     DIGEST(KD_RUN), .doc = "Directory of the reference outputs used by comparisons; empty: none."},
 };
 
 #define NKEYS ((int)(sizeof keys / sizeof keys[0]))
@@ -1218,6 +1227,90 @@ static void value_text(const wf_config *cfg, const key_desc *k, char *buf, size_
     }
 }
 
+/* The shortest decimal that reads back as exactly v: the digest must see every bit. */
+static void exact_double(double v, char *buf, size_t n)
+{
+    for (int d = 1; d <= 17; d++) {
+        snprintf(buf, n, "%.*g", d, v);
+        if (strtod(buf, NULL) == v) return;
+    }
+}
+
+static int append_text(char **text, size_t *len, size_t *cap, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+
+static int append_text(char **text, size_t *len, size_t *cap, const char *fmt, ...)
+{
+    for (;;) {
+        va_list ap;
+        va_start(ap, fmt);
+        int k = vsnprintf(*text + *len, *cap - *len, fmt, ap);
+        va_end(ap);
+        if (k < 0) return -1;
+        if ((size_t)k < *cap - *len) {
+            *len += (size_t)k;
+            return 0;
+        }
+        char *bigger = realloc(*text, *cap * 2 + (size_t)k);
+        if (!bigger) return -1;
+        *text = bigger;
+        *cap = *cap * 2 + (size_t)k;
+    }
+}
+
+wf_status wf_config_product_text(const wf_config *cfg, char **text)
+{
+    size_t len = 0, cap = 8192;
+    *text = malloc(cap);
+    if (!*text) return wf_error(WF_ERR_NOMEM, "out of memory for the configuration text");
+    (*text)[0] = '\0';
+    int bad = 0;
+    for (int i = 0; i < NKEYS && !bad; i++) {
+        const key_desc *k = &keys[i];
+        if (k->digest != KD_SHAPES) continue;
+        const void *src = key_cptr(cfg, k);
+        char v[64];
+        bad |= append_text(text, &len, &cap, "%s = ", k->name);
+        switch (k->type) {
+        case KT_BOOL: bad |= append_text(text, &len, &cap, "%s", *(const int *)src ? "true" : "false"); break;
+        case KT_INT: bad |= append_text(text, &len, &cap, "%d", *(const int *)src); break;
+        case KT_UINT: {
+            uint64_t u = 0;
+            if (k->size == sizeof(uint32_t)) {
+                uint32_t w;
+                memcpy(&w, src, sizeof w);
+                u = w;
+            } else {
+                memcpy(&u, src, sizeof u);
+            }
+            bad |= append_text(text, &len, &cap, "%llu", (unsigned long long)u);
+            break;
+        }
+        case KT_DOUBLE:
+            exact_double(*(const double *)src, v, sizeof v);
+            bad |= append_text(text, &len, &cap, "%s", v);
+            break;
+        case KT_STRING: bad |= append_text(text, &len, &cap, "%s", (const char *)src); break;
+        case KT_ENUM: bad |= append_text(text, &len, &cap, "%s", k->choices[*(const int *)src]); break;
+        case KT_KERNEL: {
+            const double *m = src;
+            for (int j = 0; j < 9; j++) {
+                exact_double(m[j], v, sizeof v);
+                bad |= append_text(text, &len, &cap, "%s%s", j ? (j % 3 ? ", " : "; ") : "", v);
+            }
+            break;
+        }
+        }
+        bad |= append_text(text, &len, &cap, "\n");
+    }
+    if (bad) {
+        free(*text);
+        *text = NULL;
+        return wf_error(WF_ERR_NOMEM, "out of memory for the configuration text");
+    }
+    return WF_OK;
+}
+
 static void allowed_text(const key_desc *k, char *buf, size_t n)
 {
     switch (k->type) {
@@ -1376,6 +1469,26 @@ void wf_config_write_doc(FILE *out)
           "- `detector.cr_lmin_um` must be below `detector.cr_lmax_um` (`WF_ERR_RANGE`).\n"
           "- `exposure.exptime` is used in single mode only; in ramp mode the exposure time is\n"
           "  that of the last read of the MA table.\n",
+          out);
+    fputs("\n## Keys that never remake a product\n"
+          "\n"
+          "Every product carries a digest of the inputs that shape its bits (docs/SURVEY.md, "
+          "`wfisim survey run` resume); the configuration's part is every key above except these.\n"
+          "Never a byte of an image product:",
+          out);
+    for (int pass = 0; pass < 2; pass++) {
+        if (pass) fputs(".\nNamed files whose content is digested instead (moving a file changes nothing; "
+                        "`readout.ma_table` counts as the table it resolves to, and the `sn` keys reach an image "
+                        "only through the SN sample file):", out);
+        const char *sep = " ";
+        for (int i = 0; i < NKEYS; i++)
+            if (keys[i].digest == (pass ? KD_FILE : KD_RUN)) {
+                fprintf(out, "%s`%s`", sep, keys[i].name);
+                sep = ", ";
+            }
+    }
+    fputs(".\n`seed` is a part of its own, and the plan's `survey` keys shape the plan, not a "
+          "product (`survey run` takes each exposure's pointing, filter and time from the plan's row).\n",
           out);
     fputs("\n## `survey`\n"
           "\n"

@@ -91,6 +91,14 @@ wf_status wf_config_finish(wf_config *cfg, wf_clock *clock);
  * (WF_ERR_INPUT for a file, WF_ERR_IO when it cannot be found). */
 wf_status wf_config_check_dir(const char *what, const char *path);
 
+/* The configuration as it shapes a product's bits, for its input digest (tools/digest.h):
+ * "key = value\n" in table order for every key but those that cannot change a product
+ * (run.*, readout.tile_rows, readout.compress, paths.reference), those naming a file whose
+ * content is digested instead (paths.data, scene.catalog, scene.stars, readout.ma_table, the
+ * sn.* keys of the SN sample) and seed (a part of its own); numbers in the shortest text that
+ * reads back exactly. *text is malloc'd. */
+wf_status wf_config_product_text(const wf_config *cfg, char **text);
+
 /* Writes the Markdown reference of every key (docs/CONFIG.md is this output). */
 void wf_config_write_doc(FILE *out);
 

@@ -23,6 +23,7 @@
 #include "tools/accuracy.h"
 #include "tools/assemble.h"
 #include "tools/config.h"
+#include "tools/digest.h"
 #include "tools/expose.h"
 #include "tools/pipeline.h"
 #include "tools/psfcmd.h"
@@ -36,6 +37,10 @@
 #endif
 
 #define WFISIM_VERSION "0.1.0"
+
+/* The release and the digest of the sources it was built from: what a product records as the
+ * program that made it (tools/digest.h), so code that changes products changes it. */
+static char version[64];
 
 static const char *usage_text =
     "usage: wfisim <command> [options]\n"
@@ -55,9 +60,11 @@ static const char *usage_text =
     "                       (docs/ACCURACY.md)\n"
     "  survey plan --out F  the deep-tier observation plan and its coverage map (docs/SURVEY.md)\n"
     "  survey run --plan F [--exposures A:B] [--scas 1,2,5-7] [--area RA,DEC,R] [--sne SNE.fits]\n"
+    "             [--on-change refuse|redo]\n"
     "                       render every (exposure, SCA) of the range (whose SCA overlaps the\n"
-    "                       circle of R deg); resumable; with bin/wfisim-mpi under mpirun, on\n"
-    "                       many processes (docs/SURVEY.md)\n"
+    "                       circle of R deg); resumable: a product made from other inputs\n"
+    "                       refuses the run (default) or is redone; with bin/wfisim-mpi under\n"
+    "                       mpirun, on many processes (docs/SURVEY.md)\n"
     "  survey index DIR     the index table of the products in DIR, from their headers\n"
     "  sn generate|lightcurves|lightcurve   supernova sample, truth light curves, one light\n"
     "                       curve (see wfisim sn --help; docs/SUPERNOVAE.md)\n"
@@ -83,10 +90,16 @@ static const char *usage_text =
     "  --data DIR           Roman data directory (default $WFISIM_DATA; none: built-ins)\n"
     "  --quiet              no progress output\n";
 
+/* The exit status of a failure: 2 for bad input, 1 otherwise. */
+static int exit_code(wf_status st)
+{
+    return st == WF_ERR_INPUT || st == WF_ERR_RANGE ? 2 : 1;
+}
+
 static int fail(const char *what, wf_status st)
 {
     fprintf(stderr, "wfisim: %s: %s\n", what, wf_error_message()[0] ? wf_error_message() : wf_status_name(st));
-    return st == WF_ERR_INPUT || st == WF_ERR_RANGE ? 2 : 1;
+    return exit_code(st);
 }
 
 typedef struct cli {
@@ -97,7 +110,7 @@ typedef struct cli {
     const char *rates;
     const char *positional;
     const char *id;
-    const char *plan, *exposures, *scas, *sne, *model, *area;
+    const char *plan, *exposures, *scas, *sne, *model, *area, *on_change;
     int ma_table_given;
 } cli;
 
@@ -163,6 +176,7 @@ static int parse(int argc, char **argv, cli *c)
         else if (!strcmp(a, "--sne") && val) { c->sne = val; i++; }
         else if (!strcmp(a, "--model") && val) { c->model = val; i++; }
         else if (!strcmp(a, "--area") && val) { c->area = val; i++; }
+        else if (!strcmp(a, "--on-change") && val) { c->on_change = val; i++; }
         else if (a[0] == '-' && a[1] == '-') {
             fprintf(stderr, "wfisim: unknown option '%s' (see wfisim --help)\n", a);
             return 2;
@@ -193,7 +207,7 @@ static int run_exposure(cli *c, int demo)
     job.clock = &c->clock;
     job.stream = c->stream;
     job.replay = c->replay;
-    job.version = WFISIM_VERSION;
+    job.version = version;
     char model[WF_PATH_MAX + 32];
     wf_status st = open_injector(c, &job.injector, model, sizeof model);
     if (!st) st = wf_pipeline_expose(&job);
@@ -328,7 +342,12 @@ static int cmd_survey_run(cli *c)
     opt.first = 0;
     opt.last = -1;
     opt.ma_table_given = c->ma_table_given;
-    opt.version = WFISIM_VERSION;
+    opt.version = version;
+    if (c->on_change && strcmp(c->on_change, "refuse") && strcmp(c->on_change, "redo")) {
+        fprintf(stderr, "wfisim survey run: --on-change '%s': expected refuse or redo\n", c->on_change);
+        return 2;
+    }
+    opt.redo_changed = c->on_change && !strcmp(c->on_change, "redo");
     wf_status st = WF_OK;
     if (c->exposures) st = wf_survey_parse_range(c->exposures, &opt.first, &opt.last);
     if (!st && c->scas) st = wf_survey_parse_scas(c->scas, opt.scas, &opt.nscas);
@@ -349,11 +368,11 @@ static int cmd_survey_run(cli *c)
     st = wf_survey_run(&c->cfg, &opt, &stats);
 #endif
     wf_sn_injector_free(opt.sne);
-    if (st) return fail("survey run", st);
+    if (st) return stats.silent ? exit_code(st) : fail("survey run", st); /* silent: rank 0 says why */
     if (!c->cfg.quiet && !stats.silent)
-        fprintf(stderr, "wfisim survey: %ld products rendered (%ld replacing damaged ones), %ld already done; "
-                "%ld supernova images%s\n", stats.rendered, stats.redone, stats.skipped, stats.sne_drawn,
-                c->area ? "; SCAs outside --area not made" : "");
+        fprintf(stderr, "wfisim survey: %ld products rendered (%ld replacing damaged ones, %ld made from other inputs), "
+                "%ld already done; %ld supernova images%s\n", stats.rendered, stats.redone, stats.changed,
+                stats.skipped, stats.sne_drawn, c->area ? "; SCAs outside --area not made" : "");
     return 0;
 }
 
@@ -408,7 +427,8 @@ int main(int argc, char **argv)
     if (argc < 2) { fputs(usage_text, stderr); return 2; }
     const char *cmd = argv[1];
     if (!strcmp(cmd, "--help") || !strcmp(cmd, "-h") || !strcmp(cmd, "help")) { fputs(usage_text, stdout); return 0; }
-    if (!strcmp(cmd, "--version")) { puts("wfisim " WFISIM_VERSION); return 0; }
+    snprintf(version, sizeof version, "%s+src.%s", WFISIM_VERSION, wf_digest_source());
+    if (!strcmp(cmd, "--version")) { printf("wfisim %s\n", version); return 0; }
     if (!strcmp(cmd, "survey") && argc >= 3 && !strcmp(argv[2], "run")) {
         cli c;
         int rc = parse(argc - 3, argv + 3, &c);

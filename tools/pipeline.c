@@ -434,6 +434,11 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         if (used + strlen(pj->meta_extra) + 1 > extra_cap) { st = wf_error(WF_ERR_INPUT, "extra header lines too long"); goto done; }
         memcpy(extra + used, pj->meta_extra, strlen(pj->meta_extra) + 1);
     }
+    /* what shapes the product, in its primary header: a resumed survey run compares it
+     * (tools/digest.h) */
+    wf_digest_inputs din = {cfg, pj->clock, pj->meta_extra, pj->replay, pj->injector, pj->sne, pj->nsne, pj->version};
+    if ((st = wf_digest_product(pj->digests, &din, &pj->digest))) goto done;
+    if ((st = wf_digest_meta(&pj->digest, cfg, extra, extra_cap))) goto done;
 
     wf_expose_job job = {0};
     job.ro = cfg->ro;
@@ -506,7 +511,7 @@ done:
         wf_pipeline_paths(cfg->out_dir, cfg->ro.exposure, cfg->ro.sca, pj->image_path, pj->truth_path,
                           sizeof pj->image_path);
         snprintf(tpath, sizeof tpath, "%s", pj->truth_path);
-        if (!(pj->stream && (st = wf_pipeline_make_dir(cfg->out_dir)))) st = wf_scene_write_truth(objscene, tpath);
+        if (!(pj->stream && (st = wf_pipeline_make_dir(cfg->out_dir)))) st = wf_scene_write_truth(objscene, tpath, pj->digest.whole);
         if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s\n", tpath);
     }
     if (st) wf_pipeline_unmake_dir(cfg->out_dir, made_dir);

@@ -12,6 +12,7 @@
 #include "sim/scene.h"
 #include "tools/assemble.h"
 #include "tools/config.h"
+#include "tools/digest.h"
 #include "tools/sninject.h"
 
 /* Catalogs of the scene: a synthetic field around the SCA, files, or a GalSim scene. */
@@ -41,11 +42,13 @@ typedef struct wf_pipeline_job {
     const wf_scene_sn *sne;      /* supernovae to inject as given (NULL or nsne = 0: none) */
     size_t nsne;
     wf_sn_injector *injector;    /* and those of an SN sample on this SCA at cfg's MJD, or NULL */
-    const char *version;         /* for the ORIGIN keyword */
+    const char *version;         /* for the ORIGIN keyword and the version part of the digest */
+    wf_digest_cache *digests;    /* file digests kept across a run's products, or NULL */
     /* out */
     char image_path[WF_PATH_MAX + 64];
     char truth_path[WF_PATH_MAX + 64];
     size_t nsne_drawn;           /* SNe that reach the SCA */
+    wf_digest digest;            /* the inputs that shaped it (WFDIGEST and its parts) */
 } wf_pipeline_job;
 
 wf_status wf_pipeline_expose(wf_pipeline_job *job);

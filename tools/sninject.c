@@ -19,6 +19,7 @@ struct wf_sn_injector {
     wf_sn_sample sample;
     wf_salt_model *model;
     char data_dir[1024];
+    char sample_path[1024], model_dir[1024]; /* for the products' input digest */
     wf_bandpass *bp[WF_NFILTER];
     lc_slot *slots[WF_NFILTER]; /* [filter][sn] */
     wf_skyindex *index;
@@ -32,6 +33,8 @@ wf_status wf_sn_injector_open(const char *sne_path, const char *model_dir, const
     wf_sn_injector *inj = calloc(1, sizeof *inj);
     if (!inj) return wf_error(WF_ERR_NOMEM, "SN injector: out of memory");
     snprintf(inj->data_dir, sizeof inj->data_dir, "%s", data_dir ? data_dir : "");
+    snprintf(inj->sample_path, sizeof inj->sample_path, "%s", sne_path);
+    snprintf(inj->model_dir, sizeof inj->model_dir, "%s", model_dir);
     wf_status st = wf_sn_sample_read(sne_path, &inj->sample);
     if (!st) st = wf_salt_load(model_dir, &inj->model);
     if (!st) wf_salt_phase_range(inj->model, &inj->phase_min, &inj->phase_max);
@@ -149,3 +152,7 @@ wf_status wf_sn_injector_select(wf_sn_injector *inj, const char *filter, double 
     *n = k;
     return WF_OK;
 }
+
+const char *wf_sn_injector_sample_path(const wf_sn_injector *inj) { return inj->sample_path; }
+
+const char *wf_sn_injector_model_dir(const wf_sn_injector *inj) { return inj->model_dir; }

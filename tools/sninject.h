@@ -19,6 +19,10 @@ wf_status wf_sn_injector_open(const char *sne_path, const char *model_dir, const
                               wf_sn_injector **out);
 void wf_sn_injector_free(wf_sn_injector *inj);
 
+/* The files it was opened with (their contents go into a product's input digest). */
+const char *wf_sn_injector_sample_path(const wf_sn_injector *inj);
+const char *wf_sn_injector_model_dir(const wf_sn_injector *inj);
+
 /* The SNe inside reg with their magnitudes in filter at mjd and the light curve's relative
  * slope there (dlnf_dt, for the up-the-ramp reads) (*out malloc'd, *n may be 0).
  * Not thread-safe (light curves are cached): one exposure at a time. */

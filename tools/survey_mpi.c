@@ -64,8 +64,7 @@ static void record(shared *s, int rank, size_t i, wf_status st, const char *msg,
             char name[64];
             wf_survey_item_name(s->ctx, i, name, sizeof name);
             fprintf(stderr, "wfisim survey: [%zu/%zu] %s %s MJD %.5f%s on rank %d (%.0f s)\n", s->done_items, s->n,
-                    name, res->row.filter, res->row.mjd, res->redone ? " (damaged product redone)" : "", rank,
-                    difftime(time(NULL), s->t0));
+                    name, res->row.filter, res->row.mjd, wf_survey_item_note(res), rank, difftime(time(NULL), s->t0));
         }
     }
     pthread_mutex_unlock(&s->mu);
@@ -138,13 +137,40 @@ static wf_status work(wf_survey_ctx *ctx)
     return mine;
 }
 
-/* Every rank waits here for the others without spinning (MPI_Finalize may busy-poll). */
+/* Completes a non-blocking collective without spinning (blocking ones may busy-poll). */
+static void quiet_wait(MPI_Request *rq)
+{
+    int done = 0;
+    while (MPI_Test(rq, &done, MPI_STATUS_IGNORE) == MPI_SUCCESS && !done) nap();
+}
+
+/* Every rank waits here for the others (MPI_Finalize may busy-poll). */
 static void quiet_barrier(void)
 {
     MPI_Request rq;
-    int done = 0;
     MPI_Ibarrier(MPI_COMM_WORLD, &rq);
-    while (MPI_Test(&rq, &done, MPI_STATUS_IGNORE) == MPI_SUCCESS && !done) nap();
+    quiet_wait(&rq);
+}
+
+/* Rank 0 alone checks every item's product against this run's inputs (wf_survey_check_inputs), so
+ * that a refusal names the first changed product in plan order and comes before any rank
+ * renders; the verdict (refused or not, and one state byte per item) then goes to every rank,
+ * which waits for it asleep. */
+static wf_status check_on_rank0(wf_survey_ctx *ctx, size_t n, int rank)
+{
+    int32_t refused = 0;
+    wf_status st = WF_OK;
+    if (rank == 0) {
+        st = wf_survey_check_inputs(ctx);
+        refused = (int32_t)st;
+    }
+    MPI_Request rq;
+    MPI_Ibcast(&refused, 1, MPI_INT32_T, 0, MPI_COMM_WORLD, &rq);
+    quiet_wait(&rq);
+    if (refused) return rank == 0 ? st : wf_error((wf_status)refused, "rank 0 did not start the run");
+    MPI_Ibcast(wf_survey_item_states(ctx), (int)n, MPI_BYTE, 0, MPI_COMM_WORLD, &rq);
+    quiet_wait(&rq);
+    return WF_OK;
 }
 
 wf_status wf_survey_run_mpi(const wf_config *cfg, const wf_survey_run_options *opt, wf_survey_run_stats *stats)
@@ -155,14 +181,17 @@ wf_status wf_survey_run_mpi(const wf_config *cfg, const wf_survey_run_options *o
         return wf_error(WF_ERR_IO, "MPI_Init_thread failed");
     MPI_Comm_rank(MPI_COMM_WORLD, &rank);
     MPI_Comm_size(MPI_COMM_WORLD, &nranks);
-    stats->silent = rank > 0;
     wf_survey_ctx *ctx = NULL;
     size_t n = 0;
     wf_status st = wf_survey_begin(cfg, opt, &ctx, &n);
-    /* Every rank read the same plan; if any could not, none starts (each reports its own). */
+    /* Every rank read the same plan; if any could not, none starts (that rank says why). */
     int bad = st != WF_OK, any_bad = 0;
     MPI_Allreduce(&bad, &any_bad, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
-    if (any_bad && !st) st = wf_error(WF_ERR_IO, "another rank could not start the run");
+    if (any_bad && !st) {
+        st = wf_error(WF_ERR_IO, "another rank could not start the run");
+        stats->silent = rank > 0; /* rank 0 says so; the rank that failed says why */
+    }
+    if (!st && (st = check_on_rank0(ctx, n, rank)) && rank > 0) stats->silent = 1; /* rank 0 says why */
     if (!st && rank == 0) {
         shared s;
         memset(&s, 0, sizeof s);
@@ -180,13 +209,13 @@ wf_status wf_survey_run_mpi(const wf_config *cfg, const wf_survey_run_options *o
         st = dispatch(&s, nranks, provided >= MPI_THREAD_FUNNELED);
         if (st) st = wf_error(st, "%s", s.message);
         else if (s.done_items != n) st = wf_error(WF_ERR_IO, "%zu of %zu items reported", s.done_items, n);
-        if (!st) st = wf_survey_end(ctx, s.res, stats);
+        if (s.res) st = st ? wf_survey_end_failed(ctx, s.res, st, stats) : wf_survey_end(ctx, s.res, stats);
         stats->silent = 0;
         free(s.res);
         pthread_mutex_destroy(&s.mu);
     } else if (!st) {
         st = work(ctx);
-        stats->silent = 1;
+        stats->silent = !st; /* a rank's own failure is printed by it too */
     }
     wf_survey_free(ctx);
     /* the error message is kept across the barrier and MPI_Finalize (neither sets one) */

@@ -3,6 +3,9 @@
  * them out in plan order, one at a time, to whichever rank asks next (items differ in cost),
  * and collects what each made. Each item is made by wf_survey_make_item, exactly as a
  * one-process run makes it, so the products are the same bytes whatever the number of ranks.
+ * Before any item is handed out, rank 0 alone checks every item's product against this run's
+ * inputs (wf_survey_check_inputs: a refusal names the product one process would name, and nothing
+ * is written) and sends its verdict to every rank (which waits for it asleep).
  *
  * Rank 0 dispatches from its main thread (the only one that calls MPI: MPI_THREAD_FUNNELED)
  * and makes items on a second thread, so N ranks are N workers; it polls for requests every
@@ -12,13 +15,15 @@
  * A failed item stops the handing out; the items in flight finish, and the run fails naming
  * the rank and the item. A rank that dies takes the job down (mpirun's default) and loses only
  * the items in flight: products are renamed into place when whole, so a rerun redoes exactly
- * the missing ones. survey_run.txt and the index are written once, by rank 0, at the end. */
+ * the missing ones. survey_run.txt is written by rank 0 alone ("in progress"
+ * after the check, then with the index and release at the end, or "failed"). */
 #ifndef WF_SURVEY_MPI_H
 #define WF_SURVEY_MPI_H
 
 #include "tools/surveyrun.h"
 
-/* Calls MPI_Init_thread and MPI_Finalize itself. stats->silent is 1 on ranks > 0. */
+/* Calls MPI_Init_thread and MPI_Finalize itself. stats->silent is 1 on ranks > 0 unless the
+ * failure returned is the rank's own (then it prints it too). */
 wf_status wf_survey_run_mpi(const wf_config *cfg, const wf_survey_run_options *opt,
                             wf_survey_run_stats *stats);
 

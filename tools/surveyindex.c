@@ -5,6 +5,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "sim/fitsout.h"
 #include "tools/config.h"
@@ -49,6 +51,11 @@ wf_status wf_survey_index_read(const char *dir, const char *file, wf_survey_inde
     row->orient = key_int(f, "ORIENT", &status);
     row->pointing = key_int(f, "POINTING", &status);
     row->pass = key_int(f, "PASS", &status);
+    char digest[FLEN_VALUE] = "";
+    if (!status && fits_read_key_str(f, "WFDIGEST", digest, NULL, &status) == KEY_NO_EXIST) {
+        status = 0; /* a product of a wfisim before digests */
+        fits_clear_errmark();
+    }
     fits_movnam_hdu(f, IMAGE_HDU, "SCI", 0, &status);
     fits_read_key_dbl(f, "CRVAL1", &row->ra_sca, NULL, &status);
     fits_read_key_dbl(f, "CRVAL2", &row->dec_sca, NULL, &status);
@@ -63,6 +70,7 @@ wf_status wf_survey_index_read(const char *dir, const char *file, wf_survey_inde
     row->sca = (int32_t)sca;
     snprintf(row->filter, sizeof row->filter, "%s", filter);
     snprintf(row->datasum, sizeof row->datasum, "%s", datasum);
+    snprintf(row->digest, sizeof row->digest, "%.64s", digest);
     return WF_OK;
 }
 
@@ -71,6 +79,22 @@ static int by_expid_sca(const void *a, const void *b)
     const wf_survey_index_row *x = a, *y = b;
     if (x->expid != y->expid) return x->expid < y->expid ? -1 : 1;
     return (x->sca > y->sca) - (x->sca < y->sca);
+}
+
+wf_status wf_survey_text_open(const char *path, char *tmp, size_t cap, FILE **out)
+{
+    *out = NULL;
+    if ((size_t)snprintf(tmp, cap, "%s.tmp.XXXXXX", path) >= cap) return wf_error(WF_ERR_INPUT, "%s: path too long", path);
+    int fd = mkstemp(tmp);
+    if (fd < 0) return wf_error(WF_ERR_IO, "%s: cannot create a temporary file beside it", path);
+    fchmod(fd, 0644); /* mkstemp's 0600 would be the file's mode after the rename */
+    *out = fdopen(fd, "w");
+    if (!*out) {
+        close(fd);
+        remove(tmp);
+        return wf_error(WF_ERR_IO, "%s: cannot open", tmp);
+    }
+    return WF_OK;
 }
 
 wf_status wf_survey_text_commit(FILE *out, const char *tmp, const char *path)
@@ -91,16 +115,16 @@ static wf_status write_csv(const char *dir, const wf_survey_index_row *rows, siz
 {
     char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
     snprintf(path, sizeof path, "%s/survey_index.csv", dir);
-    snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    FILE *out = fopen(tmp, "w");
-    if (!out) return wf_error(WF_ERR_IO, "%s: cannot create", tmp);
+    FILE *out;
+    wf_status st = wf_survey_text_open(path, tmp, sizeof tmp, &out);
+    if (st) return st;
     fprintf(out, "expid,sca,filter,mjd_mid,visit,orient,pointing,pass,ra_pnt,dec_pnt,pa_pnt,ra_sca,dec_sca,"
-                 "exptime,file,truth,datasum\n");
+                 "exptime,file,truth,datasum,wfdigest\n");
     for (size_t i = 0; i < n; i++) {
         const wf_survey_index_row *r = &rows[i];
-        fprintf(out, "%d,%d,%s,%.8f,%d,%d,%d,%d,%.10f,%.10f,%.10f,%.10f,%.10f,%.3f,%s,%s,%s\n", r->expid, r->sca,
+        fprintf(out, "%d,%d,%s,%.8f,%d,%d,%d,%d,%.10f,%.10f,%.10f,%.10f,%.10f,%.3f,%s,%s,%s,%s\n", r->expid, r->sca,
                 r->filter, r->mjd, r->visit, r->orient, r->pointing, r->pass, r->ra, r->dec, r->pa, r->ra_sca,
-                r->dec_sca, r->exptime, r->file, r->truth, r->datasum);
+                r->dec_sca, r->exptime, r->file, r->truth, r->datasum, r->digest);
     }
     return wf_survey_text_commit(out, tmp, path);
 }
@@ -115,11 +139,11 @@ static wf_status write_fits(const char *dir, const wf_survey_index_row *rows, si
     if (st) return st;
     fits_create_img(f, BYTE_IMG, 0, NULL, &status);
     char *tt[] = {"EXPID", "SCA", "FILTER", "MJD_MID", "VISIT", "ORIENT", "POINTING", "PASS", "RA_PNT", "DEC_PNT",
-                  "PA_PNT", "RA_SCA", "DEC_SCA", "EXPTIME", "FILE", "TRUTH", "DATASUM"};
-    char *tf[] = {"1J", "1J", "8A", "1D", "1J", "1J", "1J", "1J", "1D", "1D", "1D", "1D", "1D", "1D", "40A", "48A", "24A"};
-    char *tu[] = {"", "", "", "d", "", "", "", "", "deg", "deg", "deg", "deg", "deg", "s", "", "", ""};
-    fits_create_tbl(f, BINARY_TBL, 0, 17, tt, tf, tu, "INDEX", &status);
-    fits_write_comment(f, "one row per (exposure, SCA) product, from its headers; -1: not from a plan", &status);
+                  "PA_PNT", "RA_SCA", "DEC_SCA", "EXPTIME", "FILE", "TRUTH", "DATASUM", "WFDIGEST"};
+    char *tf[] = {"1J", "1J", "8A", "1D", "1J", "1J", "1J", "1J", "1D", "1D", "1D", "1D", "1D", "1D", "40A", "48A", "24A", "64A"};
+    char *tu[] = {"", "", "", "d", "", "", "", "", "deg", "deg", "deg", "deg", "deg", "s", "", "", "", ""};
+    fits_create_tbl(f, BINARY_TBL, 0, 18, tt, tf, tu, "INDEX", &status);
+    fits_write_comment(f, "one row per (exposure, SCA) product, from its headers; -1: not from a plan; WFDIGEST: its inputs", &status);
     for (size_t i = 0; i < n && !status; i++) {
         const wf_survey_index_row *r = &rows[i];
         LONGLONG row = (LONGLONG)i + 1;
@@ -129,9 +153,9 @@ static wf_status write_fits(const char *dir, const wf_survey_index_row *rows, si
         double dv[7] = {r->mjd, r->ra, r->dec, r->pa, r->ra_sca, r->dec_sca, r->exptime};
         const int dcol[7] = {4, 9, 10, 11, 12, 13, 14};
         for (int c = 0; c < 7; c++) fits_write_col(f, TDOUBLE, dcol[c], row, 1, 1, &dv[c], &status);
-        char *sv[4] = {(char *)r->filter, (char *)r->file, (char *)r->truth, (char *)r->datasum};
-        const int scol[4] = {3, 15, 16, 17};
-        for (int c = 0; c < 4; c++) fits_write_col(f, TSTRING, scol[c], row, 1, 1, &sv[c], &status);
+        char *sv[5] = {(char *)r->filter, (char *)r->file, (char *)r->truth, (char *)r->datasum, (char *)r->digest};
+        const int scol[5] = {3, 15, 16, 17, 18};
+        for (int c = 0; c < 5; c++) fits_write_col(f, TSTRING, scol[c], row, 1, 1, &sv[c], &status);
     }
     return wf_fits_finish(f, tmp, path, wf_fits_error(status, tmp, "writing the index"));
 }

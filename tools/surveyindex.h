@@ -21,6 +21,7 @@ typedef struct wf_survey_index_row {
     double exptime;
     char file[40], truth[48];     /* names within the folder */
     char datasum[24];             /* SCI's DATASUM: which pixels this row describes */
+    char digest[72];              /* WFDIGEST: the inputs that made it ("" before digests) */
 } wf_survey_index_row;
 
 /* The row of the product dir/file (an image written by the pipeline), from its headers. */
@@ -32,6 +33,10 @@ wf_status wf_survey_index_write(const char *dir, wf_survey_index_row *rows, size
 
 /* The rows of every product image in dir (names wfisim_eNNNNNN_scaNN.fits), sorted. */
 wf_status wf_survey_index_scan(const char *dir, wf_survey_index_row **rows, size_t *n);
+
+/* Opens a new temporary text file beside path, of a name no other process has (mkstemp: job
+ * array tasks writing into one folder at once never share it), its name in tmp. */
+wf_status wf_survey_text_open(const char *path, char *tmp, size_t cap, FILE **out);
 
 /* Closes a text file written to tmp and renames it onto path (removing tmp on any error), as
  * the run's record and the CSV index are written. */

@@ -1,19 +1,21 @@
 #include "tools/surveyrun.h"
 
+#include <dirent.h>
 #include <fitsio.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 
 #include "hal/clock.h"
 #include "sim/fitsout.h"
 #include "sim/skyindex.h"
 #include "sim/survey.h"
+#include "tools/digest.h"
 #include "tools/pipeline.h"
 #include "tools/surveyrelease.h"
-
 wf_status wf_survey_parse_range(const char *text, long *first, long *last)
 {
     char *end;
@@ -121,53 +123,6 @@ static wf_status configure(const wf_config *base, const wf_survey_run_options *o
     return wf_config_finish(cfg, clock);
 }
 
-/* The survey-level record of a run, DIR/survey_run.txt: the plan (and its checksum), the
- * catalogs the scenes were drawn from and the SN sample, so the products can be traced to
- * their inputs. Rewritten (temporary file, rename) at the end of every run. */
-static wf_status write_manifest(const wf_config *cfg, const wf_survey_run_options *opt, const wf_survey_row *rows,
-                                size_t nrows, const wf_survey_run_stats *stats, const char *note)
-{
-    char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
-    snprintf(path, sizeof path, "%s/survey_run.txt", cfg->out_dir);
-    snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    char datasum[FLEN_VALUE] = "";
-    fitsfile *f;
-    int status = 0;
-    if (!fits_open_diskfile(&f, opt->plan_path, READONLY, &status)) {
-        fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
-        fits_read_key_str(f, "DATASUM", datasum, NULL, &status);
-        int cs = 0;
-        fits_close_file(f, &cs);
-    }
-    static const char *const kinds[] = {"synthetic", "catalog", "grid", "galsim"};
-    FILE *out = fopen(tmp, "w");
-    if (!out) return wf_error(WF_ERR_IO, "%s: cannot create", tmp);
-    fprintf(out, "# wfisim survey run: the inputs of the products in this folder\n");
-    fprintf(out, "wfisim = %s\n", opt->version ? opt->version : "?");
-    fprintf(out, "plan = %s\nplan.datasum = %s\n", opt->plan_path, datasum);
-    fprintf(out, "exposures = %d:%d\n", rows[0].expid, rows[nrows - 1].expid);
-    fprintf(out, "scas =");
-    for (int k = 0; k < (opt->nscas ? opt->nscas : WF_NSCA); k++) fprintf(out, " %d", opt->nscas ? opt->scas[k] : k + 1);
-    fprintf(out, "\nseed = %llu\nmode = %s\nsampling = %s\n", (unsigned long long)cfg->seed,
-            cfg->ro.mode == WF_MODE_SINGLE ? "single" : "ramp", cfg->ro.sampling == WF_SAMPLE_DIRECT ? "direct" : "per-read");
-    fprintf(out, "scene.kind = %s\n", kinds[cfg->scene_kind]);
-    if (cfg->scene_kind == 0)
-        fprintf(out, "catalogs = synthetic field of seed %llu (`wfisim catalog --seed %llu` writes it)\n",
-                (unsigned long long)cfg->seed, (unsigned long long)cfg->seed);
-    else
-        fprintf(out, "scene.catalog = %s\nscene.stars = %s\n", cfg->catalog, cfg->stars);
-    fprintf(out, "sne = %s\n", opt->sne_path ? opt->sne_path : "(none)");
-    if (opt->area)
-        fprintf(out, "area = %.10g,%.10g,%.10g (RA, Dec, radius, deg: the SCAs whose footprint overlaps it)\n",
-                opt->area_ra, opt->area_dec, opt->area_radius);
-    fprintf(out, "index = survey_index.fits, survey_index.csv\n");
-    fprintf(out, "products.rendered = %ld\nproducts.skipped = %ld\nproducts.redone = %ld\n", stats->rendered,
-            stats->skipped, stats->redone);
-    if (opt->area) fprintf(out, "products.outside_area = %ld\n", stats->outside);
-    fputs(note, out);
-    return wf_survey_text_commit(out, tmp, path);
-}
-
 wf_status wf_survey_parse_area(const char *text, wf_survey_run_options *opt)
 {
     double v[3];
@@ -188,6 +143,48 @@ wf_status wf_survey_parse_area(const char *text, wf_survey_run_options *opt)
     return WF_OK;
 }
 
+/* The primary-header lines a survey product adds: where it sits in the plan. */
+static void plan_extra(const wf_survey_row *x, char *extra, size_t cap)
+{
+    snprintf(extra, cap,
+             "hdr.VISIT = %d / 0-based visit of the plan\n"
+             "hdr.ORIENT = %d / 0-based orient of the plan\n"
+             "hdr.POINTING = %d / 0-based pointing along the forward snake\n"
+             "hdr.PASS = %d / 0-based filter pass of the visit\n"
+             "hdr.PLANEXPT = %.3f / [s] planned exposure time\n",
+             x->visit, x->orient, x->pointing, x->pass, x->exptime);
+}
+
+/* One product: its configuration, header lines, names and (when asked) input digest. */
+typedef struct product {
+    wf_config cfg;
+    wf_clock clock;
+    char extra[1024];
+    char image[WF_PATH_MAX + 64], truth[WF_PATH_MAX + 64];
+    wf_digest digest;
+} product;
+
+static wf_status prepare(const wf_config *base, const wf_survey_run_options *opt, const wf_survey_row *x, int sca,
+                         wf_digest_cache *cache, product *p)
+{
+    wf_status st = configure(base, opt, x, sca, &p->cfg, &p->clock);
+    if (st) return st;
+    plan_extra(x, p->extra, sizeof p->extra);
+    wf_pipeline_paths(p->cfg.out_dir, p->cfg.ro.exposure, p->cfg.ro.sca, p->image, p->truth, sizeof p->image);
+    if (!cache) return WF_OK; /* no digest asked for */
+    wf_digest_inputs in = {&p->cfg, &p->clock, p->extra, NULL, opt->sne, NULL, 0, opt->version};
+    return wf_digest_product(cache, &in, &p->digest);
+}
+
+static int exists(const char *path)
+{
+    struct stat sb;
+    return stat(path, &sb) == 0;
+}
+
+/* Where an item's product stands before the run (the check's verdict). */
+enum { P_UNCHECKED, P_MISSING, P_SAME, P_CHANGED, P_UNREADABLE };
+
 typedef struct wf_survey_item { int row, sca; } wf_survey_item;
 
 struct wf_survey_ctx {
@@ -198,8 +195,11 @@ struct wf_survey_ctx {
     wf_survey_item *items;
     size_t nitems;
     long outside;
-    wf_config *cfg; /* the item's configuration (large: on the heap) */
+    unsigned char *state;     /* per item, P_* */
+    size_t todo;              /* items the check found to make (0: nothing will be written) */
+    product *p;               /* the item's configuration and names (large: on the heap) */
     wf_pipeline_job *job;
+    wf_digest_cache *cache;   /* file digests, computed once per process */
 };
 
 void wf_survey_free(wf_survey_ctx *ctx)
@@ -207,9 +207,180 @@ void wf_survey_free(wf_survey_ctx *ctx)
     if (!ctx) return;
     free(ctx->rows);
     free(ctx->items);
-    free(ctx->cfg);
+    free(ctx->state);
+    free(ctx->p);
     free(ctx->job);
+    wf_digest_cache_free(ctx->cache);
     free(ctx);
+}
+
+static int key_cmp(const void *a, const void *b)
+{
+    long x = *(const long *)a, y = *(const long *)b;
+    return (x > y) - (x < y);
+}
+
+/* The products of the folder that are not items of this run (other ranges, other SCAs,
+ * outside --area), sorted by name so that the record does not depend on the file system's
+ * order. *names is malloc'd, 32 bytes a name. */
+static wf_status other_products(const wf_survey_ctx *ctx, char (**names)[32], size_t *n)
+{
+    *names = NULL;
+    *n = 0;
+    long *keys = malloc((ctx->nitems ? ctx->nitems : 1) * sizeof *keys);
+    if (!keys) return wf_error(WF_ERR_NOMEM, "out of memory");
+    for (size_t i = 0; i < ctx->nitems; i++) keys[i] = ctx->rows[ctx->items[i].row].expid * 100L + ctx->items[i].sca;
+    qsort(keys, ctx->nitems, sizeof *keys, key_cmp);
+    DIR *dir = opendir(ctx->base->out_dir);
+    size_t cap = 0;
+    wf_status st = WF_OK;
+    for (struct dirent *e; dir && !st && (e = readdir(dir));) {
+        unsigned expid, sca;
+        int used = 0;
+        if (strlen(e->d_name) >= 32 || sscanf(e->d_name, "wfisim_e%6u_sca%2u.fits%n", &expid, &sca, &used) != 2 ||
+            e->d_name[used])
+            continue;
+        long key = (long)expid * 100L + (long)sca;
+        if (bsearch(&key, keys, ctx->nitems, sizeof *keys, key_cmp)) continue;
+        if (*n == cap) {
+            size_t nc = cap ? 2 * cap : 64;
+            char(*q)[32] = realloc(*names, nc * sizeof *q);
+            if (!q) { st = wf_error(WF_ERR_NOMEM, "out of memory"); break; }
+            *names = q;
+            cap = nc;
+        }
+        snprintf((*names)[(*n)++], 32, "%s", e->d_name);
+    }
+    if (dir) closedir(dir);
+    free(keys);
+    if (!st && *n) qsort(*names, *n, sizeof **names, (int (*)(const void *, const void *))strcmp);
+    if (st) { free(*names); *names = NULL; *n = 0; }
+    return st;
+}
+
+/* The survey-level record of a run, DIR/survey_run.txt: the plan (and its checksum), the
+ * catalogs the scenes were drawn from, the SN sample, the digests of the inputs, and every
+ * product of the folder as it stands (its WFDIGEST, read back from its header), so that the
+ * record never claims inputs that did not make a product. Written by one process through a
+ * temporary file and a rename: with status "in progress" after the check, before the first
+ * product is rendered (an interrupted run leaves that), and at the end with the state of the
+ * folder. */
+static wf_status write_manifest(wf_survey_ctx *ctx, const wf_survey_run_stats *stats, const char *status,
+                                const char *note)
+{
+    const wf_config *cfg = ctx->base;
+    const wf_survey_run_options *opt = ctx->opt;
+    const wf_survey_row *rows = ctx->rows;
+    product *p = ctx->p;
+    char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
+    snprintf(path, sizeof path, "%s/survey_run.txt", cfg->out_dir);
+    char datasum[FLEN_VALUE] = "";
+    fitsfile *f;
+    int fst = 0;
+    if (!fits_open_diskfile(&f, opt->plan_path, READONLY, &fst)) {
+        fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &fst);
+        fits_read_key_str(f, "DATASUM", datasum, NULL, &fst);
+        int cs = 0;
+        fits_close_file(f, &cs);
+    }
+    fits_clear_errmsg();
+    int nscas = opt->nscas ? opt->nscas : WF_NSCA;
+    /* the run-wide parts: those of the first item (only the configuration's is per product) */
+    wf_status st = prepare(cfg, opt, &rows[ctx->items[0].row], ctx->items[0].sca, ctx->cache, p);
+    if (st) return st;
+    wf_digest run = p->digest;
+    char *lines = NULL;
+    if ((st = wf_digest_config_lines(cfg, &lines))) return st;
+    char(*others)[32] = NULL;
+    size_t nothers = 0;
+    if ((st = other_products(ctx, &others, &nothers))) {
+        free(lines);
+        return st;
+    }
+    static const char *const kinds[] = {"synthetic", "catalog", "grid", "galsim"};
+    FILE *out;
+    if ((st = wf_survey_text_open(path, tmp, sizeof tmp, &out))) {
+        free(lines);
+        free(others);
+        return st;
+    }
+    fprintf(out, "# wfisim survey run: the inputs of the products in this folder\n");
+    fprintf(out, "status = %s\n", status);
+    fprintf(out, "wfisim = %s\n", opt->version ? opt->version : "?");
+    fprintf(out, "plan = %s\nplan.datasum = %s\n", opt->plan_path, datasum);
+    fprintf(out, "exposures = %d:%d\n", rows[0].expid, rows[ctx->nrows - 1].expid);
+    fprintf(out, "scas =");
+    for (int k = 0; k < nscas; k++) fprintf(out, " %d", opt->nscas ? opt->scas[k] : k + 1);
+    fprintf(out, "\nseed = %llu\nmode = %s\nsampling = %s\n", (unsigned long long)cfg->seed,
+            cfg->ro.mode == WF_MODE_SINGLE ? "single" : "ramp", cfg->ro.sampling == WF_SAMPLE_DIRECT ? "direct" : "per-read");
+    fprintf(out, "scene.kind = %s\n", kinds[cfg->scene_kind]);
+    if (cfg->scene_kind == 0)
+        fprintf(out, "catalogs = synthetic field of seed %llu (`wfisim catalog --seed %llu` writes it)\n",
+                (unsigned long long)cfg->seed, (unsigned long long)cfg->seed);
+    else
+        fprintf(out, "scene.catalog = %s\nscene.stars = %s\n", cfg->catalog, cfg->stars);
+    fprintf(out, "sne = %s\n", opt->sne_path ? opt->sne_path : "(none)");
+    fprintf(out, "paths.data = %s\n", cfg->data_dir[0] ? cfg->data_dir : "(none: built-in values)");
+    if (opt->area)
+        fprintf(out, "area = %.10g,%.10g,%.10g (RA, Dec, radius, deg: the SCAs whose footprint overlaps it)\n",
+                opt->area_ra, opt->area_dec, opt->area_radius);
+    fprintf(out, "on_change = %s\n", opt->redo_changed ? "redo" : "refuse");
+    fprintf(out, "index = survey_index.fits, survey_index.csv\n");
+    fprintf(out, "# digests of the inputs (docs/SURVEY.md); the configuration's is per product (WFDCONF:\n"
+                 "# the keys below, off their defaults, and the product's plan row)\n");
+    for (int q = 0; q < WF_DIGEST_NPARTS; q++)
+        if (q != WF_DIGEST_CONFIG) fprintf(out, "digest.%s = %s\n", wf_digest_part_name[q], run.part[q]);
+    for (char *l = lines, *nl; *l; l = nl + 1) {
+        nl = strchr(l, '\n');
+        fprintf(out, "config: %.*s\n", (int)(nl - l), l);
+    }
+    free(lines);
+    fprintf(out, "products.rendered = %ld\nproducts.skipped = %ld\nproducts.redone = %ld\nproducts.changed = %ld\n",
+            stats->rendered, stats->skipped, stats->redone, stats->changed);
+    if (opt->area) fprintf(out, "products.outside_area = %ld\n", stats->outside);
+    if (note) fputs(note, out);
+    /* every item of the run as it stands */
+    fprintf(out, "# the products of the run: file, WFDIGEST in its header, whether this run's inputs made it\n");
+    for (size_t i = 0; i < ctx->nitems && !st; i++) {
+        if ((st = prepare(cfg, opt, &rows[ctx->items[i].row], ctx->items[i].sca, ctx->cache, p))) break;
+        const char *name = strrchr(p->image, '/') ? strrchr(p->image, '/') + 1 : p->image;
+        wf_digest_found was;
+        if (!exists(p->image)) fprintf(out, "product %s missing\n", name);
+        else if (wf_digest_read(p->image, &was)) fprintf(out, "product %s unreadable\n", name);
+        else {
+            fprintf(out, "product %s %s %s\n", name, was.have ? was.d.whole : "(no digest)",
+                    wf_digest_same(&was, &p->digest) ? "this run's inputs" : "OTHER INPUTS");
+            wf_digest_found_free(&was);
+        }
+    }
+    /* products of the folder that are not items of this run: made by other runs, their
+     * headers say by what */
+    if (!st && nothers)
+        fprintf(out, "# other products of this folder (not items of this run): the parts of their inputs that differ from this run's\n");
+    for (size_t j = 0; j < nothers && !st; j++) {
+        char full[WF_PATH_MAX + 64];
+        snprintf(full, sizeof full, "%s/%s", cfg->out_dir, others[j]);
+        wf_digest_found was;
+        if (wf_digest_read(full, &was)) { fprintf(out, "other %s unreadable\n", others[j]); continue; }
+        fprintf(out, "other %s %s", others[j], was.have ? was.d.whole : "(no digest: inputs unknown)");
+        if (was.have) {
+            int n = 0;
+            for (int q = 0; q < WF_DIGEST_NPARTS; q++)
+                if (q != WF_DIGEST_CONFIG && strncmp(was.d.part[q], run.part[q], WF_DIGEST_PART_HEX))
+                    fprintf(out, "%s%s", n++ ? ", " : " differs: ", wf_digest_part_name[q]);
+            if (!n) fprintf(out, " same seed, data, catalogs, sne and version");
+        }
+        fprintf(out, "\n");
+        wf_digest_found_free(&was);
+    }
+    free(others);
+    fits_clear_errmsg();
+    if (st) {
+        fclose(out);
+        remove(tmp);
+        return st;
+    }
+    return wf_survey_text_commit(out, tmp, path);
 }
 
 /* Whether an SCA's footprint at this pointing overlaps the circle of --area: the footprint
@@ -235,26 +406,86 @@ wf_status wf_survey_begin(const wf_config *base, const wf_survey_run_options *op
     if (st) { free(ctx); return st; }
     if (!ctx->nrows) st = wf_error(WF_ERR_INPUT, "%s: no exposure in the range asked for", opt->plan_path);
     int nscas = opt->nscas ? opt->nscas : WF_NSCA;
-    ctx->cfg = malloc(sizeof *ctx->cfg);
+    size_t most = (ctx->nrows ? ctx->nrows : 1) * (size_t)nscas;
+    ctx->p = malloc(sizeof *ctx->p);
     ctx->job = malloc(sizeof *ctx->job);
-    ctx->items = malloc((ctx->nrows ? ctx->nrows : 1) * (size_t)nscas * sizeof *ctx->items);
-    if (!st && (!ctx->cfg || !ctx->job || !ctx->items)) st = wf_error(WF_ERR_NOMEM, "out of memory");
+    ctx->items = malloc(most * sizeof *ctx->items);
+    ctx->state = calloc(most, 1);
+    if (!st && (!ctx->p || !ctx->job || !ctx->items || !ctx->state)) st = wf_error(WF_ERR_NOMEM, "out of memory");
+    if (!st) st = wf_digest_cache_create(&ctx->cache);
     for (size_t i = 0; i < ctx->nrows && !st; i++)
         for (int k = 0; k < nscas && !st; k++) {
             int sca = opt->nscas ? opt->scas[k] : k + 1, inside = 1;
             if (opt->area) {
                 wf_clock clock;
-                if (!(st = configure(base, opt, &ctx->rows[i], sca, ctx->cfg, &clock))) st = in_area(ctx->cfg, opt, &inside);
+                if (!(st = configure(base, opt, &ctx->rows[i], sca, &ctx->p->cfg, &clock)))
+                    st = in_area(&ctx->p->cfg, opt, &inside);
             }
             if (!inside) ctx->outside++;
             else ctx->items[ctx->nitems++] = (wf_survey_item){(int)i, sca};
         }
     if (!st && !ctx->nitems) st = wf_error(WF_ERR_INPUT, "--area: no SCA of the exposures asked for overlaps it");
-    if (!st) st = wf_pipeline_make_dir(base->out_dir);
     if (st) { wf_survey_free(ctx); return st; }
     *out = ctx;
     *nitems = ctx->nitems;
     return WF_OK;
+}
+
+wf_status wf_survey_check_inputs(wf_survey_ctx *ctx)
+{
+    const wf_survey_run_options *opt = ctx->opt;
+    product *p = ctx->p;
+    long changed = 0;
+    char first_change[WF_PATH_MAX + 64 + 1600] = "";
+    wf_status st = WF_OK;
+    /* A product made from other inputs is refused (the default) or redone, never taken as
+     * done; the damage of a product with this run's digest is left to wf_survey_make_item
+     * (its checksums are verified where it is made). */
+    for (size_t i = 0; i < ctx->nitems && !st; i++) {
+        if ((st = prepare(ctx->base, opt, &ctx->rows[ctx->items[i].row], ctx->items[i].sca, ctx->cache, p))) break;
+        unsigned char *s = &ctx->state[i];
+        *s = P_MISSING;
+        if (!exists(p->image)) continue;
+        wf_digest_found was;
+        if (wf_digest_read(p->image, &was)) { *s = P_UNREADABLE; continue; } /* damaged: redone */
+        *s = wf_digest_same(&was, &p->digest) ? P_SAME : P_CHANGED;
+        /* a digest damaged with the rest is damage, redone, not other inputs */
+        if (*s == P_CHANGED && !wf_survey_product_ok(p->image)) *s = P_UNREADABLE;
+        /* an image with a truth from other inputs (or none) is an incomplete pair: redone */
+        wf_digest_found truth;
+        if (*s == P_SAME && (!exists(p->truth) || wf_digest_read(p->truth, &truth)))
+            *s = P_UNREADABLE;
+        else if (*s == P_SAME) {
+            if (!wf_digest_same(&truth, &p->digest)) *s = P_UNREADABLE;
+            wf_digest_found_free(&truth);
+        }
+        if (*s == P_CHANGED && !changed++) {
+            char why[1536];
+            wf_digest_inputs in = {&p->cfg, &p->clock, p->extra, NULL, opt->sne, NULL, 0, opt->version};
+            wf_digest_explain(&was, &p->digest, &in, why, sizeof why);
+            snprintf(first_change, sizeof first_change, "%s was made with %s", p->image, why);
+        }
+        wf_digest_found_free(&was);
+    }
+    fits_clear_errmsg();
+    if (!st && changed && !opt->redo_changed) {
+        char more[96] = "";
+        if (changed > 1) snprintf(more, sizeof more, " (%ld products of the run were made from other inputs)", changed);
+        st = wf_error(WF_ERR_INPUT, "%s; use --on-change redo to remake it%s", first_change, more);
+    }
+    ctx->todo = 0;
+    for (size_t i = 0; !st && i < ctx->nitems; i++) ctx->todo += ctx->state[i] != P_SAME;
+    if (!st) st = wf_pipeline_make_dir(ctx->base->out_dir);
+    wf_survey_run_stats none;
+    memset(&none, 0, sizeof none);
+    if (!st && ctx->todo) st = write_manifest(ctx, &none, "in progress (an interrupted run leaves this)", NULL);
+    if (st) memset(ctx->state, P_UNCHECKED, ctx->nitems); /* refused: nothing is made */
+    return st;
+}
+
+unsigned char *wf_survey_item_states(wf_survey_ctx *ctx)
+{
+    return ctx->state;
 }
 
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap)
@@ -262,62 +493,70 @@ void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t c
     snprintf(buf, cap, "exposure %d SCA %d", ctx->rows[ctx->items[i].row].expid, ctx->items[i].sca);
 }
 
+const char *wf_survey_item_note(const wf_survey_item_result *res)
+{
+    return res->changed ? " (made from other inputs: redone)" : res->redone ? " (damaged product redone)" : "";
+}
+
 wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_result *res)
 {
     memset(res, 0, sizeof *res);
-    const wf_survey_row *x = &ctx->rows[ctx->items[i].row];
-    wf_config *cfg = ctx->cfg;
-    wf_clock clock;
-    wf_status st = configure(ctx->base, ctx->opt, x, ctx->items[i].sca, cfg, &clock);
+    int state = ctx->state[i];
+    char name[64];
+    wf_survey_item_name(ctx, i, name, sizeof name);
+    if (state == P_UNCHECKED) return wf_error(WF_ERR_INPUT, "%s: made before the run's check", name);
+    product *p = ctx->p;
+    wf_status st = prepare(ctx->base, ctx->opt, &ctx->rows[ctx->items[i].row], ctx->items[i].sca, NULL, p);
     if (st) return st;
-    char image[WF_PATH_MAX + 64], truth[WF_PATH_MAX + 64];
-    wf_pipeline_paths(cfg->out_dir, cfg->ro.exposure, cfg->ro.sca, image, truth, sizeof image);
-    FILE *probe = fopen(image, "rb");
-    int existed = probe != NULL;
-    if (probe) fclose(probe);
-    if (!existed || !wf_survey_product_ok(image) || !wf_survey_product_ok(truth)) {
-        char extra[1024];
-        snprintf(extra, sizeof extra,
-                 "hdr.VISIT = %d / 0-based visit of the plan\n"
-                 "hdr.ORIENT = %d / 0-based orient of the plan\n"
-                 "hdr.POINTING = %d / 0-based pointing along the forward snake\n"
-                 "hdr.PASS = %d / 0-based filter pass of the visit\n"
-                 "hdr.PLANEXPT = %.3f / [s] planned exposure time\n",
-                 x->visit, x->orient, x->pointing, x->pass, x->exptime);
+    if (!(state == P_SAME && wf_survey_product_ok(p->image) && wf_survey_product_ok(p->truth))) {
+        /* the truth beside an image from other inputs goes first: an interruption then
+         * leaves the pair incomplete, redone next time, never a new image with old truth */
+        remove(p->truth);
         wf_pipeline_job *job = ctx->job;
         memset(job, 0, sizeof *job);
-        job->cfg = cfg;
-        job->clock = &clock;
-        job->meta_extra = extra;
+        job->cfg = &p->cfg;
+        job->clock = &p->clock;
+        job->meta_extra = p->extra;
         job->injector = ctx->opt->sne;
         job->version = ctx->opt->version;
-        cfg->quiet = 1;
+        job->digests = ctx->cache;
+        p->cfg.quiet = 1;
         if ((st = wf_pipeline_expose(job))) {
             char msg[1024];
             snprintf(msg, sizeof msg, "%s", wf_error_message());
-            return wf_error(st, "exposure %d SCA %d: %s", x->expid, ctx->items[i].sca, msg);
+            return wf_error(st, "%s: %s", name, msg);
         }
         res->made = 1;
-        res->redone = existed;
+        res->changed = state == P_CHANGED;
+        res->redone = state != P_CHANGED && state != P_MISSING;
         res->sne = (int64_t)job->nsne_drawn;
     }
-    const char *name = strrchr(image, '/');
-    return wf_survey_index_read(cfg->out_dir, name ? name + 1 : image, &res->row);
+    const char *file = strrchr(p->image, '/');
+    st = wf_survey_index_read(p->cfg.out_dir, file ? file + 1 : p->image, &res->row);
+    res->done = !st;
+    return st;
+}
+
+static void tally(const wf_survey_ctx *ctx, const wf_survey_item_result *res, wf_survey_run_stats *stats)
+{
+    memset(stats, 0, sizeof *stats);
+    stats->outside = ctx->outside;
+    for (size_t i = 0; i < ctx->nitems; i++) {
+        if (!res[i].done) continue;
+        if (res[i].made) stats->rendered++;
+        else stats->skipped++;
+        stats->redone += res[i].redone;
+        stats->changed += res[i].changed;
+        stats->sne_drawn += (long)res[i].sne;
+    }
 }
 
 wf_status wf_survey_end(wf_survey_ctx *ctx, const wf_survey_item_result *res, wf_survey_run_stats *stats)
 {
-    memset(stats, 0, sizeof *stats);
-    stats->outside = ctx->outside;
+    tally(ctx, res, stats);
     wf_survey_index_row *rows = malloc(ctx->nitems * sizeof *rows);
     if (!rows) return wf_error(WF_ERR_NOMEM, "out of memory for the index");
-    for (size_t i = 0; i < ctx->nitems; i++) {
-        if (res[i].made) stats->rendered++;
-        else stats->skipped++;
-        stats->redone += res[i].redone;
-        stats->sne_drawn += (long)res[i].sne;
-        rows[i] = res[i].row;
-    }
+    for (size_t i = 0; i < ctx->nitems; i++) rows[i] = res[i].row;
     const wf_survey_run_options *opt = ctx->opt;
     wf_status st = wf_survey_index_write(ctx->base->out_dir, rows, ctx->nitems);
     char note[1024] = "";
@@ -326,8 +565,20 @@ wf_status wf_survey_end(wf_survey_ctx *ctx, const wf_survey_item_result *res, wf
         st = wf_survey_write_release(ctx->base, opt->plan_path, opt->sne_path, opt->sne_model, opt->area ? centre : NULL,
                                      rows, ctx->nitems, note, sizeof note);
     free(rows);
-    if (!st) st = write_manifest(ctx->base, opt, ctx->rows, ctx->nrows, stats, note);
+    if (!st) st = write_manifest(ctx, stats, "complete", note);
     return st;
+}
+
+wf_status wf_survey_end_failed(wf_survey_ctx *ctx, const wf_survey_item_result *res, wf_status st,
+                               wf_survey_run_stats *stats)
+{
+    tally(ctx, res, stats);
+    char msg[1100];
+    snprintf(msg, sizeof msg, "failed: %s", wf_error_message());
+    /* the record says what the folder holds after a failure too (not after a refusal: then
+     * nothing was written) */
+    if (ctx->todo) write_manifest(ctx, stats, msg, NULL);
+    return wf_error(st, "%s", msg + 8);
 }
 
 wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt, wf_survey_run_stats *stats)
@@ -339,17 +590,23 @@ wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt,
     if (st) return st;
     wf_survey_item_result *res = calloc(n, sizeof *res);
     if (!res) st = wf_error(WF_ERR_NOMEM, "out of memory");
+    if (!st) st = wf_survey_check_inputs(ctx);
+    if (st) {
+        free(res);
+        wf_survey_free(ctx);
+        return st;
+    }
     time_t t0 = time(NULL);
     for (size_t i = 0; i < n && !st; i++) {
         if ((st = wf_survey_make_item(ctx, i, &res[i]))) break;
         if (!base->quiet && res[i].made) {
             const wf_survey_row *x = &ctx->rows[ctx->items[i].row];
             fprintf(stderr, "wfisim survey: [%zu/%zu] exposure %d SCA %d %s MJD %.5f%s (%.0f s)\n", i + 1, n,
-                    x->expid, ctx->items[i].sca, x->filter, x->mjd_mid,
-                    res[i].redone ? " (damaged product redone)" : "", difftime(time(NULL), t0));
+                    x->expid, ctx->items[i].sca, x->filter, x->mjd_mid, wf_survey_item_note(&res[i]),
+                    difftime(time(NULL), t0));
         }
     }
-    if (!st) st = wf_survey_end(ctx, res, stats);
+    st = st ? wf_survey_end_failed(ctx, res, st, stats) : wf_survey_end(ctx, res, stats);
     free(res);
     wf_survey_free(ctx);
     return st;

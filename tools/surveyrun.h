@@ -1,23 +1,35 @@
 /* `wfisim survey run`: every (exposure, SCA) of a range of a plan, rendered by the same
  * pipeline as `wfisim expose` at the exposure's own pointing, PA, filter and mid-time.
  *
- * Resumable: a product whose image and truth files both exist and whose every HDU's CHECKSUM
- * and DATASUM verify is skipped; anything else (missing, truncated, damaged) is rendered again
- * (products are written through temporary files, so an interrupted run leaves no half file).
+ * A run is a list of items, (exposure, SCA) pairs in plan order (the range, the SCAs, and with
+ * --area only those whose SCA footprint overlaps the circle), in three steps:
+ *   check  one process compares every item's product with this run, before anything is
+ *          written: its primary header's WFDIGEST (tools/digest.h: configuration, seed, data
+ *          files, catalogs, SN sample, program version) against the digest this run would
+ *          give it. A product from other inputs (or from a wfisim before digests) makes the
+ *          run refuse, naming what changed, unless redo_changed (then it is remade).
+ *   make   each item alone (wf_survey_make_item): a product with this run's digest whose
+ *          image and truth are whole (every HDU's CHECKSUM and DATASUM verify) and whose
+ *          truth carries the same WFDIGEST is skipped; anything else (missing, truncated,
+ *          damaged, from other inputs) is rendered again, through temporary files, so an
+ *          interrupted run leaves no half file. wf_survey_run makes the items one after
+ *          another; the MPI program (tools/survey_mpi.c) hands them out to its ranks.
+ *   end    one process writes the index and survey_run.txt (and the release with an SN
+ *          sample) from every item's result.
  * Each product depends only on the plan row, the SCA, the configuration and the seed (noise is
- * keyed by exposure id and SCA), so it is the same whichever other products were run.
+ * keyed by exposure id and SCA), so it is the same whichever other products were run, on
+ * however many processes, and whatever run.threads and readout.tile_rows (left out of the
+ * digest).
  *
  * Read pattern: up the ramp, each exposure uses the built-in Rev F table whose duration is
  * nearest its planned time (300 s -> table 6, 900 s -> table 11) unless readout.ma_table was
  * given; single-frame mode uses the planned time exactly.
  *
  * Survey level: DIR/survey_run.txt records the plan (and its DATASUM), the catalogs (files, or
- * the synthetic field's seed: `wfisim catalog --seed N` writes that field) and the SN sample;
- * DIR/survey_index.{fits,csv} lists the run's products (tools/surveyindex.h).
- *
- * A run is a list of items, (exposure, SCA) pairs in plan order, each made by
- * wf_survey_make_item alone: wf_survey_run makes them one after another; the MPI program
- * (tools/survey_mpi.c) hands them out to its ranks and gives the same products. */
+ * the synthetic field's seed: `wfisim catalog --seed N` writes that field), the SN sample, the
+ * digests of the inputs and every product of the folder with the WFDIGEST its header holds;
+ * "status = in progress" from the check until the end. DIR/survey_index.{fits,csv} lists the
+ * run's products (tools/surveyindex.h). */
 #ifndef WF_SURVEYRUN_H
 #define WF_SURVEYRUN_H
 
@@ -39,10 +51,12 @@ typedef struct wf_survey_run_options {
     const char *version;
     int area;                  /* 1: only the items whose SCA footprint overlaps the circle */
     double area_ra, area_dec, area_radius; /* deg */
+    int redo_changed;          /* a product made from other inputs: 1 redo, 0 refuse the run */
 } wf_survey_run_options;
 
 typedef struct wf_survey_run_stats {
     long rendered, skipped, redone; /* redone: a damaged product was replaced */
+    long changed;                   /* products made from other inputs, remade (--on-change redo) */
     long sne_drawn;                 /* SN entries in the truth of the products rendered */
     long outside;                   /* items outside --area, not made */
     int silent;                     /* 1: another process reports this run (MPI ranks > 0) */
@@ -70,22 +84,40 @@ typedef struct wf_survey_ctx wf_survey_ctx;
 /* What making one item gave; fixed size and pointer-free, so that it travels as bytes
  * between processes of one build. */
 typedef struct wf_survey_item_result {
+    int32_t done;          /* 1: the item was made (or found whole) */
     int32_t made;          /* 0 already whole (skipped), 1 rendered */
     int32_t redone;        /* 1: a damaged product was replaced */
+    int32_t changed;       /* 1: a product from other inputs was replaced */
     int64_t sne;           /* SNe drawn */
     wf_survey_index_row row;
 } wf_survey_item_result;
 
-/* Reads the plan, selects the items (range, SCAs, area) and makes the output folder. */
+/* Reads the plan and selects the items (range, SCAs, area); writes nothing. */
 wf_status wf_survey_begin(const wf_config *cfg, const wf_survey_run_options *opt, wf_survey_ctx **out,
                           size_t *nitems);
-/* Item i (0-based, plan order): skipped when its products are whole, else rendered. */
+/* In one process, before any item is made: every item's product against this run's inputs.
+ * Refuses the run (WF_ERR_INPUT, naming the first product in plan order and what changed)
+ * when a product was made from other inputs and opt->redo_changed is 0; else makes the
+ * output folder and, when there is work, writes survey_run.txt "in progress". */
+wf_status wf_survey_check_inputs(wf_survey_ctx *ctx);
+/* The check's verdict, one byte per item: what another process's context needs (copied into
+ * it) before it makes items. */
+unsigned char *wf_survey_item_states(wf_survey_ctx *ctx);
+/* Item i (0-based, plan order), after the check: skipped when its products are whole and
+ * from this run's inputs, else rendered. */
 wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_result *res);
 /* "exposure E SCA S" of item i, for messages. */
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap);
-/* With every item's result: the stats, the index and survey_run.txt (and, with an SN sample,
- * the release's catalogs and light curves), each through a temporary file and a rename. */
+/* How item i's result reads in a progress line: "", " (damaged product redone)", ... */
+const char *wf_survey_item_note(const wf_survey_item_result *res);
+/* With every item's result: the stats, the index and survey_run.txt "complete" (and, with an
+ * SN sample, the release's catalogs and light curves), each through a temporary file and a
+ * rename. */
 wf_status wf_survey_end(wf_survey_ctx *ctx, const wf_survey_item_result *res, wf_survey_run_stats *stats);
+/* After item failure st (its message current): survey_run.txt "failed: ..." with the folder
+ * as it stands and the results known (res[i].done); returns st, its message kept. */
+wf_status wf_survey_end_failed(wf_survey_ctx *ctx, const wf_survey_item_result *res, wf_status st,
+                               wf_survey_run_stats *stats);
 void wf_survey_free(wf_survey_ctx *ctx);
 
 #endif
