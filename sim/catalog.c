@@ -1,4 +1,5 @@
 #include "sim/catalog.h"
+#include "sim/fitscheck.h"
 #include "sim/fitsdisk.h"
 
 #include <ctype.h>
@@ -747,6 +748,7 @@ static wf_status read_fits(reader *r)
      * fits_open_table loses its handle (16 bytes) when the header after the primary is
      * damaged (found by fuzz/fuzz_catalog_fits.c). */
     int hdutype = IMAGE_HDU;
+    if ((st = wf_fits_check_headers(r->path))) return st;
     if (!fits_open_file(&ff, r->path, READONLY, &status)) {
         fits_get_hdu_type(ff, &hdutype, &status);
         while (!status && hdutype == IMAGE_HDU) fits_movrel_hdu(ff, 1, &hdutype, &status);

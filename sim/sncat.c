@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "sim/fitscheck.h"
 #include "sim/fitsout.h"
 
 enum { C_ID, C_Z, C_T0, C_X0, C_X1, C_C, C_DELTA, C_MU, C_HOSTID, C_RA, C_DEC, C_HOSTOFF, C_HOSTCOMP, C_FLAGS, NCOL };
@@ -135,6 +136,8 @@ wf_status wf_sn_sample_read(const char *path, wf_sn_sample *out)
     memset(out, 0, sizeof *out);
     fitsfile *f;
     int status = 0;
+    wf_status hst = wf_fits_check_headers(path);
+    if (hst) return hst;
     if (fits_open_diskfile(&f, path, READONLY, &status)) return wf_error(WF_ERR_IO, "%s: cannot open as FITS", path);
     char model[FLEN_VALUE] = "";
     int ks = 0;

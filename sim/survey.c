@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "sim/bandpass.h"
+#include "sim/fitscheck.h"
 #include "sim/fitsout.h"
 
 #define DEG (M_PI / 180.0)
@@ -1009,6 +1010,8 @@ wf_status wf_survey_read_plan(const char *path, wf_survey_row **rows, size_t *n)
 {
     *rows = NULL;
     *n = 0;
+    wf_status hst = wf_fits_check_headers(path);
+    if (hst) return hst;
     if (wf_fits_verify_checksums(path, PLAN_HDUS)) {
         char why[1024]; /* copied: wf_error rewrites the buffer wf_error_message points to */
         const char *m = wf_error_message();

@@ -227,6 +227,69 @@ START_TEST(test_fits_good)
 }
 END_TEST
 
+/* A header card with bytes outside printable ASCII (FITS headers may hold nothing else) is
+ * refused with the file, HDU and card named, before cfitsio reads it: cfitsio 4.2 overflows a
+ * buffer on such a TTYPE and aborts the process (found by fuzz/fuzz_catalog_fits.c, the input
+ * kept as fuzz/corpus/catalog_fits/regress-ffgtbp-overflow.fit). Behind an image HDU with
+ * data, gzip'd, and a good file beside them: the walk sizes the data it skips. */
+START_TEST(test_fits_header_not_ascii)
+{
+    const char *good = tmp_path("ascii-good.fits");
+    write_fits_table(good, 0);
+    size_t len;
+    char *bytes = wf_test_slurp(good, &len);
+    ck_assert_ptr_nonnull(bytes);
+    char *card = NULL;
+    for (size_t off = 0; off + 80 <= len; off += 80)
+        if (!strncmp(bytes + off, "TTYPE3  = '", 11)) card = bytes + off;
+    ck_assert_ptr_nonnull(card);
+    card[12] = (char)0xe9;
+    const char *bad = tmp_path("ascii-bad.fits");
+    FILE *f = fopen(bad, "wb");
+    ck_assert(f && fwrite(bytes, 1, len, f) == len && fclose(f) == 0);
+    const char *badgz = tmp_path("ascii-bad.fits.gz");
+    gzFile gz = gzopen(badgz, "wb");
+    ck_assert(gz && gzwrite(gz, bytes, (unsigned)len) == (int)len && gzclose(gz) == Z_OK);
+    /* the same table behind a primary image with data (the damaged card moves to HDU 3) */
+    const char *deep = tmp_path("ascii-deep.fits");
+    fitsfile *ff;
+    int st = 0;
+    long nax[2] = {7, 5};
+    float pix[35];
+    for (int i = 0; i < 35; i++) pix[i] = (float)i * 1.7e-3f;
+    fits_create_file(&ff, deep, &st);
+    fits_create_img(ff, FLOAT_IMG, 2, nax, &st);
+    fits_write_img(ff, TFLOAT, 1, 35, pix, &st);
+    fits_create_img(ff, FLOAT_IMG, 2, nax, &st);
+    fits_write_img(ff, TFLOAT, 1, 35, pix, &st);
+    fits_close_file(ff, &st);
+    ck_assert_int_eq(st, 0);
+    size_t dlen;
+    char *dbytes = wf_test_slurp(deep, &dlen);
+    f = fopen(deep, "wb");
+    ck_assert(f && fwrite(dbytes, 1, dlen, f) == dlen && fwrite(bytes + 2880, 1, len - 2880, f) == len - 2880 &&
+              fclose(f) == 0);
+    free(dbytes);
+    free(bytes);
+
+    wf_catalog c;
+    ck_assert_msg(wf_catalog_read_galaxies(good, &c) == WF_OK, "%s", wf_error_message());
+    wf_catalog_free(&c);
+    const char *paths[3] = {bad, badgz, deep};
+    const char *hdu[3] = {"HDU 2", "HDU 2", "HDU 3"};
+    for (int k = 0; k < 3; k++) {
+        ck_assert_int_eq(wf_catalog_read_galaxies(paths[k], &c), WF_ERR_INPUT);
+        const char *m = wf_error_message();
+        ck_assert_msg(strstr(m, paths[k]) && strstr(m, hdu[k]) && strstr(m, "(TTYPE3)") &&
+                          strstr(m, "0xe9") && strstr(m, "not printable ASCII"),
+                      "%s", m);
+    }
+    const char *fuzzed = "fuzz/corpus/catalog_fits/regress-ffgtbp-overflow.fit";
+    ck_assert_int_eq(wf_catalog_read_galaxies(fuzzed, &c), WF_ERR_INPUT);
+    ck_assert_msg(strstr(wf_error_message(), "not printable ASCII"), "%s", wf_error_message());
+}
+END_TEST
+
 /* The reader finds the first table past any image HDUs, as fits_open_table did; a file
  * without a table, or whose header after the primary is damaged, is refused
  * without losing memory (fits_open_table lost 16 bytes there, which LeakSanitizer reports
@@ -1268,6 +1331,7 @@ static Suite *catalog_suite(void)
     tcase_add_test(tc, test_csv_good);
     tcase_add_test(tc, test_fits_good);
     tcase_add_test(tc, test_fits_table_search);
+    tcase_add_test(tc, test_fits_header_not_ascii);
     tcase_add_test(tc, test_writers_roundtrip);
     tcase_add_loop_test(tc, test_bad_input, 0, N_BAD);
     tcase_add_test(tc, test_galsim_scene);
