@@ -436,9 +436,18 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
     }
     /* what shapes the product, in its primary header: a resumed survey run compares it
      * (tools/digest.h) */
-    wf_digest_inputs din = {cfg, pj->clock, pj->meta_extra, pj->replay, pj->injector, pj->sne, pj->nsne, pj->version};
+    const wf_config *dcfg = cfg;
+    wf_config canon;
+    if (inputs.galsim_scene && cfg->scene_kind != 3) {
+        /* a GalSim scene given as scene.kind catalog (recognised by its columns) is the same
+         * input as scene.kind galsim: the same digest, so the same product bytes */
+        canon = *cfg;
+        canon.scene_kind = 3;
+        dcfg = &canon;
+    }
+    wf_digest_inputs din = {dcfg, pj->clock, pj->meta_extra, pj->replay, pj->injector, pj->sne, pj->nsne, pj->version};
     if ((st = wf_digest_product(pj->digests, &din, &pj->digest))) goto done;
-    if ((st = wf_digest_meta(&pj->digest, cfg, extra, extra_cap))) goto done;
+    if ((st = wf_digest_meta(&pj->digest, dcfg, extra, extra_cap))) goto done;
 
     wf_expose_job job = {0};
     job.ro = cfg->ro;
