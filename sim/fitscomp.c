@@ -3,9 +3,13 @@
 
 #include <fitsio2.h>
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
+
+/* cfitsio stores a requested quantize level of 0 (floats kept exact) as this (imcompress.c) */
+#define CFITSIO_NO_QUANTIZE 9999.0f
 
 int wf_fits_comp_dither_seed(uint64_t seed, uint32_t exposure, uint32_t sca)
 {
@@ -134,4 +138,75 @@ wf_status wf_fits_part_append(fitsfile *dst, const char *dst_path, fitsfile *par
     wf_status st = append(dst, dst_path, part, part_path);
     wf_fits_part_discard(part, part_path);
     return st;
+}
+
+/* The k-th smallest of v[0..n-1] (v is reordered): Hoare's selection, median-of-three
+ * pivot. The value is the k-th order statistic whatever the partitioning, so it is exact
+ * and deterministic. */
+static float select_kth(float *v, long n, long k)
+{
+    long lo = 0, hi = n - 1;
+    while (hi > lo) {
+        long mid = lo + (hi - lo) / 2;
+        float a = v[lo], b = v[mid], c = v[hi];
+        float p = a < b ? (b < c ? b : (a < c ? c : a)) : (a < c ? a : (b < c ? c : b));
+        long i = lo, j = hi;
+        while (i <= j) {
+            while (v[i] < p) i++;
+            while (v[j] > p) j--;
+            if (i <= j) {
+                float t = v[i];
+                v[i++] = v[j];
+                v[j--] = t;
+            }
+        }
+        if (k <= j) hi = j;
+        else if (k >= i) lo = i;
+        else return v[k];
+    }
+    return v[k];
+}
+
+double wf_fits_row_noise(const float *row, long n, float *scratch)
+{
+    /* third-order differences 2 x_i - x_(i-2) - x_(i+2): smooth signal (sky gradients,
+     * the wings of sources) cancels, the noise of independent pixels is sqrt 6 sigma; the
+     * median of their absolute values is 0.6745 sqrt 6 sigma for Gaussian noise, robust to
+     * the few pixels a source or a cosmic ray takes */
+    long m = 0;
+    for (long i = 2; i + 2 < n; i++) {
+        float d = fabsf(2.0f * row[i] - row[i - 2] - row[i + 2]);
+        if (isfinite(d)) scratch[m++] = d;
+    }
+    if (m < 1) return 0;
+    return 0.6052697 * select_kth(scratch, m, (m - 1) / 2);
+}
+
+int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, long nrows, void *data, int *status)
+{
+    if (*status) return *status;
+    /* the part's q as fits_set_quantize_level stored it (0 as NO_QUANTIZE: exact floats);
+     * cfitsio takes the requested level as each tile is compressed */
+    const float q = f->Fptr->request_quantize_level;
+    if (type != TFLOAT || !(q > 0) || q == CFITSIO_NO_QUANTIZE || ncols < 5)
+        return fits_write_img(f, type, row0 * ncols + 1, (LONGLONG)nrows * ncols, data, status);
+    float *scratch = malloc((size_t)ncols * sizeof *scratch);
+    if (!scratch) return *status = MEMORY_ALLOCATION;
+    for (long r = 0; r < nrows && !*status; r++) {
+        float *row = (float *)data + (size_t)r * (size_t)ncols;
+        const double step = wf_fits_row_noise(row, ncols, scratch) / q;
+        /* a negative level is cfitsio's absolute step; a row without noise to measure (a
+         * constant or integer row) is left to cfitsio's own rules */
+        const float level = step > 0 && isfinite(step) ? -(float)step : q;
+        /* cfitsio compresses a tile with quantize_level and refreshes that from the request
+         * at times of its own (a tile late, observed): both are set */
+        fits_set_quantize_level(f, level, status);
+        f->Fptr->quantize_level = level;
+        fits_write_img(f, TFLOAT, (row0 + r) * ncols + 1, ncols, row, status);
+    }
+    int st = 0;
+    fits_set_quantize_level(f, q, &st);
+    f->Fptr->quantize_level = q;
+    free(scratch);
+    return *status;
 }

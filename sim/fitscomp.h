@@ -6,10 +6,11 @@
  * product when complete, its heap laid out again in tile order: the bytes then depend on
  * the pixels alone, not on thread count or tile height. Tiles are one image row (one row of
  * one resultant in a cube), so any run of whole rows is whole tiles. Integer HDUs are Rice
- * coded, losslessly; float HDUs are quantized to a step of (noise / q), where the noise is
- * cfitsio's estimate from the tile's pixel differences, with subtractive dithering whose
- * seed the caller derives from the product's identity, then Rice coded; q = 0 keeps floats
- * exact (GZIP). */
+ * coded, losslessly; float HDUs are quantized to a step of (noise / q), the noise measured
+ * on each row by wf_fits_row_noise and handed to cfitsio as an absolute step (cfitsio's own
+ * estimate takes three medians a tile: half the assembly's CPU), with subtractive dithering
+ * whose seed the caller derives from the product's identity, then Rice coded; q = 0 keeps
+ * floats exact (GZIP). */
 #ifndef WF_FITSCOMP_H
 #define WF_FITSCOMP_H
 
@@ -36,6 +37,16 @@ wf_status wf_fits_part_create(const char *path, const wf_fits_comp *c, int bitpi
 /* Appends the part's compressed HDU to dst as its new last HDU, heap in tile order, then
  * closes the part and removes its file (also on failure). dst_path names dst in messages. */
 wf_status wf_fits_part_append(fitsfile *dst, const char *dst_path, fitsfile *part, const char *part_path);
+
+/* Writes nrows whole rows of ncols pixels from row row0 (0-based) of the part's image,
+ * cfitsio's way (returns and sets *status). TFLOAT rows of a quantized part are written one
+ * by one, each at a step of wf_fits_row_noise / q. */
+int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, long nrows, void *data, int *status);
+
+/* The noise of a row of n pixels: 0.6052697 x the median of |2 x_i - x_(i-2) - x_(i+2)|,
+ * sigma for independent Gaussian pixels (cfitsio's "noise3" estimator, DER_SNR); 0 when
+ * there is nothing to measure. scratch holds n floats. */
+double wf_fits_row_noise(const float *row, long n, float *scratch);
 
 /* Closes and removes a part left over by a failure (f may be NULL). */
 void wf_fits_part_discard(fitsfile *f, const char *path);

@@ -867,7 +867,7 @@ static wf_status write_rows(const assembler *a, exposure *e, int hdu, int type, 
     fitsfile *f = hdu_file(e, hdu, &number);
     fits_movabs_hdu(f, number, NULL, &status);
     if (f != e->f) { /* a compressed part: cfitsio codes whole rows, which are whole tiles */
-        fits_write_img(f, type, (LONGLONG)y0 * e->m.ncols + 1, (LONGLONG)n * e->m.ncols, data, &status);
+        wf_fits_part_write_rows(f, type, (long)e->m.ncols, y0, (long)n, data, &status);
     } else {
         /* TFLOAT is stored as its bit pattern, TUINT with BZERO 2^31; the rows are written in
          * place (nothing reads a tile's planes after they are written) */
