@@ -22,6 +22,11 @@
 /* A write this large goes to the file as it is: the buffer gathers cfitsio's 2880-byte
  * records into large writes, and copying an already large one into it gains nothing */
 #define DIRECT_BYTES ((size_t)1 << 18)
+/* The first read ahead of a sequential run is the length of the last run (at least
+ * AHEAD_MIN), doubled at each refill up to BUF_BYTES: cfitsio reads a tile of resultants
+ * back one plane's rows at a time, runs of one length (128 KiB for 1024 columns and 64 rows),
+ * and a megabyte each time read eight times what was used */
+#define AHEAD_MIN ((size_t)1 << 15)
 /* Writes bypass the page cache (O_DIRECT) where the file system takes
  * it: copying 200 MB into the page cache, on pages the kernel must first fault in and
  * zero, cost a single-frame product 0.05-0.45 CPU-s (the spread is the host's), the
@@ -57,9 +62,18 @@ typedef struct slot {
     long long pos;              /* cfitsio's position */
     long long size;             /* the file as cfitsio sees it: on disk, buffered, holes */
     long long disk;             /* bytes on disk (what fstat would say) */
-    unsigned char *buf;         /* write-back buffer, or a clean read cache */
+    unsigned char *buf;         /* write-back buffer */
     long long buf_off;
     size_t buf_len;
+    /* Read cache, apart from the write-back buffer so that a write elsewhere keeps it: cfitsio
+     * reading a run of records back (a tile of resultants) writes out its own dirty records
+     * between them, and a shared buffer was refilled, 1 MiB, at every record. Every write
+     * over it is copied into it too, so it always holds the file's latest bytes. */
+    unsigned char *rbuf;
+    long long rbuf_off;
+    size_t rbuf_len;
+    size_t ahead;               /* the next read ahead; 0 until the first */
+    long long run_start;        /* where the current sequential run of reads began */
     long long read_end;         /* where the last read stopped: the next one there is sequential */
     hole *holes;                /* ranges never written (zeros), sorted, disjoint */
     size_t nholes, holes_cap;
@@ -73,7 +87,7 @@ static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
 static pthread_once_t once = PTHREAD_ONCE_INIT;
 static int registered_status;
 static int uncached_off; /* wf_fitsdisk_uncached(0) */
-static atomic_llong bytes_uncached, bytes_cached;
+static atomic_llong bytes_uncached, bytes_cached, bytes_read;
 
 static slot *slot_of(int handle)
 {
@@ -255,12 +269,28 @@ static int pread_all(slot *s, unsigned char *p, size_t n, long long off)
         if (r < 0 && errno == EINTR) continue;
         if (r < 0) return sys_error(READ_ERROR, "read failed");
         if (r == 0) break;
+        atomic_fetch_add(&bytes_read, (long long)r);
         p += r;
         n -= (size_t)r;
         off += r;
     }
     memset(p, 0, n);
     return 0;
+}
+
+/* Copies what [src_off, src_off + src_len) has of [dst_off, dst_off + dst_len) into dst. */
+static void copy_overlap(unsigned char *dst, long long dst_off, size_t dst_len, const unsigned char *src,
+                         long long src_off, size_t src_len)
+{
+    long long lo = dst_off > src_off ? dst_off : src_off;
+    long long hi = dst_off + (long long)dst_len, shi = src_off + (long long)src_len;
+    if (shi < hi) hi = shi;
+    if (lo < hi) memcpy(dst + (lo - dst_off), src + (lo - src_off), (size_t)(hi - lo));
+}
+
+static int overlaps(long long a, size_t an, long long b, size_t bn)
+{
+    return an && bn && a < b + (long long)bn && b < a + (long long)an;
 }
 
 static int flush_buf(slot *s)
@@ -437,6 +467,7 @@ static int d_truncate(int handle, LONGLONG size)
     if (!st && s->nfrags) st = frags_flush(s, 0, LLONG_MAX);
     if (st) return st;
     if (ftruncate(s->fd, (off_t)size) != 0) return s->error = sys_error(WRITE_ERROR, "truncating the file failed");
+    s->rbuf_len = 0;
     if ((st = hole_fill(s, size, LLONG_MAX))) return st; /* what was cut off is no hole */
     s->size = s->disk = size;
     s->pos = size; /* as file:// does: cfitsio takes the end of the file for its position */
@@ -447,6 +478,7 @@ static void slot_free(slot *s)
 {
     pthread_mutex_lock(&lock);
     free(s->buf);
+    free(s->rbuf);
     free(s->path);
     free(s->holes);
     for (size_t i = 0; i < s->nfrags; i++) free(s->frags[i].data);
@@ -511,26 +543,38 @@ static int d_read(int handle, void *buffer, long nbytes)
     if (s->pos + (long long)n <= s->size && hole_covers(s, s->pos, s->pos + (long long)n)) {
         memset(buffer, 0, n); /* never written, so not in the buffer either */
         s->pos += (long long)n;
-        s->read_end = s->pos;
+        s->read_end = s->run_start = s->pos; /* zeros are no part of a run read from the file */
         return 0;
     }
-    if (s->dirty && (st = flush_buf(s))) return st;
-    if (s->buf_len && s->pos >= s->buf_off && s->pos + (long long)n <= s->buf_off + (long long)s->buf_len) {
-        memcpy(buffer, s->buf + (s->pos - s->buf_off), n);
-    } else if (n >= BUF_BYTES || s->pos != s->read_end) {
+    const long long lo = s->pos;
+    const int in_buf = s->dirty && overlaps(lo, n, s->buf_off, s->buf_len);
+    if (in_buf && lo >= s->buf_off && lo + (long long)n <= s->buf_off + (long long)s->buf_len) {
+        memcpy(buffer, s->buf + (lo - s->buf_off), n); /* cfitsio reloading what it just wrote */
+    } else if (s->rbuf_len && lo >= s->rbuf_off && lo + (long long)n <= s->rbuf_off + (long long)s->rbuf_len) {
+        memcpy(buffer, s->rbuf + (lo - s->rbuf_off), n);
+    } else if (n >= BUF_BYTES || lo != s->read_end) {
         /* a lone record (cfitsio loading one to change part of it) is read as it is: a
          * megabyte around it would be thrown away by the write that follows */
-        s->buf_len = 0;
-        if ((st = pread_all(s, buffer, n, s->pos))) return st;
+        long long run = s->read_end - s->run_start;
+        s->ahead = run < (long long)AHEAD_MIN ? AHEAD_MIN : run > (long long)BUF_BYTES ? BUF_BYTES : (size_t)run;
+        s->run_start = lo;
+        if (in_buf && (st = flush_buf(s))) return st;
+        if ((st = pread_all(s, buffer, n, lo))) return st;
     } else {
-        if (s->pos + (long long)n > s->size) return READ_ERROR;
-        long long len = s->size - s->pos;
-        size_t fill = len < (long long)BUF_BYTES ? (size_t)len : BUF_BYTES;
-        s->buf_len = 0;
-        if ((st = pread_all(s, s->buf, fill, s->pos))) return st;
-        s->buf_off = s->pos;
-        s->buf_len = fill;
-        memcpy(buffer, s->buf, n);
+        if (lo + (long long)n > s->size) return READ_ERROR;
+        if (!s->rbuf && !(s->rbuf = malloc(BUF_BYTES))) return MEMORY_ALLOCATION;
+        long long len = s->size - lo;
+        size_t want = s->ahead ? s->ahead : AHEAD_MIN;
+        if (want < n) want = n;
+        size_t fill = len < (long long)want ? (size_t)len : want;
+        s->ahead = 2 * want < BUF_BYTES ? 2 * want : BUF_BYTES;
+        s->rbuf_len = 0;
+        if ((st = pread_all(s, s->rbuf, fill, lo))) return st;
+        /* bytes still in the write-back buffer are newer than the file's */
+        if (s->dirty) copy_overlap(s->rbuf, lo, fill, s->buf, s->buf_off, s->buf_len);
+        s->rbuf_off = lo;
+        s->rbuf_len = fill;
+        memcpy(buffer, s->rbuf, n);
     }
     s->pos += (long long)n;
     s->read_end = s->pos;
@@ -554,12 +598,14 @@ static int d_write(int handle, void *buffer, long nbytes)
         return 0;
     }
     if ((st = hole_fill(s, s->pos, end))) return st;
+    if (overlaps(s->pos, n, s->rbuf_off, s->rbuf_len))
+        copy_overlap(s->rbuf, s->rbuf_off, s->rbuf_len, p, s->pos, n);
     if (n < DIRECT_BYTES && s->dirty && s->pos == s->buf_off + (long long)s->buf_len &&
         s->buf_len + n <= BUF_BYTES) {
         memcpy(s->buf + s->buf_len, p, n);
         s->buf_len += n;
     } else {
-        if ((st = flush_buf(s))) return st; /* also drops a read cache the write may overlap */
+        if ((st = flush_buf(s))) return st;
         if (n >= DIRECT_BYTES) {
             if ((st = write_out(s, p, n, s->pos))) return st;
         } else {
@@ -596,6 +642,11 @@ void wf_fitsdisk_written(long long *uncached, long long *cached)
 {
     *uncached = atomic_load(&bytes_uncached);
     *cached = atomic_load(&bytes_cached);
+}
+
+long long wf_fitsdisk_read_back(void)
+{
+    return atomic_load(&bytes_read);
 }
 
 int wf_fitsdisk_create(fitsfile **f, const char *path, int *status)

@@ -24,4 +24,7 @@ void wf_fitsdisk_uncached(int enabled);
 /* Bytes this process has written to such files, past the page cache and through it. */
 void wf_fitsdisk_written(long long *uncached, long long *cached);
 
+/* Bytes this process has read back from such files (what cfitsio reloads; the kernel's). */
+long long wf_fitsdisk_read_back(void);
+
 #endif

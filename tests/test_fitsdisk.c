@@ -494,6 +494,61 @@ START_TEST(test_uncached_path_taken)
 }
 END_TEST
 
+/* The assembler's pattern: a tile of resultants written plane by plane, read back (its
+ * saturation came later), its fit written to another HDU. cfitsio reloads the cube's records
+ * one by one and writes its dirty ones out in between; the driver reads no more from the
+ * file than the rows asked for (once the data, plus a record at each plane's edges and read
+ * ahead), where a read cache dropped by every write refilled a megabyte per record. */
+START_TEST(test_read_back_bounded)
+{
+    enum { W = 1024, H = 256, R = 6, T = 32 };
+    static uint16_t cube[R][T][W], back[R][T][W];
+    static float sci[T][W];
+    char path[4200];
+    tmp_path(path, sizeof path, _i ? "readback_on.fits" : "readback_off.fits");
+    wf_fitsdisk_uncached(_i);
+    fitsfile *f;
+    int status = 0, anynul = 0;
+    long img[2] = {W, H}, naxes[3] = {W, H, R};
+    ck_assert_int_eq(wf_fitsdisk_create(&f, path, &status), 0);
+    fits_create_img(f, BYTE_IMG, 0, NULL, &status);
+    fits_create_img(f, FLOAT_IMG, 2, img, &status);
+    fits_create_img(f, USHORT_IMG, 3, naxes, &status);
+    ck_assert_int_eq(status, 0);
+    long long before = wf_fitsdisk_read_back();
+    for (int y0 = 0; y0 < H; y0 += T) {
+        for (int r = 0; r < R; r++)
+            for (int y = 0; y < T; y++)
+                for (int x = 0; x < W; x++) cube[r][y][x] = (uint16_t)(x * 7 + (y0 + y) * 131 + r * 4099);
+        long fp[3] = {1, y0 + 1, 1}, lp[3] = {W, y0 + T, R}, inc[3] = {1, 1, 1};
+        fits_movabs_hdu(f, 3, NULL, &status);
+        fits_write_subset(f, TUSHORT, fp, lp, cube, &status);
+        fits_read_subset(f, TUSHORT, fp, lp, inc, NULL, back, &anynul, &status);
+        ck_assert_int_eq(status, 0);
+        ck_assert(memcmp(cube, back, sizeof cube) == 0);
+        for (int y = 0; y < T; y++)
+            for (int x = 0; x < W; x++) sci[y][x] = (float)cube[R - 1][y][x] - cube[0][y][x];
+        fits_movabs_hdu(f, 2, NULL, &status);
+        fits_write_img(f, TFLOAT, (LONGLONG)y0 * W + 1, (LONGLONG)T * W, sci, &status);
+        ck_assert_int_eq(status, 0);
+    }
+    long long read = wf_fitsdisk_read_back() - before;
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    long long cube_bytes = (long long)W * H * R * 2;
+    ck_assert_msg(read <= cube_bytes + cube_bytes / 4, "read back %lld bytes for a %lld-byte cube", read,
+                  cube_bytes);
+    fitsfile *g; /* and the file holds the last tile */
+    ck_assert_int_eq(fits_open_diskfile(&g, path, READONLY, &status), 0);
+    fits_movabs_hdu(g, 3, NULL, &status);
+    long fp[3] = {1, H - T + 1, 1}, lp[3] = {W, H, R}, inc[3] = {1, 1, 1};
+    fits_read_subset(g, TUSHORT, fp, lp, inc, NULL, back, &anynul, &status);
+    fits_close_file(g, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert(memcmp(cube, back, sizeof cube) == 0);
+}
+END_TEST
+
 /* A write the system refuses (here the file-size limit, as a full disk would) fails the
  * cfitsio call or the close, with the system's reason on cfitsio's error stack. */
 START_TEST(test_write_failure_reported)
@@ -565,6 +620,7 @@ static Suite *suite(void)
     tcase_add_loop_test(tc, test_scrambled_rows, 0, 2);
     tcase_add_loop_test(tc, test_random_writes, 0, 2);
     tcase_add_test(tc, test_uncached_path_taken);
+    tcase_add_loop_test(tc, test_read_back_bounded, 0, 2);
     tcase_add_test(tc, test_names_and_slots);
     tcase_add_test(tc, test_write_failure_reported);
     tcase_add_test(tc, test_full_disk_at_the_close);
