@@ -12,7 +12,8 @@
  * printable ASCII (0x20-0x7E, FITS 4.0 section 4.1.1); otherwise WF_ERR_INPUT naming the
  * file, the HDU and the card. Data sections are skipped by their size from the header. What
  * the walk cannot size (a truncated file, a missing or absurd NAXISn) ends the check with
- * WF_OK: cfitsio reports those itself. WF_ERR_IO when the file cannot be opened. */
+ * WF_OK: cfitsio reports those itself, as the caller's own open reports a file that cannot
+ * be opened. */
 wf_status wf_fits_check_headers(const char *path);
 
 #endif

@@ -290,18 +290,34 @@ START_TEST(finds_truth_stars)
     read_column(f, "Y", n, ty);
     read_column(f, "FLUX", n, tf);
     fits_close_file(f, &status);
+    /* A star's light centroid sits where the PSF's centroid sits relative to the chief ray:
+     * on the analytic pupil (no data) that is the truth position; with Roman's Zernikes
+     * (paths.data, as in CI) the aberrations move every star of this small field by the
+     * same ~0.2 px. So the positions are compared after the field's median offset, which is
+     * itself bounded by what the PSF can shift (0.5 px). */
     int idx[32], nsn100 = 0;
-    double ratio[32] = {0}, worst_off = 0;
+    double ratio[32] = {0}, worst_off = 0, offx[32], offy[32];
     for (int k = 0; k < n; k++) {
         double dist;
         idx[k] = nearest(&ours, tx[k], ty[k], 1.0, &dist);
         ck_assert_msg(idx[k] >= 0, "star %d at (%.2f, %.2f), %.1f e-/s, not detected", k + 1, tx[k], ty[k], tf[k]);
         ratio[k] = tf[k] / ours.fa[idx[k]];
         if (ours.fa[idx[k]] > 100 * ours.ea[idx[k]]) {
+            offx[nsn100] = ours.x[idx[k]] - tx[k];
+            offy[nsn100] = ours.y[idx[k]] - ty[k];
             nsn100++;
-            if (dist > worst_off) worst_off = dist;
         }
     }
+    ck_assert_int_ge(nsn100, 10);
+    double mx[32], my[32];
+    memcpy(mx, offx, sizeof offx);
+    memcpy(my, offy, sizeof offy);
+    double medx = median(mx, nsn100), medy = median(my, nsn100);
+    for (int k = 0; k < nsn100; k++) {
+        double dist = hypot(offx[k] - medx, offy[k] - medy);
+        if (dist > worst_off) worst_off = dist;
+    }
+    ck_assert_msg(hypot(medx, medy) < 0.5, "median offset (%.3f, %.3f) px", medx, medy);
     double sorted[32];
     memcpy(sorted, ratio, sizeof ratio);
     double apcorr = median(sorted, (int)n);
@@ -313,10 +329,9 @@ START_TEST(finds_truth_stars)
         chi2 += z * z;
         if (fabs(z) > fabs(worst_z)) worst_z = z;
     }
-    printf("25 stars Y106 20.5-22.5: all detected; %d with S/N > 100, largest offset %.4f px; aperture "
-           "correction (r = 2.5 px) %.4f; aperture-corrected flux - truth: chi2/N %.2f, worst %.2f sigma\n",
-           nsn100, worst_off, apcorr, chi2 / n, worst_z);
-    ck_assert_int_ge(nsn100, 10);
+    printf("25 stars Y106 20.5-22.5: all detected; %d with S/N > 100, median offset (%.4f, %.4f) px, largest "
+           "about it %.4f px; aperture correction (r = 2.5 px) %.4f; aperture-corrected flux - truth: chi2/N %.2f, "
+           "worst %.2f sigma\n", nsn100, medx, medy, worst_off, apcorr, chi2 / n, worst_z);
     ck_assert_double_lt(worst_off, 0.1);
     /* The Roman Y106 PSF puts ~70-85% of a star inside 0.27" (docs/OPTICS.md curves). */
     ck_assert_double_gt(apcorr, 1.0 / 0.9);
