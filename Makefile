@@ -61,7 +61,8 @@ $(shell mkdir -p $(BUILD) && printf '%s\n' '$(FLAGS_NOW)' > $(FLAGS))
 endif
 endif
 
-LAYERS  := hal firmware sim analysis tools
+LAYERS  := hal firmware $(patsubst %/,%,$(sort $(dir $(wildcard sim/*/*.c)))) analysis tools
+HEADERS := $(wildcard */*.h */*/*.h)
 LIBSRC  := $(filter-out tools/main.c tools/survey_mpi.c,$(foreach d,$(LAYERS),$(wildcard $(d)/*.c)))
 LIBOBJ  := $(LIBSRC:%.c=$(BUILD)/%.o)
 LIB     := $(BUILD)/libwfisim.a
@@ -89,7 +90,7 @@ all: $(PROG) $(if $(filter 1,$(MPI)),$(MPIPROG))
 deps:
 	+@$(INSTALL_DEPS)
 
-$(BUILD)/%.o: %.c $(wildcard */*.h) $(FLAGS)
+$(BUILD)/%.o: %.c $(HEADERS) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c $< -o $@
 
@@ -112,11 +113,11 @@ $(PROG): $(BUILD)/tools/main.o $(LIB) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(BUILD)/tools/main.o $(LIB) $(LDLIBS)
 
-$(BUILD)/tests/%: tests/%.c $(TESTUTIL) $(LIB) $(wildcard */*.h) $(FLAGS)
+$(BUILD)/tests/%: tests/%.c $(TESTUTIL) $(LIB) $(HEADERS) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $< $(TESTUTIL) $(LIB) $(TEST_LDLIBS) $(LDLIBS)
 
-$(BUILD)/mpi/%.o: tools/%.c $(wildcard */*.h) $(FLAGS)
+$(BUILD)/mpi/%.o: tools/%.c $(HEADERS) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(MPICC) $(CFLAGS) -DWF_MPI -c $< -o $@
 
@@ -141,7 +142,7 @@ run-bench: $(PROG)
 clean:
 	rm -rf build bin
 
-$(BUILD)/bench/%: bench/%.c $(LIB) $(wildcard */*.h) $(FLAGS)
+$(BUILD)/bench/%: bench/%.c $(LIB) $(HEADERS) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $< $(LIB) $(LDLIBS)
 
@@ -149,15 +150,15 @@ $(BUILD)/bench/%: bench/%.c $(LIB) $(wildcard */*.h) $(FLAGS)
 # extensions clang lacks, no parser in it) is built by gcc without instrumentation.
 FUZZ_SECONDS ?= 60
 FUZZ_JOBS    ?= 1
-FUZZ_GCC     := hal/noise_batch.c firmware/detector.c sim/profile.c
+FUZZ_GCC     := hal/noise_batch.c firmware/detector.c sim/draw/profile.c
 FUZZBIN := $(patsubst fuzz/%.c,$(BUILD)/bin/%,$(wildcard fuzz/fuzz_*.c))
 ifeq ($(FUZZ),1)
-$(FUZZ_GCC:%.c=$(BUILD)/%.o): $(BUILD)/%.o: %.c $(wildcard */*.h) $(FLAGS)
+$(FUZZ_GCC:%.c=$(BUILD)/%.o): $(BUILD)/%.o: %.c $(HEADERS) $(FLAGS)
 	@mkdir -p $(dir $@)
 	gcc $(filter-out -fsanitize=% -fno-sanitize-recover=% $(OPT),$(CFLAGS)) -O2 -c $< -o $@
 endif
 
-$(BUILD)/bin/fuzz_%: fuzz/fuzz_%.c $(BUILD)/fuzz/common.o $(LIB) $(wildcard */*.h) $(FLAGS)
+$(BUILD)/bin/fuzz_%: fuzz/fuzz_%.c $(BUILD)/fuzz/common.o $(LIB) $(HEADERS) $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(LDFLAGS) -fsanitize=fuzzer -o $@ $< $(BUILD)/fuzz/common.o $(LIB) $(LDLIBS)
 

@@ -1,6 +1,6 @@
 #include "analysis/coadd.h"
 #include "analysis/drizzle.h"
-#include "sim/fitsout.h"
+#include "sim/fits/fitsout.h"
 
 #include <errno.h>
 #include <fitsio.h>

@@ -22,7 +22,7 @@
 
 #include <stdint.h>
 #include "hal/status.h"
-#include "sim/wcs.h"
+#include "sim/survey/wcs.h"
 
 #define WF_COADD_PIXSCALE 0.0575 /* arcsec per output pixel */
 #define WF_COADD_PIXFRAC 0.7

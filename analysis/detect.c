@@ -10,10 +10,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sim/bandpass.h"
-#include "sim/fitsout.h"
-#include "sim/wcs.h"
-#include "tools/rampfit.h"
+#include "hal/dq.h"
+#include "sim/optics/bandpass.h"
+#include "sim/fits/fitsout.h"
+#include "sim/survey/wcs.h"
 
 #define DEG (M_PI / 180.0)
 

@@ -1,7 +1,7 @@
 #include "analysis/diff.h"
 #include "analysis/coadd.h"
-#include "sim/fitsout.h"
-#include "sim/wcs.h"
+#include "sim/fits/fitsout.h"
+#include "sim/survey/wcs.h"
 
 #include <fitsio.h>
 #include <math.h>

@@ -1,7 +1,7 @@
 /* Writes n synthetic products for the coadd benchmark: SIZE x SIZE pixels of SCA 1 about its
  * centre, Y106, sky 0.5 e-/s with Gaussian noise, ERR from it, 1 pixel in 500 flagged, each
  * at a dithered pointing (offsets up to 20 arcsec, PA within a degree: a deep-field visit's
- * dithers) with the SCA's WCS from sim/wcs.h. Prints the pointing's centre as "RA,DEC".
+ * dithers) with the SCA's WCS from sim/survey/wcs.h. Prints the pointing's centre as "RA,DEC".
  *   usage: bench_coadd DIR N SIZE */
 #include <fitsio.h>
 #include <math.h>
@@ -9,7 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sim/wcs.h"
+#include "sim/survey/wcs.h"
 
 int main(int argc, char **argv)
 {

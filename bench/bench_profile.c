@@ -18,7 +18,7 @@
 #include <string.h>
 #include <time.h>
 
-#include "sim/profile_int.h"
+#include "sim/draw/profile_int.h"
 #include "tools/config.h"
 #include "tools/pipeline.h"
 

@@ -15,9 +15,9 @@
 
 #include <fitsio.h>
 
-#include "sim/skyindex.h"
-#include "sim/synth.h"
-#include "sim/wcs.h"
+#include "sim/survey/skyindex.h"
+#include "sim/survey/synth.h"
+#include "sim/survey/wcs.h"
 #include "tools/sninject.h"
 
 static double now(void)

@@ -1,7 +1,7 @@
-/* Text catalogs (sim/catalog.c): the input as a galaxy catalog, a star catalog and a GalSim
+/* Text catalogs (sim/survey/catalog.c): the input as a galaxy catalog, a star catalog and a GalSim
  * benchmark scene, the three CSV readers (plain or gzip'd, recognised from the content). */
 #include "fuzz/common.h"
-#include "sim/catalog.h"
+#include "sim/survey/catalog.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {

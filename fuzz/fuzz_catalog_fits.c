@@ -1,7 +1,7 @@
-/* FITS catalogs (sim/catalog.c): the input as a galaxy and as a star catalog file, read by
+/* FITS catalogs (sim/survey/catalog.c): the input as a galaxy and as a star catalog file, read by
  * cfitsio through the same path as `scene.catalog` / `scene.stars`. */
 #include "fuzz/common.h"
-#include "sim/catalog.h"
+#include "sim/survey/catalog.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {

@@ -1,6 +1,6 @@
-/* SNANA HOSTLIB (sim/hostlib.c): the input as a host library, with its weight map. */
+/* SNANA HOSTLIB (sim/sn/hostlib.c): the input as a host library, with its weight map. */
 #include "fuzz/common.h"
-#include "sim/hostlib.h"
+#include "sim/sn/hostlib.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {

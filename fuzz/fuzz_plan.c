@@ -1,4 +1,4 @@
-/* Survey plan (sim/survey.c): the input as the plan.fits that `survey run` and `sn` read.
+/* Survey plan (sim/survey/survey.c): the input as the plan.fits that `survey run` and `sn` read.
  * The reader first verifies every HDU's CHECKSUM/DATASUM, which almost no mutation survives,
  * so each input is read twice: as it is, and with its checksums rewritten by cfitsio, so
  * that mutations reach the tables' parsing behind the check. */
@@ -6,7 +6,7 @@
 #include <stdlib.h>
 
 #include "fuzz/common.h"
-#include "sim/survey.h"
+#include "sim/survey/survey.h"
 
 static void read_plan(const char *path)
 {

@@ -1,4 +1,4 @@
-/* SALT model files (sim/salt.c). A model is three files in one directory, so an input is a
+/* SALT model files (sim/sn/salt.c). A model is three files in one directory, so an input is a
  * small archive: template_0, template_1 and color_correction in that order, separated by
  * lines "%%" (fewer parts leave the later files absent). The model that loads is then used
  * as the light-curve code uses it: colour law, flux on and off the grid by both
@@ -7,7 +7,7 @@
 #include <string.h>
 
 #include "fuzz/common.h"
-#include "sim/salt.h"
+#include "sim/sn/salt.h"
 
 static const char *const part_name[3] = {"salt3_template_0.dat", "salt3_template_1.dat",
                                          "salt3_color_correction.dat"};

@@ -9,7 +9,7 @@ total flux) that falls on a PIXEL_ARCSEC square pixel, the PSF centred on the im
 centre ((N-1)/2 in 0-based pixel units, a pixel corner for even N). One line per row, row 0
 (y) first, '%.15e' values; a first line '# peak <max> sum <sum>'.
 
-It shares no code and no method with sim/psf.c. What it follows is GalSim's documented
+It shares no code and no method with sim/optics/psf.c. What it follows is GalSim's documented
 conventions for galsim.roman.getPSF (OpticalPSF with an Aperture built from the pupil image):
   - pupil: DATA_DIR/roman/RST_WIM_Filter_{skinny|F184}_SCA_<n>.fits.gz (F184 for F184 and
     K213), its header's PIXELSCL (m per sample); binned as galsim.Image.bin does (sums of

@@ -1,4 +1,4 @@
-/* Filters, bandpasses and photometry (sim/bandpass.c), checked against values derived
+/* Filters, bandpasses and photometry (sim/optics/bandpass.c), checked against values derived
  * outside it:
  *  - the top-hat's moments against their closed forms (ln(hi/lo), (lo+hi)/2, ...);
  *  - the SED integrator against the AB closed form for a flat-f_ν spectrum;
@@ -14,7 +14,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
-#include "sim/bandpass.h"
+#include "sim/optics/bandpass.h"
 #include "tests/testutil.h"
 
 #define H_CGS 6.62607015e-27

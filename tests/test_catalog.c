@@ -1,5 +1,5 @@
-/* Catalogs (sim/catalog), the synthetic generator (sim/synth) and the spatial index
- * (sim/skyindex):
+/* Catalogs (sim/survey/catalog), the synthetic generator (sim/survey/synth) and the spatial index
+ * (sim/survey/skyindex):
  *  - readers: files written here by hand (CSV, gzip'd CSV, FITS through cfitsio directly)
  *    read back exactly; every kind of bad input gives its status and a message naming the
  *    file, the row and the column; the writers' files read back bit for bit; the GalSim
@@ -21,9 +21,9 @@
 #include <zlib.h>
 
 #include "hal/noise.h"
-#include "sim/catalog.h"
-#include "sim/skyindex.h"
-#include "sim/synth.h"
+#include "sim/survey/catalog.h"
+#include "sim/survey/skyindex.h"
+#include "sim/survey/synth.h"
 #include "tests/testutil.h"
 
 #define DEG (M_PI / 180.0)

@@ -15,8 +15,8 @@
 #include "analysis/coadd.h"
 #include "analysis/diff.h"
 #include "analysis/drizzle.h"
-#include "sim/fitsout.h"
-#include "sim/wcs.h"
+#include "sim/fits/fitsout.h"
+#include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 
 #define IN_SCALE 0.11 /* arcsec per input pixel */

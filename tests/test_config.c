@@ -549,7 +549,7 @@ START_TEST(test_time_limits)
 }
 END_TEST
 
-/* exposure.filter reads names as sim/bandpass.c does (any case; W149 is W146) and keeps the
+/* exposure.filter reads names as sim/optics/bandpass.c does (any case; W149 is W146) and keeps the
  * one name, from --set and from YAML; paths.data and paths.reference take a folder or
  * nothing. */
 START_TEST(test_filter_alias_and_dirs)

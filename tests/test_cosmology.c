@@ -1,4 +1,4 @@
-/* Flat ΛCDM distances (sim/cosmology.c), checked against values derived outside it:
+/* Flat ΛCDM distances (sim/sn/cosmology.c), checked against values derived outside it:
  *  - Einstein–de Sitter (Ωm = 1) and empty-Λ (Ωm = 0) closed forms;
  *  - the second-order series at tiny z;
  *  - composite Simpson in z, written here, for several Ωm up to z = 10;
@@ -10,7 +10,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "sim/cosmology.h"
+#include "sim/sn/cosmology.h"
 #include "tests/testutil.h"
 
 #define C_KMS 299792.458

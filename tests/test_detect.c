@@ -9,7 +9,7 @@
 #include <unistd.h>
 
 #include "analysis/detect.h"
-#include "sim/wcs.h"
+#include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 
 #define SMALL "--set readout.ncols=512 --set readout.nrows=512 --quiet"

@@ -1,4 +1,4 @@
-/* Tile-compressed product HDUs (sim/fitscomp.h): integer HDUs round-trip bit for bit, the
+/* Tile-compressed product HDUs (sim/fits/fitscomp.h): integer HDUs round-trip bit for bit, the
  * quantization of float HDUs adds the noise the step predicts and no bias (on pixels and on
  * aperture photometry of point sources), the bytes do not depend on the order or grouping
  * in which rows are written, and checksums verify. */
@@ -9,8 +9,8 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "sim/fitscomp.h"
-#include "sim/fitsout.h"
+#include "sim/fits/fitscomp.h"
+#include "sim/fits/fitsout.h"
 #include "tests/testutil.h"
 
 #define NX 512

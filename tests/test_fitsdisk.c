@@ -13,8 +13,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "sim/fitsdisk.h"
-#include "sim/fitsout.h"
+#include "sim/fits/fitsdisk.h"
+#include "sim/fits/fitsout.h"
 #include "tests/testutil.h"
 
 enum { NX = 301, NY = 37, NR = 3, TILE = 5 }; /* odd sizes: 16-bit words straddle rows */

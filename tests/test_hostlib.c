@@ -1,5 +1,5 @@
-/* SNANA HOSTLIB reader (sim/hostlib) and the a_rot convention through the SN placement
- * (sim/snhost):
+/* SNANA HOSTLIB reader (sim/sn/hostlib) and the a_rot convention through the SN placement
+ * (sim/sn/snhost):
  *  - the shared library ../shared/data/hosts/Akari_Hosts_subset_SNR_v7.HOSTLIB (skipped when
  *    absent): 5000 rows, RA/Dec/z ranges and the first row against an independent parse of
  *    the text; its WGTMAP against sSNR(AH18) × 10^logmass at every node;
@@ -17,8 +17,8 @@
 #include <time.h>
 #include <zlib.h>
 
-#include "sim/hostlib.h"
-#include "sim/snhost.h"
+#include "sim/sn/hostlib.h"
+#include "sim/sn/snhost.h"
 #include "tests/testutil.h"
 
 #define DEG (M_PI / 180.0)
@@ -193,7 +193,7 @@ END_TEST
 START_TEST(test_shared_wgtmap)
 {
     /* The file's WGT should be ∝ sSNR(AH18) × 10^logmass (SOURCE.txt). Compare the weight of
-     * sim/snhost at every node, after one scale fixed at the largest node; WGT is printed
+     * sim/sn/snhost at every node, after one scale fixed at the largest node; WGT is printed
      * with 7 decimals, so each may differ by 5e-8 from its exact value. */
     char path[4096];
     const char *p = shared_hostlib(path, sizeof path);
@@ -248,7 +248,7 @@ END_TEST
 static const char SMALL[] =
     "# a HOSTLIB written for the test\n"
     "DOCUMENTATION:\n"
-    "  PURPOSE: unit test of sim/hostlib\n"
+    "  PURPOSE: unit test of sim/sn/hostlib\n"
     "  NOTES:\n"
     "  - GAL: a row inside the documentation is not a row\n"
     "DOCUMENTATION_END:\n"

@@ -1,4 +1,4 @@
-/* The set-up's parallel loop (sim/parallel.h) and the arena's top split (hal/arena.h):
+/* The set-up's parallel loop (sim/numeric/parallel.h) and the arena's top split (hal/arena.h):
  * every task runs exactly once on a slot below the thread count; the error reported is
  * the lowest failing task's, with its message, whatever the timing; a split's memory lies
  * above everything kept from the bottom and comes back on join; an error message may wrap
@@ -10,7 +10,7 @@
 #include <string.h>
 
 #include "hal/arena.h"
-#include "sim/parallel.h"
+#include "sim/numeric/parallel.h"
 #include "tests/testutil.h"
 
 typedef struct counts {

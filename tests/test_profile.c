@@ -1,4 +1,4 @@
-/* Profiles (sim/profile*.c): galaxies (de Vaucouleurs bulge + exponential disk + knots) and
+/* Profiles (sim/draw/profile*.c): galaxies (de Vaucouleurs bulge + exponential disk + knots) and
  * point sources drawn with the PSF and the pixel.
  *
  * Against GalSim 2.8.4 (../shared/reference/galsim/, skipped when absent):
@@ -46,8 +46,8 @@
 
 #include "hal/arena.h"
 #include "hal/noise.h"
-#include "sim/profile.h"
-#include "sim/profile_int.h"
+#include "sim/draw/profile.h"
+#include "sim/draw/profile_int.h"
 #include "tests/testutil.h"
 
 #define P 0.11
@@ -1539,7 +1539,7 @@ static void core_plus_wing(wf_profile_work *work, const wf_profile_psf *psf, con
     free(sum.pix);
 }
 
-/* Core and wing (sim/profile.h): the wing table holds exactly the light the core lacks; an
+/* Core and wing (sim/draw/profile.h): the wing table holds exactly the light the core lacks; an
  * object whose wing error bound is not tolerated is drawn bit for bit as without the split;
  * one that takes it keeps its flux, moves no pixel by more than the bound 2 flux wing_max
  * and, when it is nearly a point, matches the unsplit draw closely; pieces are identical. */
@@ -1662,7 +1662,7 @@ START_TEST(test_core_wing)
 }
 END_TEST
 
-/* Core levels (sim/profile.h): radii halve level by level; the first level's tables are
+/* Core levels (sim/draw/profile.h): radii halve level by level; the first level's tables are
  * those of a one-core PSF, bit for bit; every wing holds exactly the light its core lacks,
  * and smaller cores leave more in the wing (the premise of taking the smallest allowed). A
  * galaxy takes the smallest core whose bound 2 flux wing_max its tolerance allows, gets a
@@ -1738,7 +1738,7 @@ START_TEST(test_psf_tables_threads)
 }
 END_TEST
 
-/* A core's table is the transform of the image times its taper T(r) (sim/profile.h: 1 within
+/* A core's table is the transform of the image times its taper T(r) (sim/draw/profile.h: 1 within
  * 2/3 of the radius, a raised cosine to 0 at it), which the tables read only within the
  * core's square: the core's flux and its table at low |k| (the pixel's sinc included, below
  * the band's taper) against sums over every sample of the image; the whole image's table
@@ -1989,7 +1989,7 @@ static wf_stamp draw_knots(ctx *c, const wf_galaxy *g, double x, double y, const
     return s;
 }
 
-/* The knot lattice (sim/profile.c "knot lattice") against the direct sum over knots, which
+/* The knot lattice (sim/draw/profile.c "knot lattice") against the direct sum over knots, which
  * it replaces where it is cheaper: the same stamps to its aliasing error, asserted 1e-7 of
  * the peak (reached 2e-9) and 1e-8 of the flux (reached 2e-10); with the planner's choice (some far knots
  * summed directly, the rest on the lattice) and with every knot forced onto the lattice.
@@ -2093,7 +2093,7 @@ END_TEST
  * give the same bits: a stamp does not depend on the machine's vector width. */
 /* acc.knot_accuracy (the lattice's aliasing e^-E, loosened for faint objects by a scene):
  * against the direct sum, no pixel moves by more than 10 knot_accuracy x the knots' flux, the
- * bound sim/scene.c relies on (measured up to 0.13), and looser settings do use narrower
+ * bound sim/draw/scene.c relies on (measured up to 0.13), and looser settings do use narrower
  * kernels or coarser lattices. */
 START_TEST(test_knot_accuracy)
 {

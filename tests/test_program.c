@@ -10,7 +10,7 @@
 #include <fitsio.h>
 #include <zlib.h>
 
-#include "sim/wcs.h"
+#include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 #include "tools/config.h"
 #include "tools/pipeline.h"

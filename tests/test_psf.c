@@ -1,4 +1,4 @@
-/* PSF from the pupil (sim/pupil.h, sim/psf.h): closed forms without data (Zernike values
+/* PSF from the pupil (sim/optics/pupil.h, sim/optics/psf.h): closed forms without data (Zernike values
  * and orthonormality, the exact Fourier sum against a brute-force one, an unobstructed
  * circular pupil against the Airy pattern, unit flux over a period, zero first moments of a
  * real pupil, exact pixel integration, chromatic linearity, blurs), the masks and Zernike
@@ -20,9 +20,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "sim/bandpass.h"
-#include "sim/psf.h"
-#include "sim/pupil.h"
+#include "sim/optics/bandpass.h"
+#include "sim/optics/psf.h"
+#include "sim/optics/pupil.h"
 #include "tests/testutil.h"
 #include "tools/psfcmd.h"
 
@@ -961,7 +961,7 @@ static char *read_text(const char *path)
 }
 
 /* GalSim's Quintic interpolant (its Interpolant.cpp formula); its Fourier response is
- * sim/psf.c's (wf_psf_draw_opts.galsim). */
+ * sim/optics/psf.c's (wf_psf_draw_opts.galsim). */
 static double quintic(double x)
 {
     x = fabs(x);
@@ -971,7 +971,7 @@ static double quintic(double x)
     return 0;
 }
 
-/* GalSim's Roman getPSF samples the PSF at λ/(N dx), N = info.galsim_n (sim/psf.h). */
+/* GalSim's Roman getPSF samples the PSF at λ/(N dx), N = info.galsim_n (sim/optics/psf.h). */
 static double galsim_sample_scale(const wf_psf_info *info, double lam)
 {
     return lam * 1e-9 / (info->galsim_n * info->pupil_dx) * ARCSEC_PER_RAD;

@@ -1,4 +1,4 @@
-/* Gauss–Legendre rules and the composite integrator (sim/quadrature.c), checked against
+/* Gauss–Legendre rules and the composite integrator (sim/numeric/quadrature.c), checked against
  * values derived here:
  *  - the tables' shape: ascending nodes, bitwise symmetric, weights summing to 2;
  *  - the nodes and weights computed afresh by Newton's method in long double;
@@ -9,7 +9,7 @@
 #include <math.h>
 #include <stdio.h>
 
-#include "sim/quadrature.h"
+#include "sim/numeric/quadrature.h"
 #include "tests/testutil.h"
 
 static const wf_quad_rule *const rules[] = {&wf_quad_gl3, &wf_quad_gl14, &wf_quad_gl16};

@@ -5,7 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sim/render.h"
+#include "sim/draw/render.h"
 #include "tests/testutil.h"
 
 typedef struct gauss { double x, y, sigma, flux, halo_sigma, halo_flux; } gauss;

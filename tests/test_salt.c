@@ -1,4 +1,4 @@
-/* SALT2/SALT3 light curves (sim/salt.c), checked against values derived outside it:
+/* SALT2/SALT3 light curves (sim/sn/salt.c), checked against values derived outside it:
  *  - a synthetic model written here (M0 linear in phase, M1 linear in wavelength, a linear
  *    colour law) whose band rates have closed forms: units, redshift, both interpolations,
  *    both evaluation paths, negative flux;
@@ -19,8 +19,8 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "sim/bandpass.h"
-#include "sim/salt.h"
+#include "sim/optics/bandpass.h"
+#include "sim/sn/salt.h"
 #include "tests/testutil.h"
 
 #define H_CGS 6.62607015e-27

@@ -8,13 +8,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sim/bandpass.h"
-#include "sim/catalog.h"
-#include "sim/profile.h"
-#include "sim/psf.h"
-#include "sim/pupil.h"
-#include "sim/scene.h"
-#include "sim/wcs.h"
+#include "sim/optics/bandpass.h"
+#include "sim/survey/catalog.h"
+#include "sim/draw/profile.h"
+#include "sim/optics/psf.h"
+#include "sim/optics/pupil.h"
+#include "sim/draw/scene.h"
+#include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 
 #define W 256
@@ -153,7 +153,7 @@ START_TEST(galaxies_edges_and_extremes)
 }
 END_TEST
 
-/* scene.noise_tolerance (sim/scene.h): per object, folding, the Fourier cut, the knot
+/* scene.noise_tolerance (sim/draw/scene.h): per object, folding, the Fourier cut, the knot
  * lattice and the split PSF's wing are loosened, and knots drawn as the smooth disk, only as
  * far as their error bounds stay below tau x one pixel's sky noise over the exposure.
  * Against the same scene with tau = 0 (galaxies with the disk's largest knot share): no

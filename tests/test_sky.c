@@ -1,4 +1,4 @@
-/* Sky background (sim/sky.c), checked against values derived outside it:
+/* Sky background (sim/optics/sky.c), checked against values derived outside it:
  *  - the Sun's longitude at equinoxes and solstices (published instants, UTC), which are
  *    0°, 90°, 180°, 270° of apparent longitude of date by definition;
  *  - the ecliptic rotation at points whose ecliptic coordinates are known exactly (the
@@ -13,7 +13,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
-#include "sim/sky.h"
+#include "sim/optics/sky.h"
 #include "tests/testutil.h"
 
 #define DEG (M_PI / 180.0)

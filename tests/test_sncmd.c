@@ -9,12 +9,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sim/catalog.h"
-#include "sim/cosmology.h"
-#include "sim/hostlib.h"
-#include "sim/sncat.h"
-#include "sim/snhost.h"
-#include "sim/snrate.h"
+#include "sim/survey/catalog.h"
+#include "sim/sn/cosmology.h"
+#include "sim/sn/hostlib.h"
+#include "sim/sn/sncat.h"
+#include "sim/sn/snhost.h"
+#include "sim/sn/snrate.h"
 #include "tests/testutil.h"
 
 static double header_double(const char *path, const char *key)

@@ -1,4 +1,4 @@
-/* Supernova hosts (sim/snhost):
+/* Supernova hosts (sim/sn/snhost):
  *  - weights against the closed form sSNR × M*, with the sSFR clamp at both ends;
  *  - host choice: frequencies against the weight ratio (4σ), the redshift window (fixed and
  *    polynomial), hostless SNe, candidate counts against a brute-force scan of a
@@ -18,9 +18,9 @@
 #include <time.h>
 
 #include "hal/noise.h"
-#include "sim/catalog.h"
-#include "sim/profile.h"
-#include "sim/snhost.h"
+#include "sim/survey/catalog.h"
+#include "sim/draw/profile.h"
+#include "sim/sn/snhost.h"
 #include "tests/testutil.h"
 
 #define ARCSEC_PER_RAD 206264.80624709636

@@ -10,10 +10,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sim/bandpass.h"
-#include "sim/salt.h"
-#include "sim/sncat.h"
-#include "sim/wcs.h"
+#include "sim/optics/bandpass.h"
+#include "sim/sn/salt.h"
+#include "sim/sn/sncat.h"
+#include "sim/survey/wcs.h"
 #include "tools/sninject.h"
 #include "tests/testutil.h"
 

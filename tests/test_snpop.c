@@ -1,4 +1,4 @@
-/* SN Ia population (sim/snpop.c), checked against values derived outside it:
+/* SN Ia population (sim/sn/snpop.c), checked against values derived outside it:
  *  - sample mean and variance of x1, c and δ over 2e5 SNe against the moments of the
  *    truncated asymmetric Gaussian, computed here by Simpson integration of the density
  *    (4σ, σ from the 4th central moment for the variance);
@@ -11,8 +11,8 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "sim/snpop.h"
-#include "sim/snrate.h"
+#include "sim/sn/snpop.h"
+#include "sim/sn/snrate.h"
 #include "tests/testutil.h"
 
 #define NDRAW 200000

@@ -1,4 +1,4 @@
-/* SN Ia rates, counts and redshift draws (sim/snrate.c), checked against values derived
+/* SN Ia rates, counts and redshift draws (sim/sn/snrate.c), checked against values derived
  * outside it:
  *  - the expected count per deg² over two Julian years (730.5 d) for the SPEC §5 law, by a
  *    composite Simpson rule written here on this file's own H(z) and D_C, and by astropy +
@@ -13,7 +13,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "sim/snrate.h"
+#include "sim/sn/snrate.h"
 #include "tests/testutil.h"
 
 #define C_KMS 299792.458

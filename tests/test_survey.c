@@ -10,9 +10,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "sim/fitsout.h"
-#include "sim/survey.h"
-#include "sim/wcs.h"
+#include "sim/fits/fitsout.h"
+#include "sim/survey/survey.h"
+#include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 #include "tools/surveycmd.h"
 

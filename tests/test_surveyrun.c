@@ -10,8 +10,8 @@
 #include <string.h>
 #include <sys/stat.h>
 
-#include "sim/fitsout.h"
-#include "sim/sncat.h"
+#include "sim/fits/fitsout.h"
+#include "sim/sn/sncat.h"
 #include "tests/testutil.h"
 #include "tools/surveyrun.h"
 

@@ -1,4 +1,4 @@
-/* sim/trig.h against long double references: cosl and sinl of the angle formed in long
+/* sim/numeric/trig.h against long double references: cosl and sinl of the angle formed in long
  * double (64-bit mantissa), so that the reference's own rounding of 2 pi u or of x is ~2000x
  * below the double results' errors being measured. */
 #include <check.h>
@@ -6,7 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 
-#include "sim/trig.h"
+#include "sim/numeric/trig.h"
 #include "tests/testutil.h"
 
 #define PI_L 3.141592653589793238462643383279502884L

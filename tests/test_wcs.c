@@ -12,7 +12,7 @@
 #include <sys/stat.h>
 #include <sys/wait.h>
 
-#include "sim/wcs.h"
+#include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 
 #define RA_A 71.0

@@ -14,14 +14,14 @@
 #include "hal/arena.h"
 #include "hal/link.h"
 #include "hal/scene.h"
-#include "sim/bandpass.h"
-#include "sim/catalog.h"
-#include "sim/profile.h"
-#include "sim/psf.h"
-#include "sim/scene.h"
-#include "sim/skyindex.h"
-#include "sim/synth.h"
-#include "sim/wcs.h"
+#include "sim/optics/bandpass.h"
+#include "sim/survey/catalog.h"
+#include "sim/draw/profile.h"
+#include "sim/optics/psf.h"
+#include "sim/draw/scene.h"
+#include "sim/survey/skyindex.h"
+#include "sim/survey/synth.h"
+#include "sim/survey/wcs.h"
 #include "tools/assemble.h"
 #include "tools/config.h"
 #include "tools/expose.h"
@@ -1029,7 +1029,7 @@ static wf_status sweep_scene(acc_run *run)
         const char *v[4] = {"0.99", "0.995", "0.999", "0.9999"};
         if ((st = render_knob(run, &in, tcase, "flux_fraction", s, v, 4, 3))) goto out;
     }
-    { /* per-object knobs from the sky noise (sim/scene.h), with the default split PSF */
+    { /* per-object knobs from the sky noise (sim/draw/scene.h), with the default split PSF */
         render_setting s[4] = {{8, 4, 256, 0.995, 3.0, 2.0, 1, 0}, {8, 4, 256, 0.995, 1.0, 2.0, 1, 0},
                                {8, 4, 256, 0.995, 0.3, 2.0, 1, 0}, {8, 4, 256, 0.995, 0.0, 2.0, 1, 0}};
         const char *v[4] = {"3", "1", "0.3", "0"};

@@ -16,9 +16,9 @@
 #include "hal/arena.h"
 #include "hal/clock.h"
 #include "hal/packet.h"
-#include "sim/fitscomp.h"
-#include "sim/fitsdisk.h"
-#include "sim/fitsout.h"
+#include "sim/fits/fitscomp.h"
+#include "sim/fits/fitsdisk.h"
+#include "sim/fits/fitsout.h"
 #include "tools/rampfit.h"
 
 /* Per-row bookkeeping: which payloads have covered the row. Rows, not tiles, are the unit,

@@ -4,7 +4,7 @@
  * cube [resultant][y][x]); COSMICRAYS (cosmic-ray truth table) when cosmic rays are on;
  * CHECKSUM/DATASUM on every HDU (docs/PACKETS.md). Tiles are fitted and written as
  * they arrive (memory bounded by a tile, not the SCA). With `compress` the image HDUs are
- * tile-compressed (sim/fitscomp.h); with `drop_resultants` RESULTANTS is left out (a tile's
+ * tile-compressed (sim/fits/fitscomp.h); with `drop_resultants` RESULTANTS is left out (a tile's
  * resultants are then held until its SATURATION packet arrives: one tile in the readout's
  * order, more only if a stream sends them far apart). Written to "<name>.tmp" and renamed
  * only when every row arrived exactly once, so a damaged stream leaves no FITS behind. */

@@ -12,8 +12,8 @@
 #include <sys/stat.h>
 #include <yaml.h>
 
-#include "sim/bandpass.h"
-#include "sim/snpop.h"
+#include "sim/optics/bandpass.h"
+#include "sim/sn/snpop.h"
 
 /* Enum keys store the index of the chosen name as an int, so the choice lists below must
  * stay in the order of the C enums and the enums must be int-sized. */
@@ -58,7 +58,7 @@ typedef struct key_desc {
     const char *doc_default;     /* what the doc shows instead of the value, or NULL */
     double lo, hi;               /* numeric bounds, used when has_lo / has_hi */
     unsigned char has_lo, has_hi, lo_open, nonempty;
-    unsigned char filter;        /* KT_STRING: a filter name as sim/bandpass.c reads it (W149
+    unsigned char filter;        /* KT_STRING: a filter name as sim/optics/bandpass.c reads it (W149
                                   * is W146), stored under its one name */
     unsigned char dir;           /* KT_STRING: empty, or an existing directory */
     const char *const *choices;  /* NULL-terminated, KT_ENUM and restricted KT_STRING */
@@ -516,7 +516,7 @@ static void choices_text(const char *const *choices, char *buf, size_t n)
                                  choices[i]);
 }
 
-/* The filter names sim/bandpass.c reads, for messages and the reference. */
+/* The filter names sim/optics/bandpass.c reads, for messages and the reference. */
 static void filters_text(char *buf, size_t n)
 {
     size_t used = 0;
@@ -807,7 +807,7 @@ typedef struct load_ctx {
     int seen_line[NKEYS]; /* line where each key was set in this file, 0 if not */
 } load_ctx;
 
-/* survey.* keys live in sim/survey.c's own table; a YAML value (a scalar, or a sequence of
+/* survey.* keys live in sim/survey/survey.c's own table; a YAML value (a scalar, or a sequence of
  * scalars for lists such as survey.columns) goes there as "key=value" text. */
 static wf_status set_survey_node(load_ctx *lc, const char *name, yaml_node_t *vn, const where *w)
 {
@@ -1492,7 +1492,7 @@ void wf_config_write_doc(FILE *out)
           out);
     fputs("\n## `survey`\n"
           "\n"
-          "The deep-tier plan (`wfisim survey plan`, sim/survey.h, docs/SURVEY.md). Lists are YAML\n"
+          "The deep-tier plan (`wfisim survey plan`, sim/survey/survey.h, docs/SURVEY.md). Lists are YAML\n"
           "sequences or comma-separated text (`--set survey.exptimes=300,300,300,900`).\n"
           "\n",
           out);

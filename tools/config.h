@@ -10,7 +10,7 @@
 #include <stdio.h>
 #include "firmware/readout.h"
 #include "hal/clock.h"
-#include "sim/survey.h"
+#include "sim/survey/survey.h"
 
 #define WF_PATH_MAX 1024
 
@@ -58,7 +58,7 @@ typedef struct wf_config {
     double stamp_pool_mib;         /* scene.stamp_pool [32] */
     char data_dir[WF_PATH_MAX];    /* paths.data [$WFISIM_DATA or ""] */
     char reference_dir[WF_PATH_MAX]; /* paths.reference [$WFISIM_REFERENCE or ""] */
-    wf_survey_params survey;       /* survey.* (sim/survey.h keeps their table) */
+    wf_survey_params survey;       /* survey.* (sim/survey/survey.h keeps their table) */
     struct {                       /* sn.*: supernova generation (docs/SUPERNOVAE.md) */
         char model[WF_PATH_MAX];   /* SALT model directory ["": data/salt3/salt3-k21] */
         double h0, om;             /* flat LCDM [70, 0.315] */

@@ -9,7 +9,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
-#include "sim/fitsout.h"
+#include "sim/fits/fitsout.h"
 
 #ifndef WF_SOURCE_DIGEST
 #error "WF_SOURCE_DIGEST is defined by the Makefile (a digest of the program's sources)"

@@ -12,9 +12,9 @@
 
 #include "hal/link.h"
 #include "hal/scene.h"
-#include "sim/skyindex.h"
-#include "sim/synth.h"
-#include "sim/wcs.h"
+#include "sim/survey/skyindex.h"
+#include "sim/survey/synth.h"
+#include "sim/survey/wcs.h"
 #include "tools/assemble.h"
 #include "tools/expose.h"
 

@@ -8,8 +8,8 @@
 
 #include "hal/clock.h"
 #include "hal/scene.h"
-#include "sim/catalog.h"
-#include "sim/scene.h"
+#include "sim/survey/catalog.h"
+#include "sim/draw/scene.h"
 #include "tools/assemble.h"
 #include "tools/config.h"
 #include "tools/digest.h"

@@ -8,9 +8,9 @@
 #include <string.h>
 #include <time.h>
 
-#include "sim/bandpass.h"
-#include "sim/psf.h"
-#include "sim/fitsout.h"
+#include "sim/optics/bandpass.h"
+#include "sim/optics/psf.h"
+#include "sim/fits/fitsout.h"
 #include "tools/config.h"
 
 static const char *usage =
@@ -217,7 +217,7 @@ static wf_status write_fits(const psf_args *a, const wf_psf_info *info, const wf
     for (long i = 0; i < naxes[0] * naxes[1]; i++) sum += img[i];
     key_dbl(f, "STAMPSUM", sum, "sum of this stamp", &status);
     key_dbl(f, "BUILDSEC", round(secs * 1000) / 1000, "build + draw time, s", &status);
-    fits_write_key_str(f, "CREATOR", "wfisim psf", "sim/psf.c, docs/OPTICS.md", &status);
+    fits_write_key_str(f, "CREATOR", "wfisim psf", "sim/optics/psf.c, docs/OPTICS.md", &status);
     st = wf_fits_error(status, tmp, "writing the header");
     if (!st) st = wf_fits_reserve_checksum(f, tmp);
     if (!st) {

@@ -8,7 +8,7 @@
  * truncation to the stamp, the PSF centred on the image's true centre (GalSim's convention),
  * sampled every 0.11/K arcsec, with the pixel response when K = 1 (or --pixel on), and every
  * setting in the header. Without --wavelength the band's effective wavelength comes from
- * sim/bandpass.h (the data's effective-area curve, else the built-in top-hat); --sed flat is
+ * sim/optics/bandpass.h (the data's effective-area curve, else the built-in top-hat); --sed flat is
  * chromatic: N wavelengths across the band weighted by throughput / λ (photons from a source
  * flat in f_ν). Masks and aberrations come from DIR/roman/ (--data, else $WFISIM_DATA);
  * "--data none" or neither set: the analytic pupil without aberrations (docs/OPTICS.md). */

@@ -10,12 +10,8 @@
 
 #include <stdint.h>
 #include "hal/clock.h"
+#include "hal/dq.h"
 #include "hal/status.h"
-
-/* Data-quality bits, as Roman's pixel DQ (romancal / roman_datamodels dqflags). */
-#define WF_DQ_DO_NOT_USE 0x1u
-#define WF_DQ_SATURATED 0x2u
-#define WF_DQ_JUMP_DET 0x4u
 
 #define WF_RAMPFIT_POWER_LEVELS 6 /* Casertano's powers 0, 0.4, 1, 3, 6, 10 */
 

@@ -5,9 +5,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sim/bandpass.h"
-#include "sim/salt.h"
-#include "sim/sncat.h"
+#include "sim/optics/bandpass.h"
+#include "sim/sn/salt.h"
+#include "sim/sn/sncat.h"
 
 /* One light curve per (SN, filter), built on first use: the per-SN band integrals make every
  * later date cost a phase interpolation. */

@@ -8,8 +8,8 @@
 
 #include <stddef.h>
 #include "hal/status.h"
-#include "sim/scene.h"
-#include "sim/skyindex.h"
+#include "sim/draw/scene.h"
+#include "sim/survey/skyindex.h"
 
 typedef struct wf_sn_injector wf_sn_injector;
 

@@ -5,8 +5,8 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "sim/survey.h"
-#include "sim/wcs.h"
+#include "sim/survey/survey.h"
+#include "sim/survey/wcs.h"
 #include "tools/config.h"
 #include "tools/plot.h"
 #include "tools/surveyindex.h"

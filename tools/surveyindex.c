@@ -8,7 +8,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "sim/fitsout.h"
+#include "sim/fits/fitsout.h"
 #include "tools/config.h"
 
 /* An optional integer key of the primary header (-1 when absent: a product of wfisim expose). */

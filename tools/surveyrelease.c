@@ -4,8 +4,8 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "sim/catalog.h"
-#include "sim/sncat.h"
+#include "sim/survey/catalog.h"
+#include "sim/sn/sncat.h"
 #include "tools/pipeline.h"
 #include "tools/sncmd.h"
 

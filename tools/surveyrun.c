@@ -10,9 +10,9 @@
 #include <time.h>
 
 #include "hal/clock.h"
-#include "sim/fitsout.h"
-#include "sim/skyindex.h"
-#include "sim/survey.h"
+#include "sim/fits/fitsout.h"
+#include "sim/survey/skyindex.h"
+#include "sim/survey/survey.h"
 #include "tools/digest.h"
 #include "tools/pipeline.h"
 #include "tools/surveyrelease.h"
@@ -384,7 +384,7 @@ static wf_status write_manifest(wf_survey_ctx *ctx, const wf_survey_run_stats *s
 }
 
 /* Whether an SCA's footprint at this pointing overlaps the circle of --area: the footprint
- * grown by the radius holds the circle's centre (sim/skyindex.h, exact on the sphere). */
+ * grown by the radius holds the circle's centre (sim/survey/skyindex.h, exact on the sphere). */
 static wf_status in_area(const wf_config *cfg, const wf_survey_run_options *opt, int *inside)
 {
     wf_skyregion reg;

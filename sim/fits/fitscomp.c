@@ -1,0 +1,212 @@
+#include "sim/fits/fitscomp.h"
+#include "sim/fits/fitsout.h"
+
+#include <fitsio2.h>
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+/* cfitsio stores a requested quantize level of 0 (floats kept exact) as this (imcompress.c) */
+#define CFITSIO_NO_QUANTIZE 9999.0f
+
+int wf_fits_comp_dither_seed(uint64_t seed, uint32_t exposure, uint32_t sca)
+{
+    /* splitmix64's finaliser over the three keys: neighbouring exposures and SCAs get
+     * unrelated seeds */
+    uint64_t z = seed ^ ((uint64_t)exposure << 20) ^ ((uint64_t)sca << 52) ^ 0x9e3779b97f4a7c15ull;
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    z ^= z >> 31;
+    return (int)(z % 10000u) + 1;
+}
+
+wf_status wf_fits_part_create(const char *path, const wf_fits_comp *c, int bitpix, int naxis,
+                              long *naxes, fitsfile **f)
+{
+    if (!(c->quantize == 0 || c->quantize >= 1))
+        return wf_error(WF_ERR_RANGE, "%s: products.quantize_level %g: 0 (lossless) or at least 1", path, c->quantize);
+    if (c->dither_seed < 1 || c->dither_seed > 10000)
+        return wf_error(WF_ERR_INTERNAL, "%s: dither seed %d outside 1..10000", path, c->dither_seed);
+    unlink(path);
+    int status = 0;
+    const int is_float = bitpix == FLOAT_IMG || bitpix == DOUBLE_IMG;
+    long tile[3] = {naxes[0], 1, 1}; /* one row: any run of whole rows is whole tiles */
+    *f = NULL;
+    if (fits_create_diskfile(f, path, &status)) return wf_fits_error(status, path, "creating a part file");
+    fits_create_img(*f, BYTE_IMG, 0, NULL, &status);
+    fits_set_compression_type(*f, is_float && c->quantize == 0 ? GZIP_2 : RICE_1, &status);
+    fits_set_tile_dim(*f, naxis, tile, &status);
+    if (is_float) {
+        fits_set_quantize_level(*f, (float)c->quantize, &status);
+        /* dither 2 keeps exact zeros exact */
+        if (c->quantize > 0) fits_set_quantize_method(*f, SUBTRACTIVE_DITHER_2, &status);
+        fits_set_dither_seed(*f, c->dither_seed, &status);
+    }
+    fits_create_img(*f, bitpix, naxis, naxes, &status);
+    if (status) {
+        wf_status st = wf_fits_error(status, path, "creating a compressed image");
+        wf_fits_part_discard(*f, path);
+        *f = NULL;
+        return st;
+    }
+    return WF_OK;
+}
+
+void wf_fits_part_discard(fitsfile *f, const char *path)
+{
+    int status = 0;
+    if (f) fits_close_file(f, &status);
+    fits_clear_errmsg();
+    unlink(path);
+}
+
+/* Bytes of one heap element of column c (a 'P' or 'Q' descriptor column). */
+static int heap_width(fitsfile *f, int c, long *width, int *status)
+{
+    int type = 0;
+    long repeat = 0;
+    if (fits_get_coltype(f, c, &type, &repeat, width, status)) return *status;
+    if (*width < 1) *width = 1;
+    return 0;
+}
+
+static wf_status append(fitsfile *dst, const char *dst_path, fitsfile *part, const char *part_path)
+{
+    int status = 0;
+    if (fits_movabs_hdu(part, 2, NULL, &status) || fits_flush_file(part, &status))
+        return wf_fits_error(status, part_path, "finishing the compressed image");
+    /* the header as cfitsio wrote it (a binary table, NAXIS2 tiles, PCOUNT heap bytes) */
+    if (fits_copy_header(part, dst, &status)) return wf_fits_error(status, dst_path, "copying a compressed header");
+    LONGLONG ha, da, ea, hb, db, eb;
+    fits_get_hduaddrll(part, &ha, &da, &ea, &status);
+    fits_get_hduaddrll(dst, &hb, &db, &eb, &status);
+    if (status) return wf_fits_error(status, dst_path, "locating a compressed image");
+    FITSfile *A = part->Fptr, *B = dst->Fptr;
+    const LONGLONG nrows = A->numrows, fixed = A->rowlength * nrows;
+    size_t cap = (size_t)(fixed > 65536 ? fixed : 65536);
+    unsigned char *buf = malloc(cap);
+    if (!buf) return wf_error(WF_ERR_NOMEM, "%s: no memory to append a compressed image", dst_path);
+    /* the table rows (descriptors, ZSCALE and ZZERO) as they are; the descriptors are
+     * rewritten below */
+    ffmbyt(part, da, REPORT_EOF, &status);
+    ffgbyt(part, fixed, buf, &status);
+    ffmbyt(dst, db, IGNORE_EOF, &status);
+    ffpbyt(dst, fixed, buf, &status);
+    LONGLONG heap = 0;
+    for (LONGLONG r = 1; r <= nrows && !status; r++)
+        for (int c = 1; c <= A->tfield && !status; c++) {
+            if (A->tableptr[c - 1].tdatatype >= 0) continue; /* not a variable-length column */
+            LONGLONG len = 0, off = 0;
+            long width = 1;
+            if (ffgdesll(part, c, r, &len, &off, &status) || heap_width(part, c, &width, &status)) break;
+            LONGLONG nb = len * width;
+            if ((size_t)nb > cap) {
+                unsigned char *p = realloc(buf, (size_t)nb);
+                if (!p) {
+                    free(buf);
+                    return wf_error(WF_ERR_NOMEM, "%s: no memory for a compressed tile of %lld bytes", dst_path,
+                                    (long long)nb);
+                }
+                buf = p;
+                cap = (size_t)nb;
+            }
+            if (nb > 0) {
+                ffmbyt(part, da + A->heapstart + off, REPORT_EOF, &status);
+                ffgbyt(part, nb, buf, &status);
+                ffmbyt(dst, db + B->heapstart + heap, IGNORE_EOF, &status);
+                ffpbyt(dst, nb, buf, &status);
+            }
+            ffpdes(dst, c, r, len, nb > 0 ? heap : 0, &status);
+            heap += nb;
+        }
+    free(buf);
+    if (status) return wf_fits_error(status, dst_path, "appending a compressed image");
+    if (heap != A->heapsize) {
+        /* tiles written twice left dead bytes in the part's heap: none are copied */
+        fits_modify_key_lng(dst, "PCOUNT", heap, "&", &status);
+        B->heapsize = heap;
+        ffrdef(dst, &status);
+        if (status) return wf_fits_error(status, dst_path, "setting PCOUNT of a compressed image");
+    }
+    return WF_OK;
+}
+
+wf_status wf_fits_part_append(fitsfile *dst, const char *dst_path, fitsfile *part, const char *part_path)
+{
+    wf_status st = append(dst, dst_path, part, part_path);
+    wf_fits_part_discard(part, part_path);
+    return st;
+}
+
+/* The k-th smallest of v[0..n-1] (v is reordered): Hoare's selection, median-of-three
+ * pivot. The value is the k-th order statistic whatever the partitioning, so it is exact
+ * and deterministic. */
+static float select_kth(float *v, long n, long k)
+{
+    long lo = 0, hi = n - 1;
+    while (hi > lo) {
+        long mid = lo + (hi - lo) / 2;
+        float a = v[lo], b = v[mid], c = v[hi];
+        float p = a < b ? (b < c ? b : (a < c ? c : a)) : (a < c ? a : (b < c ? c : b));
+        long i = lo, j = hi;
+        while (i <= j) {
+            while (v[i] < p) i++;
+            while (v[j] > p) j--;
+            if (i <= j) {
+                float t = v[i];
+                v[i++] = v[j];
+                v[j--] = t;
+            }
+        }
+        if (k <= j) hi = j;
+        else if (k >= i) lo = i;
+        else return v[k];
+    }
+    return v[k];
+}
+
+double wf_fits_row_noise(const float *row, long n, float *scratch)
+{
+    /* third-order differences 2 x_i - x_(i-2) - x_(i+2): smooth signal (sky gradients,
+     * the wings of sources) cancels, the noise of independent pixels is sqrt 6 sigma; the
+     * median of their absolute values is 0.6745 sqrt 6 sigma for Gaussian noise, robust to
+     * the few pixels a source or a cosmic ray takes */
+    long m = 0;
+    for (long i = 2; i + 2 < n; i++) {
+        float d = fabsf(2.0f * row[i] - row[i - 2] - row[i + 2]);
+        if (isfinite(d)) scratch[m++] = d;
+    }
+    if (m < 1) return 0;
+    return 0.6052697 * select_kth(scratch, m, (m - 1) / 2);
+}
+
+int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, long nrows, void *data, int *status)
+{
+    if (*status) return *status;
+    /* the part's q as fits_set_quantize_level stored it (0 as NO_QUANTIZE: exact floats);
+     * cfitsio takes the requested level as each tile is compressed */
+    const float q = f->Fptr->request_quantize_level;
+    if (type != TFLOAT || !(q > 0) || q == CFITSIO_NO_QUANTIZE || ncols < 5)
+        return fits_write_img(f, type, row0 * ncols + 1, (LONGLONG)nrows * ncols, data, status);
+    float *scratch = malloc((size_t)ncols * sizeof *scratch);
+    if (!scratch) return *status = MEMORY_ALLOCATION;
+    for (long r = 0; r < nrows && !*status; r++) {
+        float *row = (float *)data + (size_t)r * (size_t)ncols;
+        const double step = wf_fits_row_noise(row, ncols, scratch) / q;
+        /* a negative level is cfitsio's absolute step; a row without noise to measure (a
+         * constant or integer row) is left to cfitsio's own rules */
+        const float level = step > 0 && isfinite(step) ? -(float)step : q;
+        /* cfitsio compresses a tile with quantize_level and refreshes that from the request
+         * at times of its own (a tile late, observed): both are set */
+        fits_set_quantize_level(f, level, status);
+        f->Fptr->quantize_level = level;
+        fits_write_img(f, TFLOAT, (row0 + r) * ncols + 1, ncols, row, status);
+    }
+    int st = 0;
+    fits_set_quantize_level(f, q, &st);
+    f->Fptr->quantize_level = q;
+    free(scratch);
+    return *status;
+}
