@@ -968,21 +968,26 @@ END_TEST
 START_TEST(linear_rate_direct) { check_linear(WF_SAMPLE_DIRECT); }
 END_TEST
 
-/* A grid scene behind a wrapper that records the rows it was asked for and, for instance 1,
- * takes its time: the fast instance finishes its run and takes the back of the slow one's. */
+/* A grid scene behind a wrapper that records the rows it was asked for; instance 1 does not
+ * draw its first tile until instance 0 has taken one of its run's (or 10 s have passed), so
+ * the fast instance finishes its run and takes the back of the slow one's whatever the
+ * machine's scheduling (a fixed delay made this depend on how soon thread 0 got a core). */
 typedef struct slow_source {
     wf_scene_source inner;
-    int delay_us;
-    int max_y0; /* the furthest row asked for */
+    int slow;
+    _Atomic int max_y0; /* the furthest row asked for */
+    _Atomic int *other_max_y0;
+    int other_from;     /* the first row of this instance's run */
 } slow_source;
 
 static wf_status slow_fill(void *ctx, int y0, int y1, int ncols, float *rate)
 {
     slow_source *s = ctx;
-    if (s->delay_us) {
-        struct timespec ts = {0, (long)s->delay_us * 1000};
-        nanosleep(&ts, NULL);
-    }
+    if (s->slow)
+        for (int i = 0; i < 10000 && *s->other_max_y0 < s->other_from; i++) {
+            struct timespec ts = {0, 1000000};
+            nanosleep(&ts, NULL);
+        }
     if (y0 > s->max_y0) s->max_y0 = y0;
     return s->inner.fill_rate(s->inner.ctx, y0, y1, ncols, rate);
 }
@@ -1004,7 +1009,8 @@ START_TEST(tiles_taken_from_a_slow_thread)
     decode(buf, len, &ref);
     free(buf);
 
-    slow_source ss[2] = {{grid, 0, -1}, {grid, 20000, -1}};
+    slow_source ss[2] = {{grid, 0, -1, NULL, 0}, {grid, 1, -1, NULL, 64}};
+    ss[1].other_max_y0 = &ss[0].max_y0;
     wf_scene_source scenes[2];
     for (int i = 0; i < 2; i++) scenes[i] = (wf_scene_source){&ss[i], slow_fill, NULL, NULL};
     wf_link_memory mem;
