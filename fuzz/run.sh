@@ -45,7 +45,7 @@ if [ "${1:-}" = --one ]; then
   if [ $rc = 0 ]; then result=clean; else result="FAILED (exit $rc, see $log)"; fi
   printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$((end - start))" "$cpu" \
     "${execs:-?}" "${rate:-?}" "${cov:-?}" "${ft:-?}" "${rss:-?}" "$crashes" "$result" \
-    >"$out/logs/$t.row"
+    >"$out/logs/$([ "$smoke" = 1 ] && echo smoke/)$t.row"
   echo "fuzz: $t: $result, $((end - start)) s, ${execs:-?} executions, cov ${cov:-?}" >&2
   exit $rc
 fi
@@ -53,12 +53,23 @@ fi
 smoke=0
 [ "${1:-}" = --smoke ] && { smoke=1; shift; }
 [ $# -gt 0 ] || { echo "usage: fuzz/run.sh [--smoke] build/fuzz/bin/fuzz_T..." >&2; exit 2; }
-mkdir -p "$out/logs"
+# smoke rows apart from fuzzing rows: a smoke run never stands in a fuzzing table
+rows=$out/logs
+[ $smoke = 1 ] && rows=$out/logs/smoke
+mkdir -p "$rows"
 # the table keeps the last row of every target, so one target can be run again alone
-for bin in "$@"; do rm -f "$out/logs/${bin##*/fuzz_}.row"; done
+for bin in "$@"; do rm -f "$rows/${bin##*/fuzz_}.row"; done
 status=0
 printf '%s\n' "$@" | xargs -n 1 -P "$jobs" "$0" --one "$smoke" || status=1
 
+# A full run of some targets keeps the other targets' rows of docs/FUZZ.md (a fresh tree has
+# no build/fuzz/logs), so the table always has every target's latest run.
+if [ $smoke = 0 ] && [ -f docs/FUZZ.md ]; then
+  grep -E '^\| [a-z_]+ \| [0-9]' docs/FUZZ.md | while IFS= read -r row; do
+    t=$(echo "$row" | cut -d'|' -f2 | tr -d ' ')
+    [ -e fuzz/fuzz_"$t".c ] && [ ! -e "$out/logs/$t.row" ] && printf '%s\n' "$row" >"$out/logs/$t.row"
+  done
+fi
 summary=$out/summary.md
 cpu=$(sed -n 's/^model name[^:]*: *//p' /proc/cpuinfo | head -n 1)
 cc=$(${FUZZ_CC:-clang} --version | head -n 1)
@@ -75,7 +86,7 @@ commit=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
   echo
   echo "| target | seconds | CPU s | executions | exec/s | cov | features | peak RSS MiB | crash files | result |"
   echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"
-  cat "$out"/logs/*.row
+  cat "$rows"/*.row
 } >"$summary"
 [ $smoke = 1 ] || cp "$summary" docs/FUZZ.md
 cat "$summary"
