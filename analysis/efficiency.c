@@ -520,14 +520,12 @@ static wf_status score_line(const char *list_path, const line *ln, const wf_eff_
         return st;
     }
     int fi = 0;
-    if (o->types & (1 << WF_EFF_SN)) {
-        if (!im.filter[0])
-            st = wf_error(WF_ERR_INPUT, "%s:%d: %s: no FILTER keyword (the SNANA map is per filter)", list_path,
-                          ln->lineno, ln->image);
-        else if ((fi = filter_index(r, im.filter)) < 0)
-            st = wf_error(WF_ERR_INPUT, "%s:%d: %s: more than %d filters in one list", list_path, ln->lineno,
-                          ln->image, MAX_FILTERS);
-    }
+    if (!im.filter[0] && (o->types & (1 << WF_EFF_SN)))
+        st = wf_error(WF_ERR_INPUT, "%s:%d: %s: no FILTER keyword (the SNANA map is per filter)", list_path,
+                      ln->lineno, ln->image);
+    else if (im.filter[0] && (fi = filter_index(r, im.filter)) < 0)
+        st = wf_error(WF_ERR_INPUT, "%s:%d: %s: more than %d filters in one list", list_path, ln->lineno, ln->image,
+                      MAX_FILTERS);
     /* the truth objects of the scored types, whether the image sees them or not: an unseen
      * object still owns the detection its light makes at the edge or around a masked pixel */
     long ns = 0;

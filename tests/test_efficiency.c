@@ -563,6 +563,160 @@ START_TEST(bad_input_is_refused)
 }
 END_TEST
 
+/* ---- end to end on a wfisim exposure ---- */
+
+#define SMALL "--set readout.ncols=512 --set readout.nrows=512 --quiet"
+#define GRID 20
+#define NCAL 20 /* the first row: bright stars whose pixels give the PSF */
+
+/* GRID x GRID stars 25 px apart at the default pointing (SCA 1, the built-in WCS: the truth
+ * table holds the pixel positions the renderer used, whatever focal plane the program reads):
+ * the first row at Y106 21, the others spread evenly over 23.5..28 in a shuffled order. */
+static void write_star_field(const char *path)
+{
+    wf_focal_plane fp;
+    wf_wcs w;
+    wf_wcs_focal_plane_builtin(&fp);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, 71.0, -53.0, 30.0, 1, &w), WF_OK);
+    FILE *f = fopen(path, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "id,ra,dec,mag_Y106\n");
+    int nf = GRID * GRID - NCAL;
+    for (int k = 0; k < GRID * GRID; k++) {
+        double x = 18 + 25 * (k % GRID) + 0.37 * ((k * 3) % 7) / 7.0, y = 18 + 25 * (k / GRID) + 0.29 * ((k * 5) % 11) / 11.0;
+        double ra, dec, mag = 21.0;
+        if (k >= NCAL) mag = 23.5 + 4.5 * (double)(((k - NCAL) * 149) % nf) / (nf - 1);
+        ck_assert_int_eq(wf_wcs_pix2world(&w, x, y, &ra, &dec), WF_OK);
+        fprintf(f, "%d,%.10f,%.10f,%.4f\n", k + 1, ra, dec, mag);
+    }
+    fclose(f);
+}
+
+static int cmp_desc(const void *a, const void *b)
+{
+    double u = *(const double *)a, v = *(const double *)b;
+    return (u < v) - (u > v);
+}
+
+static void read_plane(fitsfile *f, const char *name, float *buf, long n)
+{
+    int status = 0;
+    fits_movnam_hdu(f, IMAGE_HDU, (char *)name, 0, &status);
+    fits_read_img(f, TFLOAT, 1, n, NULL, buf, NULL, &status);
+    ck_assert_int_eq(status, 0);
+}
+
+/* The magnitude at which detection should find half of the stars, from the image alone:
+ * detection thresholds the image filtered by the normalised 3x3 pyramid at 1.5 ERR and needs
+ * 5 connected pixels above it, so a star of flux F is found about half the time when the
+ * 5th brightest pixel of its filtered profile, F q5, sits at the threshold 1.5 sigma
+ * (noise is symmetric about it): F50 = 1.5 sigma / q5. sigma is the median ERR; q5 comes from
+ * the bright stars' own pixels (sky-subtracted, divided by their true flux), so the PSF and
+ * the pixel phases are the image's. Also the 5-sigma PSF-fit depth, 5 sigma sqrt(N_eff). */
+static void expected_depth(const char *product, const char *truth, double *m50, double *m5)
+{
+    enum { N = 512 };
+    static float sci[N * N], err[N * N], work[N * N];
+    fitsfile *f = NULL;
+    int status = 0;
+    fits_open_file(&f, product, READONLY, &status);
+    ck_assert_int_eq(status, 0);
+    read_plane(f, "SCI", sci, (long)N * N);
+    read_plane(f, "ERR", err, (long)N * N);
+    fits_close_file(f, &status);
+    static double v[N * N];
+    for (int i = 0; i < N * N; i++) v[i] = err[i];
+    qsort(v, N * N, sizeof *v, cmp_desc);
+    double sigma = v[N * N / 2];
+    for (int i = 0; i < N * N; i++) v[i] = sci[i];
+    qsort(v, N * N, sizeof *v, cmp_desc);
+    double sky = v[N * N / 2];
+    (void)work;
+    /* the truth of the bright stars */
+    double x[NCAL], y[NCAL], flux[NCAL], mag[NCAL];
+    fits_open_table(&f, truth, READONLY, &status);
+    int col;
+    const char *names[4] = {"X", "Y", "FLUX", "MAG"};
+    double *dst[4] = {x, y, flux, mag};
+    for (int c = 0; c < 4; c++) {
+        fits_get_colnum(f, CASEINSEN, (char *)names[c], &col, &status);
+        fits_read_col(f, TDOUBLE, col, 1, 1, NCAL, NULL, dst[c], NULL, &status);
+    }
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    double q5[NCAL], neff[NCAL], zp = mag[0] + 2.5 * log10(flux[0]);
+    for (int s = 0; s < NCAL; s++) {
+        ck_assert_double_lt(mag[s], 21.5);
+        int cx = (int)lround(x[s] - 1), cy = (int)lround(y[s] - 1);
+        double st[11][11], filt[81], sum2 = 0;
+        for (int j = 0; j < 11; j++)
+            for (int i = 0; i < 11; i++) {
+                st[j][i] = (sci[(cy - 5 + j) * N + cx - 5 + i] - sky) / flux[s];
+                sum2 += st[j][i] * st[j][i];
+            }
+        static const double k3[3][3] = {{1, 2, 1}, {2, 4, 2}, {1, 2, 1}};
+        for (int j = 1; j < 10; j++)
+            for (int i = 1; i < 10; i++) {
+                double a = 0;
+                for (int dj = -1; dj <= 1; dj++)
+                    for (int di = -1; di <= 1; di++) a += k3[dj + 1][di + 1] / 16.0 * st[j + dj][i + di];
+                filt[(j - 1) * 9 + i - 1] = a;
+            }
+        qsort(filt, 81, sizeof *filt, cmp_desc);
+        q5[s] = filt[4], neff[s] = 1 / sum2;
+    }
+    qsort(q5, NCAL, sizeof *q5, cmp_desc);
+    qsort(neff, NCAL, sizeof *neff, cmp_desc);
+    double q = 0.5 * (q5[NCAL / 2 - 1] + q5[NCAL / 2]), ne = 0.5 * (neff[NCAL / 2 - 1] + neff[NCAL / 2]);
+    *m50 = zp - 2.5 * log10(1.5 * sigma / q);
+    *m5 = zp - 2.5 * log10(5 * sigma * sqrt(ne));
+    printf("image: sky %.4f e-/s, median ERR %.4f e-/s, AB zero point %.4f; bright stars: 5th filtered pixel "
+           "%.4f of the flux, N_eff %.2f px; expected m50 %.3f, 5-sigma PSF depth %.3f\n", sky, sigma, zp, q, ne,
+           *m50, *m5);
+}
+
+/* wfisim expose of a star field, wfisim detect, wfisim efficiency: every bright star found,
+ * no false detections to speak of, and the fitted m50 where the image's noise and PSF put it. */
+START_TEST(end_to_end_star_field)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char stars[4200], product[4300], truth[4300], cat[4300], lst[4300], text[20000], path[4400];
+    snprintf(stars, sizeof stars, "%s/stars.csv", d);
+    write_star_field(stars);
+    ck_assert_int_eq(wf_test_run("%s expose " SMALL " --set scene.kind=catalog --set scene.stars=%s --out %s", bin,
+                                 stars, d), 0);
+    snprintf(product, sizeof product, "%s/wfisim_e000001_sca01.fits", d);
+    snprintf(truth, sizeof truth, "%s/wfisim_e000001_sca01_truth.fits", d);
+    snprintf(cat, sizeof cat, "%s/cat.fits", d);
+    ck_assert_int_eq(wf_test_run("%s detect %s --out %s --quiet", bin, product, cat), 0);
+    snprintf(lst, sizeof lst, "%s/single.list", d);
+    snprintf(text, sizeof text, "# IMAGE DETCAT TRUTH\n%s %s %s\n", product, cat, truth);
+    write_text(lst, text);
+    ck_assert_int_eq(wf_test_run("%s efficiency --label single --out %s/eff --types star %s", bin, d, lst), 0);
+    snprintf(path, sizeof path, "%s/eff/single_summary.json", d);
+    double m50 = json_value(path, "m50_star"), err = json_value(path, "m50_err_star");
+    double n_true = json_value(path, "n_true_star"), n_false = json_value(path, "n_false");
+    double det = json_value(path, "n_det");
+    char tstars[4400];
+    snprintf(tstars, sizeof tstars, "%s[STARS]", truth);
+    double expect, m5;
+    expected_depth(product, tstars, &expect, &m5);
+    printf("efficiency: %.0f stars, %.0f detections, %.0f false; m50 %.3f +- %.3f (expected %.3f)\n", n_true, det,
+           n_false, m50, err, expect);
+    ck_assert_double_eq(n_true, GRID * GRID);
+    ck_assert(isfinite(m50) && err > 0 && err < 0.1);
+    snprintf(path, sizeof path, "%s/eff/single_efficiency.csv", d);
+    long n, k;
+    double eff, lo, hi;
+    ck_assert(csv_row(path, "star", 21.0, &n, &k, &eff, &lo, &hi));
+    ck_assert_int_eq(n, NCAL);
+    ck_assert_int_eq(k, NCAL);
+    ck_assert_double_lt(fabs(m50 - expect), 0.35 + 3 * err);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("efficiency");
@@ -574,6 +728,7 @@ static Suite *suite(void)
     tcase_add_test(tc, counts_on_synthetic_files);
     tcase_add_test(tc, snana_map_of_known_curve);
     tcase_add_test(tc, bad_input_is_refused);
+    tcase_add_test(tc, end_to_end_star_field);
     suite_add_tcase(s, tc);
     return s;
 }
