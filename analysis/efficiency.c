@@ -12,6 +12,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "sim/fitscheck.h"
 #include "sim/wcs.h"
 #include "tools/plot.h"
 #include "tools/rampfit.h"
@@ -50,6 +51,15 @@ wf_status wf_eff_parse_types(const char *s, int *types)
 }
 
 /* ---- the list ---- */
+
+/* The message of the error st, prefixed with the list line it came from. */
+static wf_status at_line(wf_status st, const char *list_path, int lineno)
+{
+    char msg[2048];
+    snprintf(msg, sizeof msg, "%s", wf_error_message());
+    return wf_error(st, "%s:%d: %s", list_path, lineno, msg);
+}
+
 
 typedef struct line {
     int lineno;
@@ -207,6 +217,8 @@ static wf_status read_image(const char *path, image *im)
     memset(im, 0, sizeof *im);
     fitsfile *f = NULL;
     int status = 0;
+    wf_status hs = wf_fits_check_headers(path);
+    if (hs) return hs;
     if (fits_open_file(&f, path, READONLY, &status)) {
         char text[FLEN_STATUS];
         fits_get_errstatus(status, text);
@@ -279,6 +291,8 @@ static wf_status read_catalog(const char *path, detections *d)
     memset(d, 0, sizeof *d);
     fitsfile *f = NULL;
     int status = 0;
+    wf_status hs = wf_fits_check_headers(path);
+    if (hs) return hs;
     if (fits_open_file(&f, path, READONLY, &status)) {
         fits_clear_errmsg();
         return wf_error(WF_ERR_INPUT, "%s: cannot open the detection catalog", path);
@@ -367,6 +381,10 @@ static wf_status read_truths(const char *list_path, const line *ln, truth *t)
         const char *path = ln->truth[k];
         fitsfile *f = NULL;
         int status = 0;
+        if ((st = wf_fits_check_headers(path))) {
+            st = at_line(st, list_path, ln->lineno);
+            break;
+        }
         if (fits_open_file(&f, path, READONLY, &status)) {
             fits_clear_errmsg();
             st = wf_error(WF_ERR_INPUT, "%s:%d: truth %s: cannot open it as FITS", list_path, ln->lineno, path);
@@ -492,14 +510,6 @@ static int filter_index(run *r, const char *name)
     if (r->nfilters == MAX_FILTERS) return -1;
     snprintf(r->filters[r->nfilters], sizeof r->filters[0], "%s", name);
     return r->nfilters++;
-}
-
-/* The message of the error st, prefixed with the list line it came from. */
-static wf_status at_line(wf_status st, const char *list_path, int lineno)
-{
-    char msg[2048];
-    snprintf(msg, sizeof msg, "%s", wf_error_message());
-    return wf_error(st, "%s:%d: %s", list_path, lineno, msg);
 }
 
 /* One list line: which truth objects the image sees, which detections match them. */
