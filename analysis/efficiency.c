@@ -338,20 +338,22 @@ static wf_status truth_grow(truth *t, long need)
     if (need <= t->cap) return WF_OK;
     long nc = t->cap ? t->cap : 1024;
     while (nc < need) nc *= 2;
-    void *p[7] = {realloc(t->id, (size_t)nc * sizeof *t->id), NULL, NULL, NULL, NULL, NULL, NULL};
-    if (p[0]) t->id = p[0];
+    long long *id = realloc(t->id, (size_t)nc * sizeof *id);
+    if (id) t->id = id;
+    int ok = id != NULL;
     double **dd[4] = {&t->ra, &t->dec, &t->mag, &t->flux_sum};
-    int ok = p[0] != NULL;
     for (int k = 0; k < 4 && ok; k++) {
-        double *q = realloc(*dd[k], (size_t)nc * sizeof **dd[k]);
+        double *q = realloc(*dd[k], (size_t)nc * sizeof *q);
         if (q) *dd[k] = q;
-        ok &= q != NULL;
+        ok = q != NULL;
     }
-    int *c = ok ? realloc(t->count, (size_t)nc * sizeof *c) : NULL;
-    if (c) t->count = c;
-    int *ty = c ? realloc(t->type, (size_t)nc * sizeof *ty) : NULL;
-    if (ty) t->type = ty;
-    if (!ty) return wf_error(WF_ERR_NOMEM, "truth: out of memory for %ld objects", nc);
+    int **ii[2] = {&t->count, &t->type};
+    for (int k = 0; k < 2 && ok; k++) {
+        int *q = realloc(*ii[k], (size_t)nc * sizeof *q);
+        if (q) *ii[k] = q;
+        ok = q != NULL;
+    }
+    if (!ok) return wf_error(WF_ERR_NOMEM, "truth: out of memory for %ld objects", nc);
     t->cap = nc;
     return WF_OK;
 }
@@ -407,11 +409,16 @@ static wf_status read_truths(const char *list_path, const line *ln, truth *t)
             total += n;
             if (n == 0) continue;
             if ((st = truth_grow(t, t->n + n))) break;
-            double *idd = malloc((size_t)n * sizeof *idd);
-            if (!idd) { st = wf_error(WF_ERR_NOMEM, "%s: out of memory", path); break; }
-            const char *names[4] = {"ID", "RA", "DEC", "MAG"};
-            double *dst[4] = {idd, t->ra + t->n, t->dec + t->n, t->mag + t->n};
-            for (int c = 0; c < 4 && !st; c++) {
+            const char *names[3] = {"RA", "DEC", "MAG"};
+            double *dst[3] = {t->ra + t->n, t->dec + t->n, t->mag + t->n};
+            int col = 0;
+            if (fits_get_colnum(f, CASEINSEN, "ID", &col, &status) ||
+                fits_read_col(f, TLONGLONG, col, 1, 1, n, NULL, t->id + t->n, NULL, &status)) {
+                fits_clear_errmsg();
+                st = wf_error(WF_ERR_INPUT, "%s:%d: truth %s: %s has no readable ID column", list_path, ln->lineno,
+                              path, type_hdu[ty]);
+            }
+            for (int c = 0; c < 3 && !st; c++) {
                 int missing = 0;
                 st = read_column(f, path, type_hdu[ty], names[c], n, dst[c], &missing);
                 if (!st && missing)
@@ -420,13 +427,11 @@ static wf_status read_truths(const char *list_path, const line *ln, truth *t)
             }
             for (long i = 0; !st && i < n; i++) {
                 long r = t->n + i;
-                t->id[r] = (long long)idd[i];
                 t->type[r] = ty;
                 double m = t->mag[r];
                 t->flux_sum[r] = isfinite(m) && m < 99.0 ? pow(10.0, -0.4 * m) : 0.0;
                 t->count[r] = 1;
             }
-            free(idd);
             if (!st) t->n += n;
         }
         if (!st && total == 0)
