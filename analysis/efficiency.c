@@ -172,6 +172,21 @@ static int move_to(fitsfile *f, int type, const char *name)
     return 1;
 }
 
+/* Opens an outside FITS file read-only, its headers checked first (sim/fitscheck.h). */
+static wf_status open_fits(const char *path, const char *what, fitsfile **f)
+{
+    int status = 0;
+    wf_status st = wf_fits_check_headers(path);
+    if (st) return st;
+    if (fits_open_file(f, path, READONLY, &status)) {
+        char text[FLEN_STATUS];
+        fits_get_errstatus(status, text);
+        fits_clear_errmsg();
+        return wf_error(WF_ERR_INPUT, "%s: cannot open the %s: %s", path, what, text);
+    }
+    return WF_OK;
+}
+
 /* Marks the bad pixels of one plane of the current HDU, a block of rows at a time. */
 static wf_status mark_plane(fitsfile *f, const char *path, const char *name, image *im, int kind)
 {
@@ -217,20 +232,13 @@ static wf_status read_image(const char *path, image *im)
     memset(im, 0, sizeof *im);
     fitsfile *f = NULL;
     int status = 0;
-    wf_status hs = wf_fits_check_headers(path);
-    if (hs) return hs;
-    if (fits_open_file(&f, path, READONLY, &status)) {
-        char text[FLEN_STATUS];
-        fits_get_errstatus(status, text);
-        fits_clear_errmsg();
-        return wf_error(WF_ERR_INPUT, "%s: cannot open the image: %s", path, text);
-    }
-    wf_status st = WF_OK;
+    wf_status st = open_fits(path, "image", &f);
+    if (st) return st;
     char value[FLEN_VALUE];
     if (!fits_read_key_str(f, "FILTER", value, NULL, &status)) snprintf(im->filter, sizeof im->filter, "%s", value);
     status = 0;
     fits_clear_errmsg();
-    if (!move_to(f, IMAGE_HDU, "SCI")) {
+    if (!move_to(f, ANY_HDU, "SCI")) {
         int naxis = 0;
         fits_movabs_hdu(f, 1, NULL, &status);
         if (status || fits_get_img_dim(f, &naxis, &status) || naxis != 2)
@@ -250,8 +258,8 @@ static wf_status read_image(const char *path, image *im)
     if (!st && !(im->bad = calloc((size_t)im->nx * im->ny, 1)))
         st = wf_error(WF_ERR_NOMEM, "%s: out of memory for a %d x %d mask", path, im->nx, im->ny);
     if (!st) st = mark_plane(f, path, "SCI", im, 0);
-    if (!st && move_to(f, IMAGE_HDU, "ERR")) st = mark_plane(f, path, "ERR", im, 1);
-    if (!st && move_to(f, IMAGE_HDU, "DQ")) st = mark_plane(f, path, "DQ", im, 2);
+    if (!st && move_to(f, ANY_HDU, "ERR")) st = mark_plane(f, path, "ERR", im, 1);
+    if (!st && move_to(f, ANY_HDU, "DQ")) st = mark_plane(f, path, "DQ", im, 2);
     status = 0;
     fits_close_file(f, &status);
     if (st) free(im->bad), im->bad = NULL;
@@ -291,13 +299,8 @@ static wf_status read_catalog(const char *path, detections *d)
     memset(d, 0, sizeof *d);
     fitsfile *f = NULL;
     int status = 0;
-    wf_status hs = wf_fits_check_headers(path);
-    if (hs) return hs;
-    if (fits_open_file(&f, path, READONLY, &status)) {
-        fits_clear_errmsg();
-        return wf_error(WF_ERR_INPUT, "%s: cannot open the detection catalog", path);
-    }
-    wf_status st = WF_OK;
+    wf_status st = open_fits(path, "detection catalog", &f);
+    if (st) return st;
     if (!move_to(f, BINARY_TBL, "CATALOG"))
         st = wf_error(WF_ERR_INPUT, "%s: no CATALOG table (make it with wfisim detect)", path);
     if (!st && fits_get_num_rows(f, &d->n, &status)) st = wf_error(WF_ERR_INPUT, "%s: CATALOG: cannot count rows", path);
@@ -383,13 +386,8 @@ static wf_status read_truths(const char *list_path, const line *ln, truth *t)
         const char *path = ln->truth[k];
         fitsfile *f = NULL;
         int status = 0;
-        if ((st = wf_fits_check_headers(path))) {
+        if ((st = open_fits(path, "truth file", &f))) {
             st = at_line(st, list_path, ln->lineno);
-            break;
-        }
-        if (fits_open_file(&f, path, READONLY, &status)) {
-            fits_clear_errmsg();
-            st = wf_error(WF_ERR_INPUT, "%s:%d: truth %s: cannot open it as FITS", list_path, ln->lineno, path);
             break;
         }
         long total = 0;

@@ -11,6 +11,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "analysis/detect.h"
 #include "analysis/efficiency.h"
 #include "sim/wcs.h"
 #include "tests/testutil.h"
@@ -675,7 +676,7 @@ static void expected_depth(const char *product, const char *truth, double *m50, 
            *m50, *m5);
 }
 
-/* wfisim expose of a star field, wfisim detect, wfisim efficiency: every bright star found,
+/* wfisim expose of a star field, detection (wf_detect_file), wfisim efficiency: every bright star found,
  * no false detections to speak of, and the fitted m50 where the image's noise and PSF put it. */
 START_TEST(end_to_end_star_field)
 {
@@ -690,7 +691,12 @@ START_TEST(end_to_end_star_field)
     snprintf(product, sizeof product, "%s/wfisim_e000001_sca01.fits", d);
     snprintf(truth, sizeof truth, "%s/wfisim_e000001_sca01_truth.fits", d);
     snprintf(cat, sizeof cat, "%s/cat.fits", d);
-    ck_assert_int_eq(wf_test_run("%s detect %s --out %s --quiet", bin, product, cat), 0);
+    /* detection in this process: SEP's known leak (above) is suppressed here, not in a
+     * sanitized wfisim program */
+    wf_detect_options dopt;
+    wf_detect_summary dsum;
+    wf_detect_defaults(&dopt);
+    ck_assert_msg(wf_detect_file(product, cat, &dopt, &dsum) == WF_OK, "%s", wf_error_message());
     snprintf(lst, sizeof lst, "%s/single.list", d);
     snprintf(text, sizeof text, "# IMAGE DETCAT TRUTH\n%s %s %s\n", product, cat, truth);
     write_text(lst, text);
