@@ -555,7 +555,8 @@ static wf_status score_line(const char *list_path, const line *ln, const wf_eff_
         double x, y;
         int seen = isfinite(t.mag[i]) && t.mag[i] < 99.0 && !wf_wcs_world2pix(&im.wcs, t.ra[i], t.dec[i], &x, &y) &&
                    x >= -0.5 && y >= -0.5 && x < im.nx - 0.5 && y < im.ny - 0.5;
-        if (seen) seen = !im.bad[(size_t)lround(y) * im.nx + (size_t)lround(x)];
+        /* the pixel holding the position: floor(x + 1/2), so -0.5 is pixel 0 */
+        if (seen) seen = !im.bad[(size_t)floor(y + 0.5) * im.nx + (size_t)floor(x + 0.5)];
         if (!seen) {
             sum->n_unseen[t.type[i]]++;
             continue;
@@ -761,10 +762,13 @@ static wf_status write_snana(const char *tmp, const wf_eff_options *o, const run
 {
     FILE *f = fopen(tmp, "w");
     if (!f) return wf_error(WF_ERR_IO, "%s: cannot create: %s", tmp, strerror(errno));
-    fprintf(f, "# SNANA pipeline detection efficiency against the true supernova magnitude\n");
-    fprintf(f, "# made by wfisim efficiency (label %s), matching within %.3g arcsec\n", o->label, o->radius_arcsec);
-    fprintf(f, "# rows: the maximum-likelihood curve plateau / (1 + exp((m - mc) / width)) where it\n");
-    fprintf(f, "# could be fitted, else the measured fraction found in bins of %.3g mag\n", o->bin);
+    /* SNANA's documentation block first (what its REQUIRE_DOCANA option asks for) */
+    fprintf(f, "DOCUMENTATION:\n  PURPOSE: pipeline detection efficiency of supernovae against their true magnitude\n");
+    fprintf(f, "  SOURCE: wfisim efficiency, label %s, detections matched within %.3g arcsec\n", o->label,
+            o->radius_arcsec);
+    fprintf(f, "  NOTES:\n  - rows are the maximum-likelihood curve plateau / (1 + exp((m - mc) / width))\n");
+    fprintf(f, "  - or, where it could not be fitted, the fraction found in bins of %.3g mag\n", o->bin);
+    fprintf(f, "DOCUMENTATION_END:\n");
     wf_status st = WF_OK;
     int maps = 0;
     for (int fi = 0; fi < r->nfilters && !st; fi++) {

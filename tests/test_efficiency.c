@@ -462,6 +462,8 @@ START_TEST(snana_map_of_known_curve)
     char line[256];
     int rows = 0, maps = 0;
     double last_m = -1, last_e = 2, first_e = -1;
+    ck_assert_ptr_nonnull(fgets(line, sizeof line, f));
+    ck_assert_str_eq(line, "DOCUMENTATION:\n"); /* SNANA's DOCANA block first */
     while (fgets(line, sizeof line, f)) {
         double m, e;
         if (!strncmp(line, "MAPNAME_DETECT:", 15)) maps++;
