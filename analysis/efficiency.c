@@ -540,21 +540,26 @@ static wf_status score_line(const char *list_path, const line *ln, const wf_eff_
         st = wf_error(WF_ERR_INPUT, "%s:%d: %s: more than %d filters in one list", list_path, ln->lineno, ln->image,
                       MAX_FILTERS);
     /* the truth objects of the scored types, whether the image sees them or not: an unseen
-     * object still owns the detection its light makes at the edge or around a masked pixel */
+     * object still owns the detection its light makes at the edge or around a masked pixel;
+     * one without light (MAG 99: an SN before explosion) owns none and is not scored */
     long ns = 0;
-    for (long i = 0; i < t.n; i++)
-        if (o->types & (1 << t.type[i])) {
-            t.id[ns] = t.id[i], t.ra[ns] = t.ra[i], t.dec[ns] = t.dec[i], t.mag[ns] = t.mag[i], t.type[ns] = t.type[i];
-            ns++;
+    for (long i = 0; i < t.n; i++) {
+        if (!(o->types & (1 << t.type[i]))) continue;
+        if (!(isfinite(t.mag[i]) && t.mag[i] < 99.0)) {
+            sum->n_unseen[t.type[i]]++;
+            continue;
         }
+        t.id[ns] = t.id[i], t.ra[ns] = t.ra[i], t.dec[ns] = t.dec[i], t.mag[ns] = t.mag[i], t.type[ns] = t.type[i];
+        ns++;
+    }
     long *t2d = malloc((size_t)(ns > 0 ? ns : 1) * sizeof *t2d);
     long *d2t = malloc((size_t)(det.n > 0 ? det.n : 1) * sizeof *d2t);
     if (!st && (!t2d || !d2t)) st = wf_error(WF_ERR_NOMEM, "efficiency: out of memory");
     if (!st) st = wf_eff_match(t.ra, t.dec, ns, det.ra, det.dec, det.n, o->radius_arcsec / 3600.0, t2d, d2t);
     for (long i = 0; !st && i < ns; i++) {
         double x, y;
-        int seen = isfinite(t.mag[i]) && t.mag[i] < 99.0 && !wf_wcs_world2pix(&im.wcs, t.ra[i], t.dec[i], &x, &y) &&
-                   x >= -0.5 && y >= -0.5 && x < im.nx - 0.5 && y < im.ny - 0.5;
+        int seen = !wf_wcs_world2pix(&im.wcs, t.ra[i], t.dec[i], &x, &y) && x >= -0.5 && y >= -0.5 &&
+                   x < im.nx - 0.5 && y < im.ny - 0.5;
         /* the pixel holding the position: floor(x + 1/2), so -0.5 is pixel 0 */
         if (seen) seen = !im.bad[(size_t)floor(y + 0.5) * im.nx + (size_t)floor(x + 0.5)];
         if (!seen) {

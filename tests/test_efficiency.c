@@ -326,7 +326,7 @@ START_TEST(counts_on_synthetic_files)
     snprintf(lst, sizeof lst, "%s/list.txt", d);
     snprintf(out, sizeof out, "%s/out", d);
     write_image(img, 1, 1, "Y106");
-    static obj gal[64], star[16], sn[2], gal_rep[8];
+    static obj gal[64], star[16], sn[3], gal_rep[8];
     long ng = 0, ns = 0;
     static double dra[200], ddec[200];
     long nd = 0;
@@ -345,6 +345,8 @@ START_TEST(counts_on_synthetic_files)
     }
     sn[0] = (obj){9000, 60.0, 25.0, 22.0};
     sn[1] = (obj){9000, 60.0, 25.0, 23.0};
+    /* an SN without light (MAG 99) on galaxy 2's detection: not scored, and it takes nothing */
+    sn[2] = (obj){9001, gal[2].x + 0.5, gal[2].y, 99.0};
     pixel_sky(sn[0].x + 0.2, sn[0].y, &dra[nd], &ddec[nd]), nd++;
     for (int k = 0; k < 3; k++) pixel_sky(185.0, 20.0 + 40 * k, &dra[nd], &ddec[nd]), nd++;
     for (int i = 0; i < 8; i++) gal_rep[i] = gal[3 * i];
@@ -353,7 +355,7 @@ START_TEST(counts_on_synthetic_files)
     const long n1[3] = {8, ns, 1};
     write_truth(t1, tabs1, n1);
     const obj *tabs2[3] = {gal, star, sn + 1};
-    const long n2[3] = {ng, ns, 1};
+    const long n2[3] = {ng, ns, 2};
     write_truth(t2, tabs2, n2);
     char text[40000];
     snprintf(text, sizeof text, "# a comment line\n\n%s %s %s,%s   # trailing comment\n", img, cat, t1, t2);
@@ -373,6 +375,7 @@ START_TEST(counts_on_synthetic_files)
     ck_assert_int_eq(s.n_found[WF_EFF_STAR], 6);
     ck_assert_int_eq(s.n_true[WF_EFF_SN], 1);
     ck_assert_int_eq(s.n_found[WF_EFF_SN], 1);
+    ck_assert_int_eq(s.n_unseen[WF_EFF_SN], 1);
     ck_assert_int_eq(s.n_det, nd);
     ck_assert_int_eq(s.n_false, 4); /* the second detection of galaxy 0 and the three far ones */
     snprintf(path, sizeof path, "%s/syn_summary.json", out);
