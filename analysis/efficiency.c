@@ -87,10 +87,10 @@ static void list_free(list *l)
 static wf_status need_file(const char *list_path, int lineno, const char *what, const char *path)
 {
     struct stat sb;
-    if (stat(path, &sb) || !S_ISREG(sb.st_mode) || access(path, R_OK))
-        return wf_error(WF_ERR_INPUT, "%s:%d: %s %s: %s", list_path, lineno, what, path,
-                        errno == ENOENT ? "no such file" : "not a readable file");
-    return WF_OK;
+    const char *why = stat(path, &sb) ? (errno == ENOENT ? "no such file" : strerror(errno))
+                      : !S_ISREG(sb.st_mode) ? "not a regular file"
+                      : access(path, R_OK) ? "not readable" : NULL;
+    return why ? wf_error(WF_ERR_INPUT, "%s:%d: %s %s: %s", list_path, lineno, what, path, why) : WF_OK;
 }
 
 static wf_status read_list(const char *path, list *l)
