@@ -788,13 +788,15 @@ static wf_status write_snana(const char *tmp, const wf_eff_options *o, const run
         if (!st && sub.n) {
             char band = snana_band(r->filters[fi]);
             fprintf(f, "\n# %s: %ld supernovae, %ld found", r->filters[fi], sub.n, ft.nfound);
-            if (ft.ok) fprintf(f, "; m50 %.3f +- %.3f, width %.3f, plateau %.4f\n", ft.m50, ft.m50_err, ft.width, ft.plateau);
+            if (ft.ok)
+                fprintf(f, "; m50 %.3f +- %.3f, width %.3f, plateau %.4f\n", ft.m50, ft.m50_err, ft.width, ft.plateau);
             else fprintf(f, "; too few to fit, measured fractions\n");
             fprintf(f, "MAPNAME_DETECT: WFISIM_%s_%s\nFILTER: %c\n", o->label, r->filters[fi], band);
             if (ft.ok) {
                 double m0 = b.first * o->bin, m1 = ft.m50 + ft.width * log(1000.0 * ft.plateau);
                 if (m1 < (b.first + b.nb) * o->bin) m1 = (b.first + b.nb) * o->bin;
-                for (double m = m0; m <= m1 + 1e-9; m += o->bin) fprintf(f, "MAG: %8.3f %8.5f\n", m, wf_eff_curve(&ft, m));
+                for (double m = m0; m <= m1 + 1e-9; m += o->bin)
+                    fprintf(f, "MAG: %8.3f %8.5f\n", m, wf_eff_curve(&ft, m));
             } else {
                 for (long i = 0; i < b.nb; i++)
                     if (b.n[i])
@@ -823,7 +825,8 @@ static wf_status check_options(const wf_eff_options *o)
     if (!o->out_dir || !*o->out_dir) return wf_error(WF_ERR_INPUT, "--out: give the output folder");
     if (!(o->radius_arcsec > 0) || !(o->radius_arcsec < 3600))
         return wf_error(WF_ERR_INPUT, "--radius %g: must be a positive number of arcsec", o->radius_arcsec);
-    if (!(o->bin >= 0.001) || !(o->bin <= 10)) return wf_error(WF_ERR_INPUT, "--bin %g: must be in [0.001, 10] mag", o->bin);
+    if (!(o->bin >= 0.001) || !(o->bin <= 10))
+        return wf_error(WF_ERR_INPUT, "--bin %g: must be in [0.001, 10] mag", o->bin);
     if (!(o->types & ((1 << WF_EFF_NTYPE) - 1)) || (o->types & ~((1 << WF_EFF_NTYPE) - 1)))
         return wf_error(WF_ERR_INPUT, "--types: no type scored");
     return WF_OK;

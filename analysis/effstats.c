@@ -35,7 +35,8 @@ static int cmp_pair(const void *x, const void *y)
 wf_status wf_eff_match(const double *ra_a, const double *dec_a, long na, const double *ra_b,
                        const double *dec_b, long nb, double radius_deg, long *a_to_b, long *b_to_a)
 {
-    if (!(radius_deg > 0) || !isfinite(radius_deg)) return wf_error(WF_ERR_INPUT, "match radius %g deg: must be > 0", radius_deg);
+    if (!(radius_deg > 0) || !isfinite(radius_deg))
+        return wf_error(WF_ERR_INPUT, "match radius %g deg: must be > 0", radius_deg);
     for (long i = 0; a_to_b && i < na; i++) a_to_b[i] = -1;
     for (long j = 0; b_to_a && j < nb; j++) b_to_a[j] = -1;
     if (na <= 0 || nb <= 0) return WF_OK;
