@@ -1,4 +1,4 @@
-/* PNG writer and plots (tools/png.c, tools/plot.c). Every image written is read back by a
+/* PNG writer and plots (analysis/png.c, analysis/plot.c). Every image written is read back by a
  * decoder of its own here (chunk walk, each CRC recomputed with zlib's crc32, IDAT joined and
  * inflated with uncompress, all five row filters undone), and the checks use what that decoder
  * sees, never bytes the library computed:
@@ -19,8 +19,8 @@
 #include <zlib.h>
 
 #include "tests/testutil.h"
-#include "tools/plot.h"
-#include "tools/png.h"
+#include "analysis/plot.h"
+#include "analysis/png.h"
 
 /* ------------------------------------------------------------------ an independent decoder */
 

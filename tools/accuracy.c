@@ -25,7 +25,7 @@
 #include "tools/assemble.h"
 #include "tools/config.h"
 #include "tools/expose.h"
-#include "tools/plot.h"
+#include "analysis/plot.h"
 
 static const char *usage =
     "usage: wfisim accuracy psf|galaxy|scene|all [--filter F] [--sca N] [--out DIR]\n"

@@ -25,7 +25,7 @@
 #include "sim/survey/survey.h"
 #include "sim/survey/synth.h"
 #include "tools/config.h"
-#include "tools/plot.h"
+#include "analysis/plot.h"
 #include "tools/sninject.h"
 #include "sim/survey/wcs.h"
 

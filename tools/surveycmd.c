@@ -8,7 +8,7 @@
 #include "sim/survey/survey.h"
 #include "sim/survey/wcs.h"
 #include "tools/config.h"
-#include "tools/plot.h"
+#include "analysis/plot.h"
 #include "tools/surveyindex.h"
 
 static const char *survey_usage =

@@ -1,11 +1,11 @@
-#include "tools/plot.h"
+#include "analysis/plot.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "tools/png.h"
+#include "analysis/png.h"
 
 /* ---- font: 5x7 cells, one byte per row, bit 4 = leftmost column; ASCII 32..126. g p q y are
  * drawn two rows lower (descenders), in a 9-row line. ------------------------------------------ */

@@ -1,4 +1,4 @@
-#include "tools/png.h"
+#include "analysis/png.h"
 
 #include <errno.h>
 #include <stdint.h>

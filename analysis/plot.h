@@ -1,5 +1,5 @@
 /* Raster plots for the host tools (light curves, accuracy plots, coverage maps), written as
- * PNG by tools/png.h. No anti-aliasing; a built-in 5x7 font (x2 for titles). A plot is a black
+ * PNG by analysis/png.h. No anti-aliasing; a built-in 5x7 font (x2 for titles). A plot is a black
  * frame with outward ticks, a light grid at the ticks, %g tick labels, the title above, the
  * x label below, the y label rotated along the left edge and a legend box in the frame's
  * top-right corner. Example and layout: docs/PLOTS.md. */
