@@ -29,6 +29,7 @@
 #include "tools/psfcmd.h"
 #include "analysis/coadd.h"
 #include "analysis/diff.h"
+#include "analysis/hosts.h"
 #include "tools/sncmd.h"
 #include "tools/surveycmd.h"
 #include "tools/surveyrun.h"
@@ -441,6 +442,7 @@ int main(int argc, char **argv)
     if (!strcmp(cmd, "accuracy")) return wf_cmd_accuracy(argc - 1, argv + 1);
     if (!strcmp(cmd, "sn")) return wf_cmd_sn(argc - 2, argv + 2);
     if (!strcmp(cmd, "detect")) return wf_cmd_detect(argc - 2, argv + 2);
+    if (!strcmp(cmd, "hosts")) return wf_cmd_hosts(argc - 2, argv + 2);
     if (!strcmp(cmd, "config")) {
         if (argc >= 3 && !strcmp(argv[2], "doc")) { wf_config_write_doc(stdout); return 0; }
         if (argc >= 4 && !strcmp(argv[2], "check")) {
