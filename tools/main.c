@@ -71,6 +71,8 @@ static const char *usage_text =
     "                       curve (see wfisim sn --help; docs/SUPERNOVAE.md)\n"
     "  detect IMAGE --out CAT.fits   objects of an image (SEP: SExtractor's background, filter,\n"
     "                       deblending, aperture and Kron fluxes), see wfisim detect --help\n"
+    "  hosts --out DIR LIST   SN hosts by nearest separation and by d_DLR against the truth,\n"
+    "                       by redshift (see wfisim hosts --help; docs/ANALYSIS.md)\n"
     "  config doc           print the reference of every configuration key (docs/CONFIG.md)\n"
     "  config check FILE    load a configuration file and report the first problem\n"
     "\n"
