@@ -453,6 +453,132 @@ START_TEST(bad_input)
 }
 END_TEST
 
+
+/* ---- end to end on a real product -------------------------------------------------------- */
+
+static void plan_row0(const char *plan, double *ra, double *dec, double *pa, double *mjd)
+{
+    fitsfile *f;
+    int status = 0, c;
+    fits_open_file(&f, plan, READONLY, &status);
+    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
+    const char *names[4] = {"RA", "DEC", "PA", "MJD_MID"};
+    double *out[4] = {ra, dec, pa, mjd};
+    for (int k = 0; k < 4; k++) {
+        fits_get_colnum(f, CASEINSEN, (char *)names[k], &c, &status);
+        fits_read_col(f, TDOUBLE, c, 1, 1, 1, NULL, out[k], NULL, &status);
+    }
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+}
+
+/* HOSTOFF (arcsec from the host's centre) of every SN of the sample, by ID. */
+static int sample_offsets(const char *path, long long *id, double *off, int max)
+{
+    fitsfile *f;
+    int status = 0, ci, co;
+    long n = 0;
+    fits_open_file(&f, path, READONLY, &status);
+    fits_movnam_hdu(f, BINARY_TBL, "SNE", 0, &status);
+    fits_get_num_rows(f, &n, &status);
+    ck_assert_int_le(n, max);
+    fits_get_colnum(f, CASEINSEN, "ID", &ci, &status);
+    fits_get_colnum(f, CASEINSEN, "HOSTOFF", &co, &status);
+    fits_read_col(f, TLONGLONG, ci, 1, 1, n, NULL, id, NULL, &status);
+    fits_read_col(f, TDOUBLE, co, 1, 1, n, NULL, off, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    return (int)n;
+}
+
+/* A 512 x 512 corner of SCA 1 of the plan's first exposure, rendered with SNe whose hosts are
+ * the synthetic field's galaxies the run draws (the sample's rate raised 600-fold over a
+ * 25" circle so that ~100 fall on it), detected by `wfisim detect`, and associated. Checked
+ * against what the pipeline does not compute: each detected host's separation from its SN
+ * equals the sample's HOSTOFF (the SN's offset from its host's true centre) to within the
+ * matching radius; the counts add up; and each rule's choice is at least as good, by its own
+ * measure, as the true host's detection. */
+START_TEST(end_to_end)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the Roman and SALT data");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], sne[4200], list[9000];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(sne, sizeof sne, "%s/sne.fits", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
+    double ra, dec, pa, mjd, rc, dc;
+    plan_row0(plan, &ra, &dec, &pa, &mjd);
+    wf_focal_plane fp;
+    wf_wcs w;
+    ck_assert_int_eq(wf_wcs_focal_plane(data, &fp), 0);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, ra, dec, pa, 1, &w), 0);
+    ck_assert_int_eq(wf_wcs_pix2world(&w, 255.5, 255.5, &rc, &dc), 0);
+    const double r_deg = 25.0 / 3600.0;
+    ck_assert_int_eq(wf_test_run("%s sn generate --data %s --model %s/salt3/salt3-k21 --seed 1 --area %.10g --start %.6f "
+                                 "--days 200 --ra %.10f --dec %.10f --rate '1.5e-2 1.5 0.06 2.99' --out %s >/dev/null",
+                                 bin, data, data, M_PI * r_deg * r_deg, mjd - 150, rc, dc, sne), 0);
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --seed 1 --data %s --plan %s --exposures 0 --scas 1 --sne %s --model "
+                                 "%s/salt3/salt3-k21 --set readout.ncols=512 --set readout.nrows=512 --out %s/run",
+                                 bin, data, plan, sne, data, d), 0);
+    ck_assert_int_eq(wf_test_run("%s detect --quiet %s/run/wfisim_e000000_sca01.fits --out %s/cat.fits", bin, d, d), 0);
+    snprintf(list, sizeof list, "%s/list.txt", d);
+    char text[20000];
+    snprintf(text, sizeof text, "%s/run/wfisim_e000000_sca01.fits %s/cat.fits %s/run/wfisim_e000000_sca01_truth.fits\n", d,
+             d, d);
+    write_text(list, text);
+    wf_hosts_options o;
+    wf_hosts_defaults(&o);
+    o.quiet = 1;
+    wf_hosts_summary s;
+    char out[4200];
+    snprintf(out, sizeof out, "%s/hosts", d);
+    ck_assert_msg(wf_hosts_run(list, out, &o, &s) == WF_OK, "%s", wf_error_message());
+    printf("end_to_end: %ld SNe, %ld with a host in the image, %ld hostless, %ld host outside; DLR %ld correct "
+           "%ld wrong, nearest %ld correct %ld wrong, %ld undetected; %ld detections, %ld galaxies matched\n",
+           s.sne, s.total, s.hostless, s.host_outside, s.dlr_correct, s.dlr_wrong, s.nearest_correct, s.nearest_wrong,
+           s.undetected, s.detections, s.galaxies_matched);
+    ck_assert_int_ge(s.total, 20);
+    ck_assert_int_eq(s.total + s.hostless + s.host_outside, s.sne);
+    ck_assert_int_eq(s.dlr_correct + s.dlr_wrong + s.undetected, s.total);
+    ck_assert_int_eq(s.nearest_correct + s.nearest_wrong + s.undetected, s.total);
+    ck_assert_int_gt(s.total - s.undetected, 5);
+
+    static long long ids[20000];
+    static double offs[20000];
+    int nsample = sample_offsets(sne, ids, offs, 20000);
+    char path[4300];
+    snprintf(path, sizeof path, "%s/hosts.csv", out);
+    FILE *f = fopen(path, "r");
+    ck_assert_ptr_nonnull(f);
+    char line[2048];
+    int checked = 0;
+    ck_assert_ptr_nonnull(fgets(line, sizeof line, f)); /* header */
+    while (fgets(line, sizeof line, f)) {
+        char v[19][64];
+        for (int k = 0; k < 19; k++) field(line, k, v[k], sizeof v[k]);
+        v[18][strcspn(v[18], "\n")] = 0;
+        if (!v[6][0]) continue; /* host not detected, outside, or hostless */
+        long long sn = atoll(v[0]);
+        double off = NAN;
+        for (int i = 0; i < nsample; i++)
+            if (ids[i] == sn) off = offs[i];
+        ck_assert_msg(fabs(atof(v[7]) - off) <= o.radius, "SN %lld: host detection %s\" away, HOSTOFF %g\"", sn, v[7], off);
+        /* the rules' choices are the best by their own measure */
+        if (v[14][0]) ck_assert_double_le(atof(v[16]), atof(v[7]) + 1e-4);
+        if (v[8][0] && atof(v[8]) <= o.dlr_max) {
+            ck_assert_msg(v[9][0], "SN %lld: its host has d_DLR %s but the DLR rule chose none", sn, v[8]);
+            ck_assert_double_le(atof(v[12]), atof(v[8]) + 1e-4);
+        }
+        if (!strcmp(v[18], "correct")) ck_assert_str_eq(v[14], v[6]);
+        checked++;
+    }
+    fclose(f);
+    ck_assert_int_eq(checked, s.total - s.undetected);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("hosts");
@@ -461,6 +587,7 @@ static Suite *suite(void)
     tcase_add_test(tc, dlr_by_hand);
     tcase_add_test(tc, synthetic_scene);
     tcase_add_test(tc, bad_input);
+    tcase_add_test(tc, end_to_end);
     suite_add_tcase(s, tc);
     return s;
 }
