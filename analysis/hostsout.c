@@ -165,7 +165,8 @@ static wf_status plot(const char *path, long (*b)[NB], int nb, double zbin)
     wf_plot *p = NULL;
     wf_status st = x && y && e ? WF_OK : wf_error(WF_ERR_NOMEM, "hosts: out of memory");
     if (!st) st = wf_plot_create(760, 480, "SN host association", "redshift", "fraction of SNe with a host", &p);
-    if (!st) st = wf_plot_set_range(p, 0, nb * zbin, 0, 1.05);
+    /* y up to 1.45: the legend (top right) sits above the fractions */
+    if (!st) st = wf_plot_set_range(p, 0, nb * zbin, 0, 1.45);
     static const struct { int col; const char *label; } s[5] = {
         {B_DLR_OK, "DLR: host chosen"},
         {B_NEAR_OK, "nearest: host chosen"},
