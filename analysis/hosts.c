@@ -170,23 +170,13 @@ static int column(fitsfile *f, const char *name, int *col)
     return status == 0;
 }
 
-static wf_status read_doubles(fitsfile *f, const char *path, const char *hdu, const char *name, long n, double *out)
+/* Column `name` of table `hdu` (rows 1..n) as cfitsio type `type` (TDOUBLE, TLONGLONG). */
+static wf_status read_column(fitsfile *f, const char *path, const char *hdu, const char *name, int type, long n,
+                             void *out)
 {
     int col, status = 0;
     if (!column(f, name, &col)) return wf_error(WF_ERR_INPUT, "%s: %s: no column %s", path, hdu, name);
-    if (n > 0 && fits_read_col(f, TDOUBLE, col, 1, 1, n, NULL, out, NULL, &status)) {
-        char what[128];
-        snprintf(what, sizeof what, "reading %s.%s", hdu, name);
-        return wf_fits_error(status, path, what);
-    }
-    return WF_OK;
-}
-
-static wf_status read_ids(fitsfile *f, const char *path, const char *hdu, const char *name, long n, long long *out)
-{
-    int col, status = 0;
-    if (!column(f, name, &col)) return wf_error(WF_ERR_INPUT, "%s: %s: no column %s", path, hdu, name);
-    if (n > 0 && fits_read_col(f, TLONGLONG, col, 1, 1, n, NULL, out, NULL, &status)) {
+    if (n > 0 && fits_read_col(f, type, col, 1, 1, n, NULL, out, NULL, &status)) {
         char what[128];
         snprintf(what, sizeof what, "reading %s.%s", hdu, name);
         return wf_fits_error(status, path, what);
@@ -241,11 +231,11 @@ static wf_status read_truth_table(fitsfile *f, const char *path, const char *hdu
     long long *id = malloc(m * sizeof *id), *host = sne ? malloc(m * sizeof *host) : NULL;
     double *ra = malloc(m * sizeof *ra), *dec = malloc(m * sizeof *dec), *z = sne ? malloc(m * sizeof *z) : NULL;
     wf_status st = id && ra && dec && (!sne || (host && z)) ? WF_OK : wf_error(WF_ERR_NOMEM, "%s: out of memory", path);
-    if (!st) st = read_ids(f, path, hdu, "ID", n, id);
-    if (!st) st = read_doubles(f, path, hdu, "RA", n, ra);
-    if (!st) st = read_doubles(f, path, hdu, "DEC", n, dec);
-    if (!st && sne) st = read_doubles(f, path, hdu, "Z", n, z);
-    if (!st && sne) st = read_ids(f, path, hdu, "HOSTID", n, host);
+    if (!st) st = read_column(f, path, hdu, "ID", TLONGLONG, n, id);
+    if (!st) st = read_column(f, path, hdu, "RA", TDOUBLE, n, ra);
+    if (!st) st = read_column(f, path, hdu, "DEC", TDOUBLE, n, dec);
+    if (!st && sne) st = read_column(f, path, hdu, "Z", TDOUBLE, n, z);
+    if (!st && sne) st = read_column(f, path, hdu, "HOSTID", TLONGLONG, n, host);
     for (long i = 0; !st && i < n; i++) {
         hosts_obj o = {id[i], ra[i], dec[i], 0, 0, sne ? z[i] : NAN, sne ? host[i] : -1};
         if (!isfinite(o.ra) || !isfinite(o.dec)) {
@@ -321,8 +311,8 @@ static wf_status read_catalog(const char *path, const hosts_image *im, hosts_lin
     int ok = id && ln->det;
     for (int k = 0; k < 7; k++) ok &= col[k] != NULL;
     if (!st && !ok) st = wf_error(WF_ERR_NOMEM, "%s: out of memory for %ld detections", path, n);
-    if (!st) st = read_ids(f, path, "CATALOG", "ID", n, id);
-    for (int k = 0; !st && k < 7; k++) st = read_doubles(f, path, "CATALOG", need[k + 1], n, col[k]);
+    if (!st) st = read_column(f, path, "CATALOG", "ID", TLONGLONG, n, id);
+    for (int k = 0; !st && k < 7; k++) st = read_column(f, path, "CATALOG", need[k + 1], TDOUBLE, n, col[k]);
     for (long i = 0; !st && i < n; i++) {
         hosts_det *d = &ln->det[i];
         d->id = id[i];

@@ -463,22 +463,6 @@ END_TEST
 
 /* ---- end to end on a real product -------------------------------------------------------- */
 
-static void plan_row0(const char *plan, double *ra, double *dec, double *pa, double *mjd)
-{
-    fitsfile *f;
-    int status = 0, c;
-    fits_open_file(&f, plan, READONLY, &status);
-    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
-    const char *names[4] = {"RA", "DEC", "PA", "MJD_MID"};
-    double *out[4] = {ra, dec, pa, mjd};
-    for (int k = 0; k < 4; k++) {
-        fits_get_colnum(f, CASEINSEN, (char *)names[k], &c, &status);
-        fits_read_col(f, TDOUBLE, c, 1, 1, 1, NULL, out[k], NULL, &status);
-    }
-    fits_close_file(f, &status);
-    ck_assert_int_eq(status, 0);
-}
-
 /* HOSTOFF (arcsec from the host's centre) of every SN of the sample, by ID. */
 static int sample_offsets(const char *path, long long *id, double *off, int max)
 {
@@ -516,7 +500,7 @@ START_TEST(end_to_end)
     snprintf(sne, sizeof sne, "%s/sne.fits", d);
     ck_assert_int_eq(wf_test_run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
     double ra, dec, pa, mjd, rc, dc;
-    plan_row0(plan, &ra, &dec, &pa, &mjd);
+    wf_test_plan_row0(plan, &ra, &dec, &pa, &mjd);
     wf_focal_plane fp;
     wf_wcs w;
     ck_assert_int_eq(wf_wcs_focal_plane(data, &fp), 0);
