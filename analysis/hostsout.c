@@ -153,7 +153,7 @@ static void write_json(FILE *f, const wf_hosts_summary *s, const wf_hosts_option
     fprintf(f, "  \"images\": %ld,\n  \"detections\": %ld,\n  \"galaxies_matched\": %ld,\n"
                "  \"detections_excluded\": %ld,\n",
             s->images, s->detections, s->galaxies_matched, s->excluded);
-    fprintf(f, "  \"radius_arcsec\": %.17g,\n  \"dlr_max\": %.17g,\n  \"sep_max_arcsec\": %.17g,\n  \"zbin\": %.17g\n}\n",
+    fprintf(f, "  \"radius_arcsec\": %.10g,\n  \"dlr_max\": %.10g,\n  \"sep_max_arcsec\": %.10g,\n  \"zbin\": %.10g\n}\n",
             o->radius, o->dlr_max, o->sep_max, o->zbin);
 }
 
