@@ -521,6 +521,54 @@ START_TEST(end_to_end)
     wf_detect_defaults(&dop);
     snprintf(dop.data_dir, sizeof dop.data_dir, "%s", data);
     ck_assert_msg(wf_detect_file(img, cat, &dop, &dsum) == WF_OK, "%s", wf_error_message());
+    /* The catalog's own convention: the point A pixels along THETA from a detection lies on
+     * its ellipse, so it lands on the sky ellipse here, in the direction `wfisim detect` gives
+     * as PA_SKY (a step along THETA through the WCS), at the distance the WCS puts it.
+     * (The sky ellipse's own major axis differs from PA_SKY where Roman's pixels are not
+     * square: printed, not asserted.) */
+    {
+        fitsfile *f;
+        int status = 0, col;
+        long n = 0;
+        fits_open_file(&f, img, READONLY, &status);
+        fits_movnam_hdu(f, IMAGE_HDU, "SCI", 0, &status);
+        wf_wcs pw;
+        ck_assert_int_eq(wf_wcs_read_header(f, img, &pw), WF_OK);
+        fits_close_file(f, &status);
+        fits_open_table(&f, cat, READONLY, &status);
+        fits_get_num_rows(f, &n, &status);
+        ck_assert_int_eq(status, 0);
+        const char *names[6] = {"X", "Y", "A", "B", "THETA", "PA_SKY"};
+        double *c[6];
+        for (int k = 0; k < 6; k++) {
+            c[k] = malloc((size_t)n * sizeof(double));
+            fits_get_colnum(f, CASEINSEN, (char *)names[k], &col, &status);
+            fits_read_col(f, TDOUBLE, col, 1, 1, n, NULL, c[k], NULL, &status);
+        }
+        fits_close_file(f, &status);
+        ck_assert_int_eq(status, 0);
+        int tested = 0;
+        double worst = 0, worst_axis = 0;
+        for (long i = 0; i < n; i++) {
+            if (!(c[3][i] > 0) || c[2][i] < 1.3 * c[3][i]) continue;
+            double cov[3], r0, d0, r1, d1, x = c[0][i] - 1, y = c[1][i] - 1, a = c[2][i], th = c[4][i] * DEG;
+            ck_assert_int_eq(wf_hosts_sky_ellipse(&pw, c[0][i], c[1][i], a, c[3][i], c[4][i], cov), WF_OK);
+            ck_assert_int_eq(wf_wcs_pix2world(&pw, x, y, &r0, &d0), 0);
+            ck_assert_int_eq(wf_wcs_pix2world(&pw, x + a * cos(th), y + a * sin(th), &r1, &d1), 0);
+            double want = wf_wcs_separation(r0, d0, r1, d1) * 3600.0, pa_sky = c[5][i] * DEG;
+            double got = wf_hosts_dlr(cov, sin(pa_sky), cos(pa_sky));
+            ck_assert_msg(fabs(got / want - 1) < 1e-5, "detection %ld: DLR along PA_SKY %.5f\", the WCS puts A along "
+                          "THETA at %.5f\"", i + 1, got, want);
+            worst = fmax(worst, fabs(got / want - 1));
+            double alpha = 0.5 * atan2(2 * cov[1], cov[0] - cov[2]) / DEG; /* from east towards north */
+            worst_axis = fmax(worst_axis, fabs(remainder(90.0 - alpha - c[5][i], 180.0)));
+            tested++;
+        }
+        printf("end_to_end: %d elongated detections: DLR along PA_SKY = the WCS's length of A along THETA to %.1e; "
+               "the sky ellipse's major axis within %.2f deg of PA_SKY\n", tested, worst, worst_axis);
+        ck_assert_int_gt(tested, 10);
+        for (int k = 0; k < 6; k++) free(c[k]);
+    }
     snprintf(list, sizeof list, "%s/list.txt", d);
     char text[20000];
     snprintf(text, sizeof text, "%s/run/wfisim_e000000_sca01.fits %s/cat.fits %s/run/wfisim_e000000_sca01_truth.fits\n", d,
