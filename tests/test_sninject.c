@@ -25,22 +25,6 @@
     "--set scene.sky=false --set scene.flux_fraction=0.9999 "                                         \
     "--mode single"
 
-static void plan_row0(const char *plan, double *ra, double *dec, double *pa, double *mjd)
-{
-    fitsfile *f;
-    int status = 0, c;
-    fits_open_file(&f, plan, READONLY, &status);
-    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
-    const char *names[4] = {"RA", "DEC", "PA", "MJD_MID"};
-    double *out[4] = {ra, dec, pa, mjd};
-    for (int k = 0; k < 4; k++) {
-        fits_get_colnum(f, CASEINSEN, (char *)names[k], &c, &status);
-        fits_read_col(f, TDOUBLE, c, 1, 1, 1, NULL, out[k], NULL, &status);
-    }
-    fits_close_file(f, &status);
-    ck_assert_int_eq(status, 0);
-}
-
 /* A one-visit plan in d (*plan), the SALT model's folder (*model) and exposure 0's pointing. */
 static void one_visit(const char *bin, const char *data, const char *d, char *plan, char *model, size_t cap,
                       double *ra, double *dec, double *pa, double *mjd)
@@ -48,7 +32,7 @@ static void one_visit(const char *bin, const char *data, const char *d, char *pl
     snprintf(plan, cap, "%s/plan.fits", d);
     snprintf(model, cap, "%s/salt3/salt3-k21", data);
     ck_assert_int_eq(wf_test_run("%s survey plan --quiet --data %s --set survey.visits=1 --out %s", bin, data, plan), 0);
-    plan_row0(plan, ra, dec, pa, mjd);
+    wf_test_plan_row0(plan, ra, dec, pa, mjd);
 }
 
 static double image_sum(const char *path)

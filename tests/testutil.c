@@ -1,5 +1,7 @@
 #include "tests/testutil.h"
 
+#include <fitsio.h>
+
 #include <stdarg.h>
 #include <sys/wait.h>
 
@@ -134,4 +136,20 @@ int wf_test_file_contains(const char *path, const char *needle)
     int found = t && strstr(t, needle);
     free(t);
     return found;
+}
+
+void wf_test_plan_row0(const char *plan, double *ra, double *dec, double *pa, double *mjd)
+{
+    fitsfile *f;
+    int status = 0, c;
+    fits_open_file(&f, plan, READONLY, &status);
+    fits_movnam_hdu(f, BINARY_TBL, "PLAN", 0, &status);
+    const char *names[4] = {"RA", "DEC", "PA", "MJD_MID"};
+    double *out[4] = {ra, dec, pa, mjd};
+    for (int k = 0; k < 4; k++) {
+        fits_get_colnum(f, CASEINSEN, (char *)names[k], &c, &status);
+        fits_read_col(f, TDOUBLE, c, 1, 1, 1, NULL, out[k], NULL, &status);
+    }
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
 }

@@ -22,6 +22,10 @@ char *wf_test_slurp(const char *path, size_t *len);
 /* Runs a shell command built like printf; its exit status (255 when it did not exit). */
 int wf_test_run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 
+/* RA, DEC, PA and MJD_MID of the first row of a plan's PLAN table (a Check assertion fails
+ * when it cannot be read). */
+void wf_test_plan_row0(const char *plan, double *ra, double *dec, double *pa, double *mjd);
+
 /* 1 when the file exists and contains needle. */
 int wf_test_file_contains(const char *path, const char *needle);
 

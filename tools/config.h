@@ -10,9 +10,8 @@
 #include <stdio.h>
 #include "firmware/readout.h"
 #include "hal/clock.h"
+#include "hal/file.h"
 #include "sim/survey/survey.h"
-
-#define WF_PATH_MAX 1024
 
 /* products.compress: `auto` is rice for `survey run`, none for every other command */
 enum { WF_COMPRESS_AUTO = 0, WF_COMPRESS_NONE = 1, WF_COMPRESS_RICE = 2 };

@@ -12,6 +12,7 @@
 
 #include "analysis/detect.h"
 #include "analysis/efficiency.h"
+#include "hal/file.h"
 #include "hal/link.h"
 #include "hal/scene.h"
 #include "sim/survey/catalog.h"
@@ -30,6 +31,7 @@
 #include "tools/psfcmd.h"
 #include "analysis/coadd.h"
 #include "analysis/diff.h"
+#include "analysis/hosts.h"
 #include "tools/sncmd.h"
 #include "tools/surveycmd.h"
 #include "tools/surveyrun.h"
@@ -71,6 +73,8 @@ static const char *usage_text =
     "                       curve (see wfisim sn --help; docs/SUPERNOVAE.md)\n"
     "  detect IMAGE --out CAT.fits   objects of an image (SEP: SExtractor's background, filter,\n"
     "                       deblending, aperture and Kron fluxes), see wfisim detect --help\n"
+    "  hosts --out DIR LIST   SN hosts by nearest separation and by d_DLR against the truth,\n"
+    "                       by redshift (see wfisim hosts --help; docs/ANALYSIS.md)\n"
     "  config doc           print the reference of every configuration key (docs/CONFIG.md)\n"
     "  config check FILE    load a configuration file and report the first problem\n"
     "\n"
@@ -222,13 +226,13 @@ static int cmd_assemble(cli *c)
     FILE *in = strcmp(c->positional, "-") ? fopen(c->positional, "rb") : stdin;
     if (!in) { wf_error(WF_ERR_IO, "%s: cannot open", c->positional); return fail("assemble", WF_ERR_IO); }
     char made[WF_PATH_MAX];
-    wf_status st = wf_pipeline_make_dir_noting(c->cfg.out_dir, made);
+    wf_status st = wf_file_make_dir_noting(c->cfg.out_dir, made);
     wf_assemble_options opt;
     wf_pipeline_assemble_options(&c->cfg, &opt);
     char path[WF_PATH_MAX] = "";
     if (!st) st = wf_assemble_stream(in, c->positional, &opt, path, sizeof path);
     if (in != stdin) fclose(in);
-    if (st) wf_pipeline_unmake_dir(c->cfg.out_dir, made); /* a damaged stream leaves no empty folder */
+    if (st) wf_file_unmake_dir(c->cfg.out_dir, made); /* a damaged stream leaves no empty folder */
     return st ? fail("assemble", st) : 0;
 }
 
@@ -297,7 +301,7 @@ static int cmd_stamp(cli *c)
     snprintf(path, sizeof path, "%s/stamp_%lld.fits", cfg->out_dir, id);
     fitsfile *f = NULL;
     char made[WF_PATH_MAX] = "";
-    if (!st) st = wf_pipeline_make_dir_noting(cfg->out_dir, made);
+    if (!st) st = wf_file_make_dir_noting(cfg->out_dir, made);
     if (!st) st = wf_fits_begin(path, tmp, sizeof tmp, &f);
     if (!st) {
         int status = 0;
@@ -325,7 +329,7 @@ static int cmd_stamp(cli *c)
         fits_write_pix(f, TDOUBLE, first, (long long)nx * ny, pix, &status);
         st = wf_fits_finish(f, tmp, path, wf_fits_error(status, tmp, "writing the stamp"));
     }
-    if (st) wf_pipeline_unmake_dir(cfg->out_dir, made);
+    if (st) wf_file_unmake_dir(cfg->out_dir, made);
     if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s (%d x %d, %s %lld, %.4g e-/s)\n", path, nx, ny,
                                     info.kind ? "star" : "galaxy", info.id, info.flux);
     free(pix);
@@ -391,7 +395,7 @@ static int cmd_catalog(cli *c)
     snprintf(gpath, sizeof gpath, "%s/synthetic_galaxies.fits", c->cfg.out_dir);
     snprintf(spath, sizeof spath, "%s/synthetic_stars.fits", c->cfg.out_dir);
     char made[WF_PATH_MAX];
-    wf_status st = wf_pipeline_make_dir_noting(c->cfg.out_dir, made);
+    wf_status st = wf_file_make_dir_noting(c->cfg.out_dir, made);
     if (!st) st = wf_synth_create(&sc, &syn);
     if (!st && !(st = wf_synth_generate_all(syn, &gal, &stars))) have = 1;
     if (!st) st = wf_catalog_write_fits(gpath, &gal);
@@ -404,7 +408,7 @@ static int cmd_catalog(cli *c)
         wf_catalog_free(&stars);
     }
     wf_synth_free(syn);
-    if (st) wf_pipeline_unmake_dir(c->cfg.out_dir, made);
+    if (st) wf_file_unmake_dir(c->cfg.out_dir, made);
     return st ? fail("catalog", st) : 0;
 }
 
@@ -443,6 +447,7 @@ int main(int argc, char **argv)
     if (!strcmp(cmd, "sn")) return wf_cmd_sn(argc - 2, argv + 2);
     if (!strcmp(cmd, "detect")) return wf_cmd_detect(argc - 2, argv + 2);
     if (!strcmp(cmd, "efficiency")) return wf_cmd_efficiency(argc - 2, argv + 2);
+    if (!strcmp(cmd, "hosts")) return wf_cmd_hosts(argc - 2, argv + 2);
     if (!strcmp(cmd, "config")) {
         if (argc >= 3 && !strcmp(argv[2], "doc")) { wf_config_write_doc(stdout); return 0; }
         if (argc >= 4 && !strcmp(argv[2], "check")) {

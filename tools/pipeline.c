@@ -10,6 +10,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "hal/file.h"
 #include "hal/link.h"
 #include "hal/scene.h"
 #include "sim/survey/skyindex.h"
@@ -23,48 +24,6 @@ void wf_pipeline_paths(const char *dir, unsigned exposure, unsigned sca, char *i
 {
     snprintf(image, cap, "%s/wfisim_e%06u_sca%02u.fits", dir, exposure, sca);
     snprintf(truth, cap, "%s/wfisim_e%06u_sca%02u_truth.fits", dir, exposure, sca);
-}
-
-wf_status wf_pipeline_make_dir_noting(const char *dir, char *made)
-{
-    char buf[WF_PATH_MAX];
-    if (made) made[0] = '\0';
-    if (strlen(dir) >= sizeof buf) return wf_error(WF_ERR_INPUT, "%.80s...: directory name too long", dir);
-    snprintf(buf, sizeof buf, "%s", dir);
-    /* every folder from the first one made down is new: the first is all undo needs */
-    for (char *p = buf + 1;; p++)
-        if (*p == '/' || !*p) {
-            char c = *p;
-            *p = '\0';
-            if (mkdir(buf, 0777) == 0) {
-                if (made && !made[0]) snprintf(made, WF_PATH_MAX, "%s", buf);
-            } else if (errno != EEXIST) {
-                wf_pipeline_unmake_dir(dir, made);
-                return wf_error(WF_ERR_IO, "%s: cannot create directory: %s", buf, strerror(errno));
-            }
-            *p = c;
-            if (!c) break;
-        }
-    return WF_OK;
-}
-
-wf_status wf_pipeline_make_dir(const char *dir) { return wf_pipeline_make_dir_noting(dir, NULL); }
-
-void wf_pipeline_unmake_dir(const char *dir, const char *made)
-{
-    if (!made || !made[0]) return;
-    char buf[WF_PATH_MAX];
-    snprintf(buf, sizeof buf, "%s", dir);
-    size_t keep = strlen(made);
-    for (;;) {
-        size_t n = strlen(buf);
-        while (n > 1 && buf[n - 1] == '/') buf[--n] = '\0';
-        /* rmdir takes only an empty folder: anything a run left in it stays */
-        if (n < keep || rmdir(buf) != 0) return;
-        char *slash = strrchr(buf, '/');
-        if (!slash) return;
-        *slash = '\0';
-    }
 }
 
 void wf_pipeline_grid(const wf_config *cfg, wf_scene_grid *g)
@@ -477,7 +436,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
      * pipe is wfisim's own (hal/link.h): an OS pipe cost ~5% of a GalSim-scene run in system
      * calls, kernel copies and wake-ups. Its 4 MiB ring holds a few tiles' packets. */
     job.ro.compress = 0;
-    if ((st = wf_pipeline_make_dir_noting(cfg->out_dir, made_dir))) goto done;
+    if ((st = wf_file_make_dir_noting(cfg->out_dir, made_dir))) goto done;
     wf_link_pipe lp;
     if ((st = wf_link_pipe_open(&lp, (size_t)4 << 20, "in-process stream", &link))) goto done;
     assembler_thread at = {0};
@@ -520,10 +479,10 @@ done:
         wf_pipeline_paths(cfg->out_dir, cfg->ro.exposure, cfg->ro.sca, pj->image_path, pj->truth_path,
                           sizeof pj->image_path);
         snprintf(tpath, sizeof tpath, "%s", pj->truth_path);
-        if (!(pj->stream && (st = wf_pipeline_make_dir(cfg->out_dir)))) st = wf_scene_write_truth(objscene, tpath, pj->digest.whole);
+        if (!(pj->stream && (st = wf_file_make_dir(cfg->out_dir)))) st = wf_scene_write_truth(objscene, tpath, pj->digest.whole);
         if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s\n", tpath);
     }
-    if (st) wf_pipeline_unmake_dir(cfg->out_dir, made_dir);
+    if (st) wf_file_unmake_dir(cfg->out_dir, made_dir);
     wf_scene_destroy(objscene);
     wf_pipeline_inputs_free(&inputs);
     free(sne);

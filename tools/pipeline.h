@@ -64,12 +64,5 @@ void wf_pipeline_grid(const wf_config *cfg, wf_scene_grid *g);
  * none here; `survey run` resolves it to rice before it comes through). */
 void wf_pipeline_assemble_options(const wf_config *cfg, wf_assemble_options *opt);
 
-/* mkdir -p. */
-wf_status wf_pipeline_make_dir(const char *dir);
-/* The same, noting in made (WF_PATH_MAX bytes) the shallowest folder it created ("" when
- * all were there), so that wf_pipeline_unmake_dir can take back the folders a failed run
- * made, those still empty: a failure leaves no empty output folder behind. */
-wf_status wf_pipeline_make_dir_noting(const char *dir, char *made);
-void wf_pipeline_unmake_dir(const char *dir, const char *made);
 
 #endif

@@ -81,42 +81,12 @@ static int by_expid_sca(const void *a, const void *b)
     return (x->sca > y->sca) - (x->sca < y->sca);
 }
 
-wf_status wf_survey_text_open(const char *path, char *tmp, size_t cap, FILE **out)
-{
-    *out = NULL;
-    if ((size_t)snprintf(tmp, cap, "%s.tmp.XXXXXX", path) >= cap) return wf_error(WF_ERR_INPUT, "%s: path too long", path);
-    int fd = mkstemp(tmp);
-    if (fd < 0) return wf_error(WF_ERR_IO, "%s: cannot create a temporary file beside it", path);
-    fchmod(fd, 0644); /* mkstemp's 0600 would be the file's mode after the rename */
-    *out = fdopen(fd, "w");
-    if (!*out) {
-        close(fd);
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: cannot open", tmp);
-    }
-    return WF_OK;
-}
-
-wf_status wf_survey_text_commit(FILE *out, const char *tmp, const char *path)
-{
-    int bad = ferror(out);
-    if (fclose(out) != 0 || bad) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: write failed", tmp);
-    }
-    if (rename(tmp, path) != 0) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
-    }
-    return WF_OK;
-}
-
 static wf_status write_csv(const char *dir, const wf_survey_index_row *rows, size_t n)
 {
     char path[WF_PATH_MAX + 64], tmp[WF_PATH_MAX + 80];
     snprintf(path, sizeof path, "%s/survey_index.csv", dir);
     FILE *out;
-    wf_status st = wf_survey_text_open(path, tmp, sizeof tmp, &out);
+    wf_status st = wf_file_text_open(path, tmp, sizeof tmp, &out);
     if (st) return st;
     fprintf(out, "expid,sca,filter,mjd_mid,visit,orient,pointing,pass,ra_pnt,dec_pnt,pa_pnt,ra_sca,dec_sca,"
                  "exptime,file,truth,datasum,wfdigest\n");
@@ -126,7 +96,7 @@ static wf_status write_csv(const char *dir, const wf_survey_index_row *rows, siz
                 r->filter, r->mjd, r->visit, r->orient, r->pointing, r->pass, r->ra, r->dec, r->pa, r->ra_sca,
                 r->dec_sca, r->exptime, r->file, r->truth, r->datasum, r->digest);
     }
-    return wf_survey_text_commit(out, tmp, path);
+    return wf_file_text_commit(out, tmp, path);
 }
 
 static wf_status write_fits(const char *dir, const wf_survey_index_row *rows, size_t n)

@@ -34,12 +34,5 @@ wf_status wf_survey_index_write(const char *dir, wf_survey_index_row *rows, size
 /* The rows of every product image in dir (names wfisim_eNNNNNN_scaNN.fits), sorted. */
 wf_status wf_survey_index_scan(const char *dir, wf_survey_index_row **rows, size_t *n);
 
-/* Opens a new temporary text file beside path, of a name no other process has (mkstemp: job
- * array tasks writing into one folder at once never share it), its name in tmp. */
-wf_status wf_survey_text_open(const char *path, char *tmp, size_t cap, FILE **out);
-
-/* Closes a text file written to tmp and renames it onto path (removing tmp on any error), as
- * the run's record and the CSV index are written. */
-wf_status wf_survey_text_commit(FILE *out, const char *tmp, const char *path);
 
 #endif

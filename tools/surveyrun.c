@@ -9,6 +9,7 @@
 #include <sys/stat.h>
 #include <time.h>
 
+#include "hal/file.h"
 #include "hal/clock.h"
 #include "sim/fits/fitsout.h"
 #include "sim/survey/skyindex.h"
@@ -299,7 +300,7 @@ static wf_status write_manifest(wf_survey_ctx *ctx, const wf_survey_run_stats *s
     }
     static const char *const kinds[] = {"synthetic", "catalog", "grid", "galsim"};
     FILE *out;
-    if ((st = wf_survey_text_open(path, tmp, sizeof tmp, &out))) {
+    if ((st = wf_file_text_open(path, tmp, sizeof tmp, &out))) {
         free(lines);
         free(others);
         return st;
@@ -380,7 +381,7 @@ static wf_status write_manifest(wf_survey_ctx *ctx, const wf_survey_run_stats *s
         remove(tmp);
         return st;
     }
-    return wf_survey_text_commit(out, tmp, path);
+    return wf_file_text_commit(out, tmp, path);
 }
 
 /* Whether an SCA's footprint at this pointing overlaps the circle of --area: the footprint
@@ -475,7 +476,7 @@ wf_status wf_survey_check_inputs(wf_survey_ctx *ctx)
     }
     ctx->todo = 0;
     for (size_t i = 0; !st && i < ctx->nitems; i++) ctx->todo += ctx->state[i] != P_SAME;
-    if (!st) st = wf_pipeline_make_dir(ctx->base->out_dir);
+    if (!st) st = wf_file_make_dir(ctx->base->out_dir);
     wf_survey_run_stats none;
     memset(&none, 0, sizeof none);
     if (!st && ctx->todo) st = write_manifest(ctx, &none, "in progress (an interrupted run leaves this)", NULL);
