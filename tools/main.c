@@ -373,7 +373,10 @@ static int cmd_survey_run(cli *c)
     st = wf_survey_run(&c->cfg, &opt, &stats);
 #endif
     wf_sn_injector_free(opt.sne);
-    if (st) return stats.silent ? exit_code(st) : fail("survey run", st); /* silent: rank 0 says why */
+    /* silent: another rank (rank 0) says why and gives the job its status. Such a rank ends
+     * with 0: a non-zero exit makes mpirun abort the job, which could kill rank 0 before its
+     * message is out (seen on a fresh machine: the refusal never printed). */
+    if (st) return stats.silent ? 0 : fail("survey run", st);
     if (!c->cfg.quiet && !stats.silent)
         fprintf(stderr, "wfisim survey: %ld products rendered (%ld replacing damaged ones, %ld made from other inputs), "
                 "%ld already done; %ld supernova images%s\n", stats.rendered, stats.redone, stats.changed,
