@@ -77,17 +77,18 @@ wf_status wf_isolate_run(const char *what, wf_isolate_fn fn, void *arg, void *ou
     int fds[2];
     if (pipe2(fds, O_CLOEXEC) != 0) return wf_error(WF_ERR_IO, "%s: no pipe for its process: %s", what, strerror(errno));
     /* the locks another thread of ours may hold, held by this one across the fork: the
-     * child then owns them, and releases them, instead of waiting on them forever */
+     * child then owns them, and releases them, instead of waiting on them forever. The
+     * planner's first: a thread holding it may print. */
     fflush(stdout);
     fflush(stderr);
+    wf_fftw_lock();
     flockfile(stdout);
     flockfile(stderr);
-    wf_fftw_lock();
     pid_t pid = fork();
     int fork_errno = errno;
-    wf_fftw_unlock();
     funlockfile(stderr);
     funlockfile(stdout);
+    wf_fftw_unlock();
     if (pid == 0) {
         close(fds[0]);
         child(fds[1], fn, arg, out, out_size);

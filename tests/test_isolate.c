@@ -1,0 +1,217 @@
+/* Work in a child process of its own (tools/isolate.h): a child that ends normally gives back
+ * its status, message and result (and changes nothing of the parent's memory); one killed
+ * by a signal or ending by exit() is reported as crashed, naming the work and the signal or
+ * status; a child forked while another thread holds stderr's or FFTW's planner lock can
+ * still take them. */
+#include <pthread.h>
+#include <signal.h>
+#include <stdatomic.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "sim/numeric/fftw_lock.h"
+#include "tools/isolate.h"
+#include "tests/testutil.h"
+
+static int in_parent = 7; /* changed by the children: the parent must still read 7 */
+
+typedef struct answer {
+    int64_t pid;
+    int64_t sum;
+} answer;
+
+static wf_status sum_fn(void *arg, void *out)
+{
+    int n = *(int *)arg;
+    answer *a = out;
+    in_parent = -1;
+    a->pid = getpid();
+    a->sum = 0;
+    for (int k = 1; k <= n; k++) a->sum += (int64_t)k * k;
+    return WF_OK;
+}
+
+static wf_status fail_fn(void *arg, void *out)
+{
+    (void)out;
+    return wf_error(WF_ERR_INPUT, "row %d: no such filter", *(int *)arg);
+}
+
+static wf_status signal_fn(void *arg, void *out)
+{
+    (void)out;
+    int sig = *(int *)arg;
+    signal(sig, SIG_DFL); /* the signal itself, not a sanitizer's handler */
+    raise(sig);
+    return WF_OK;
+}
+
+static wf_status exit_fn(void *arg, void *out)
+{
+    (void)out;
+    _exit(*(int *)arg); /* a library giving up on its own: no report (_exit: no sanitizer's exit check) */
+}
+
+static wf_status fault_fn(void *arg, void *out)
+{
+    (void)out;
+    volatile int *volatile p = arg;
+    p = NULL;
+    return *p ? WF_OK : WF_ERR_INTERNAL; /* an invalid read */
+}
+
+START_TEST(normal_exit)
+{
+    int n = 1000;
+    answer a = {0, 0};
+    int crashed = -1;
+    ck_assert_int_eq(wf_isolate_run("sum", sum_fn, &n, &a, sizeof a, &crashed), WF_OK);
+    ck_assert_int_eq(crashed, 0);
+    ck_assert_int_eq(a.sum, (int64_t)n * (n + 1) * (2 * n + 1) / 6);
+    ck_assert_int_ne(a.pid, getpid()); /* made in another process ... */
+    ck_assert_int_eq(in_parent, 7);    /* ... which changed nothing here */
+}
+END_TEST
+
+START_TEST(own_failure)
+{
+    int row = 42;
+    answer a = {-5, -5};
+    int crashed = -1;
+    ck_assert_int_eq(wf_isolate_run("plan", fail_fn, &row, &a, sizeof a, &crashed), WF_ERR_INPUT);
+    ck_assert_int_eq(crashed, 0);
+    ck_assert_str_eq(wf_error_message(), "row 42: no such filter");
+    ck_assert(a.pid == -5 && a.sum == -5);
+}
+END_TEST
+
+START_TEST(killed_by_signal)
+{
+    static const int sigs[] = {SIGKILL, SIGSEGV, SIGABRT, SIGBUS};
+    static const char *const said[] = {"signal 9 (SIGKILL: the kernel's out-of-memory killer",
+                                       "signal 11 (SIGSEGV", "signal 6 (SIGABRT", "signal 7 (SIGBUS"};
+    for (int k = 0; k < 4; k++) {
+        answer a = {-5, -5};
+        int crashed = -1, sig = sigs[k];
+        ck_assert_int_eq(wf_isolate_run("exposure 17 SCA 7", signal_fn, &sig, &a, sizeof a, &crashed), WF_ERR_INTERNAL);
+        ck_assert_int_eq(crashed, 1);
+        const char *m = wf_error_message();
+        ck_assert_msg(!strncmp(m, "exposure 17 SCA 7: its process was killed by ", 45) && strstr(m, said[k]), "%s", m);
+        ck_assert(a.pid == -5 && a.sum == -5);
+    }
+    /* a real invalid access: the signal, or the sanitizer's report and exit (SAN=1) */
+    int crashed = -1, dummy = 0;
+    answer a;
+    ck_assert_int_eq(wf_isolate_run("fault", fault_fn, &dummy, &a, sizeof a, &crashed), WF_ERR_INTERNAL);
+    ck_assert_int_eq(crashed, 1);
+    ck_assert_msg(strstr(wf_error_message(), "signal 11 (SIGSEGV") || strstr(wf_error_message(), "exited with status"),
+                  "%s", wf_error_message());
+}
+END_TEST
+
+START_TEST(exit_without_report)
+{
+    for (int code = 0; code <= 3; code += 3) {
+        answer a = {-5, -5};
+        int crashed = -1;
+        char want[128];
+        ck_assert_int_eq(wf_isolate_run("item", exit_fn, &code, &a, sizeof a, &crashed), WF_ERR_INTERNAL);
+        ck_assert_int_eq(crashed, 1);
+        snprintf(want, sizeof want, "item: its process exited with status %d before reporting its result", code);
+        ck_assert_str_eq(wf_error_message(), want);
+        ck_assert(a.pid == -5 && a.sum == -5);
+    }
+}
+END_TEST
+
+/* A result larger than a pipe holds (64 KiB) comes back whole. */
+static wf_status big_fn(void *arg, void *out)
+{
+    size_t n = *(size_t *)arg;
+    uint32_t *v = out;
+    for (size_t k = 0; k < n; k++) v[k] = (uint32_t)(k * 2654435761u);
+    return WF_OK;
+}
+
+START_TEST(large_result)
+{
+    size_t n = 1 << 20;
+    uint32_t *v = calloc(n, sizeof *v);
+    ck_assert_ptr_nonnull(v);
+    int crashed = -1;
+    ck_assert_int_eq(wf_isolate_run("big", big_fn, &n, v, n * sizeof *v, &crashed), WF_OK);
+    ck_assert_int_eq(crashed, 0);
+    size_t bad = 0;
+    for (size_t k = 0; k < n; k++) bad += v[k] != (uint32_t)(k * 2654435761u);
+    ck_assert_uint_eq(bad, 0);
+    free(v);
+}
+END_TEST
+
+/* Another thread takes and releases stderr's and FFTW's planner lock without pause: a child
+ * forked while it holds one would wait for it forever (the test's timeout) without the
+ * guard around fork(). */
+static atomic_int stop_holding;
+
+static void *holder(void *arg)
+{
+    (void)arg;
+    struct timespec ts = {0, 20000};
+    while (!atomic_load(&stop_holding)) {
+        wf_fftw_lock();
+        flockfile(stderr);
+        nanosleep(&ts, NULL);
+        funlockfile(stderr);
+        wf_fftw_unlock();
+    }
+    return NULL;
+}
+
+static wf_status locks_fn(void *arg, void *out)
+{
+    (void)arg;
+    wf_fftw_lock();
+    flockfile(stderr);
+    funlockfile(stderr);
+    wf_fftw_unlock();
+    ((answer *)out)->sum = 1;
+    return WF_OK;
+}
+
+START_TEST(locks_held_elsewhere)
+{
+    pthread_t t;
+    atomic_store(&stop_holding, 0);
+    ck_assert_int_eq(pthread_create(&t, NULL, holder, NULL), 0);
+    int ok = 0;
+    for (int k = 0; k < 200; k++) {
+        answer a = {0, 0};
+        int crashed = -1;
+        ok += wf_isolate_run("locks", locks_fn, NULL, &a, sizeof a, &crashed) == WF_OK && a.sum == 1;
+    }
+    atomic_store(&stop_holding, 1);
+    pthread_join(t, NULL);
+    ck_assert_int_eq(ok, 200);
+}
+END_TEST
+
+static Suite *suite(void)
+{
+    Suite *s = suite_create("isolate");
+    TCase *tc = tcase_create("all");
+    tcase_set_timeout(tc, 60);
+    tcase_add_test(tc, normal_exit);
+    tcase_add_test(tc, own_failure);
+    tcase_add_test(tc, killed_by_signal);
+    tcase_add_test(tc, exit_without_report);
+    tcase_add_test(tc, large_result);
+    tcase_add_test(tc, locks_held_elsewhere);
+    suite_add_tcase(s, tc);
+    return s;
+}
+
+int main(void) { return wf_test_main(suite()); }
