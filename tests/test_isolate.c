@@ -6,6 +6,7 @@
 #include <pthread.h>
 #include <signal.h>
 #include <stdatomic.h>
+#include <inttypes.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -74,6 +75,35 @@ START_TEST(normal_exit)
     ck_assert_int_eq(a.sum, (int64_t)n * (n + 1) * (2 * n + 1) / 6);
     ck_assert_int_ne(a.pid, getpid()); /* made in another process ... */
     ck_assert_int_eq(in_parent, 7);    /* ... which changed nothing here */
+}
+END_TEST
+
+/* The child's oom_score_adj, read by itself. */
+static wf_status oom_fn(void *arg, void *out)
+{
+    (void)arg;
+    FILE *f = fopen("/proc/self/oom_score_adj", "r");
+    answer *a = out;
+    a->sum = -2000;
+    if (f) {
+        if (fscanf(f, "%" SCNd64, &a->sum) != 1) a->sum = -3000;
+        fclose(f);
+    }
+    return WF_OK;
+}
+
+/* The out-of-memory killer is pointed at the child: its score is the parent's + 500. */
+START_TEST(oom_prefers_child)
+{
+    FILE *f = fopen("/proc/self/oom_score_adj", "r");
+    if (!f) WF_SKIP("no /proc/self/oom_score_adj (not Linux)");
+    int64_t mine = 0;
+    ck_assert_int_eq(fscanf(f, "%" SCNd64, &mine), 1);
+    fclose(f);
+    answer a = {0, 0};
+    int crashed = -1;
+    ck_assert_int_eq(wf_isolate_run("oom", oom_fn, NULL, &a, sizeof a, &crashed), WF_OK);
+    ck_assert_int_eq(a.sum, mine + 500 > 1000 ? 1000 : mine + 500);
 }
 END_TEST
 
@@ -206,6 +236,7 @@ static Suite *suite(void)
     tcase_set_timeout(tc, 60);
     tcase_add_test(tc, normal_exit);
     tcase_add_test(tc, own_failure);
+    tcase_add_test(tc, oom_prefers_child);
     tcase_add_test(tc, killed_by_signal);
     tcase_add_test(tc, exit_without_report);
     tcase_add_test(tc, large_result);

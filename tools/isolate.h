@@ -6,7 +6,8 @@
  * not). The child holds only the forking thread: the work starts its own threads, and the
  * locks the work takes that another thread of the parent might hold at the fork (stdout,
  * stderr, FFTW's planner lock) are taken by the forking thread around fork(), so the child
- * never inherits one held. */
+ * never inherits one held. The child's oom_score_adj is raised by 500 (Linux), so that the
+ * out-of-memory killer takes the work rather than the process waiting for it. */
 #ifndef WF_ISOLATE_H
 #define WF_ISOLATE_H
 
