@@ -12,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include "sim/numeric/fftw_lock.h"
@@ -229,6 +230,53 @@ START_TEST(locks_held_elsewhere)
 }
 END_TEST
 
+/* The work's process tells its pid and waits forever. */
+static wf_status sleeper_fn(void *arg, void *out)
+{
+    (void)out;
+    pid_t me = getpid();
+    if (write(*(int *)arg, &me, sizeof me) != sizeof me) return WF_ERR_IO;
+    for (;;) pause();
+}
+
+/* 1 when the process is gone or a zombie. */
+static int dead(pid_t pid)
+{
+    char path[64], line[256];
+    snprintf(path, sizeof path, "/proc/%ld/stat", (long)pid);
+    FILE *f = fopen(path, "r");
+    if (!f) return 1;
+    int z = fgets(line, sizeof line, f) && strstr(line, ") Z ");
+    fclose(f);
+    return z;
+}
+
+/* A parent killed (as mpirun kills its ranks) takes the work's process along. */
+START_TEST(dies_with_parent)
+{
+    if (access("/proc/self/stat", R_OK)) WF_SKIP("no /proc (not Linux)");
+    int fds[2];
+    ck_assert_int_eq(pipe(fds), 0);
+    pid_t mid = fork();
+    ck_assert_int_ge(mid, 0);
+    if (mid == 0) {
+        answer a;
+        int crashed;
+        wf_isolate_run("sleeper", sleeper_fn, &fds[1], &a, sizeof a, &crashed);
+        _exit(0);
+    }
+    pid_t worker = 0;
+    ck_assert_int_eq(read(fds[0], &worker, sizeof worker), sizeof worker);
+    ck_assert(!dead(worker));
+    kill(mid, SIGKILL);
+    ck_assert_int_eq(waitpid(mid, NULL, 0), mid);
+    int gone = 0;
+    for (int k = 0; k < 500 && !(gone = dead(worker)); k++) usleep(10000);
+    kill(worker, SIGKILL); /* whatever happened, leave nothing running */
+    ck_assert_msg(gone, "the work's process %ld outlived its parent", (long)worker);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("isolate");
@@ -241,6 +289,7 @@ static Suite *suite(void)
     tcase_add_test(tc, exit_without_report);
     tcase_add_test(tc, large_result);
     tcase_add_test(tc, locks_held_elsewhere);
+    tcase_add_test(tc, dies_with_parent);
     suite_add_tcase(s, tc);
     return s;
 }

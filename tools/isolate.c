@@ -9,6 +9,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/wait.h>
+#ifdef __linux__
+#include <sys/prctl.h>
+#endif
 #include <unistd.h>
 
 #include "sim/numeric/fftw_lock.h"
@@ -60,8 +63,16 @@ static void prefer_for_oom(void)
     close(fd);
 }
 
-static void child(int fd, wf_isolate_fn fn, void *arg, void *out, size_t out_size)
+static void child(int fd, pid_t parent, wf_isolate_fn fn, void *arg, void *out, size_t out_size)
 {
+#ifdef __linux__
+    /* a parent killed (mpirun ending the job) takes its child along, rather than leave it
+     * writing a product beside the rerun */
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) _exit(126);
+#else
+    (void)parent;
+#endif
     prefer_for_oom();
     wf_status st = fn(arg, out);
     const char *msg = st ? wf_error_message() : "";
@@ -99,14 +110,14 @@ wf_status wf_isolate_run(const char *what, wf_isolate_fn fn, void *arg, void *ou
     wf_fftw_lock();
     flockfile(stdout);
     flockfile(stderr);
-    pid_t pid = fork();
+    pid_t parent = getpid(), pid = fork();
     int fork_errno = errno;
     funlockfile(stderr);
     funlockfile(stdout);
     wf_fftw_unlock();
     if (pid == 0) {
         close(fds[0]);
-        child(fds[1], fn, arg, out, out_size);
+        child(fds[1], parent, fn, arg, out, out_size);
     }
     close(fds[1]);
     if (pid < 0) {

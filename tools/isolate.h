@@ -7,7 +7,8 @@
  * locks the work takes that another thread of the parent might hold at the fork (stdout,
  * stderr, FFTW's planner lock) are taken by the forking thread around fork(), so the child
  * never inherits one held. The child's oom_score_adj is raised by 500 (Linux), so that the
- * out-of-memory killer takes the work rather than the process waiting for it. */
+ * out-of-memory killer takes the work rather than the process waiting for it, and it dies with
+ * the thread that forked it (PR_SET_PDEATHSIG), never left running after its parent. */
 #ifndef WF_ISOLATE_H
 #define WF_ISOLATE_H
 
