@@ -23,7 +23,8 @@ typedef wf_status (*wf_isolate_fn)(void *arg, void *out);
 /* Runs fn(arg, out) in a child process. *crashed = 0: fn's status and message, and out as fn
  * left it (when WF_OK); *crashed = 1: the child died before reporting (a signal, or an exit
  * of its own) and the status is WF_ERR_INTERNAL with a message naming what (the work, e.g.
- * "exposure 17 SCA 7") and the signal or exit status; out is untouched. */
+ * "exposure 17 SCA 7") and the signal or exit status; out is then not to be read (a child
+ * killed while sending it may have sent part). */
 wf_status wf_isolate_run(const char *what, wf_isolate_fn fn, void *arg, void *out, size_t out_size, int *crashed);
 
 /* wf_survey_make_item in a child process (the MPI ranks make every item so). The item's input
