@@ -455,6 +455,115 @@ START_TEST(mpi_matches_one_process)
 }
 END_TEST
 
+/* The products of SIX in d/b (and the index, when index) against d/a: the same bytes, except
+ * the item skip (expid, sca), absent when absent is 1. */
+static void assert_six_but(const char *d, const char *b, int skip_id, int skip_sca, int absent, int index)
+{
+    char x[4400], y[4400], name[64];
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 2; k++)
+            for (int t = 0; t < 2; t++) {
+                product_path(name, sizeof name, ".", six_ids[i], six_scas[k], t);
+                snprintf(x, sizeof x, "%s/a/%s", d, name + 2);
+                snprintf(y, sizeof y, "%s/%s/%s", d, b, name + 2);
+                if (six_ids[i] == skip_id && six_scas[k] == skip_sca)
+                    ck_assert_msg(exists(y) == !absent, "%s: exists %d", y, exists(y));
+                else assert_same_file(x, y);
+            }
+    static const char *const files[] = {"survey_index.csv", "survey_index.fits"};
+    for (int k = 0; k < 2; k++) {
+        snprintf(x, sizeof x, "%s/a/%s", d, files[k]);
+        snprintf(y, sizeof y, "%s/%s/%s", d, b, files[k]);
+        if (index) assert_same_file(x, y);
+        else ck_assert_msg(!exists(y), "%s written by a run that lost an item", y);
+    }
+}
+
+/* After a run of SIX into d/b that lost item (expid, sca) alone: the run's exit and messages,
+ * the record, the five others the bytes one process makes, no index; then leaves there what
+ * a crash mid-write leaves (the item's temporary file, cut short), for the rerun to replace. */
+static void check_lost_then_rerun(const char *d, const char *b, const char *log, int expid, int sca, const char *signal)
+{
+    char x[4400], want[256];
+    snprintf(want, sizeof want, "exposure %d SCA %d: its process was killed by %s", expid, sca, signal);
+    ck_assert_msg(wf_test_file_contains(log, want), "the crash is not reported: %s", want);
+    snprintf(want, sizeof want, "1 of 6 items lost (their process crashed; a rerun makes them): exposure %d SCA %d\n",
+             expid, sca);
+    char *said = wf_test_slurp(log, NULL);
+    ck_assert_ptr_nonnull(said);
+    const char *q = strstr(said, want);
+    ck_assert_msg(q && !strstr(q + 1, want), "the lost item is not listed once:\n%.3000s", said);
+    free(said);
+    snprintf(x, sizeof x, "%s/%s/survey_run.txt", d, b);
+    snprintf(want, sizeof want, "product wfisim_e%06d_sca%02d.fits missing\n", expid, sca);
+    ck_assert_msg(wf_test_file_contains(x, "status = failed: 1 of 6 items lost") && wf_test_file_contains(x, want),
+                  "the record does not say what was lost");
+    assert_six_but(d, b, expid, sca, 1, 0);
+    snprintf(x, sizeof x, "%s/%s/wfisim_e%06d_sca%02d.fits.tmp", d, b, expid, sca);
+    FILE *f = fopen(x, "w");
+    ck_assert_ptr_nonnull(f);
+    fputs("SIMPLE  =                    T / cut short by a crash", f);
+    fclose(f);
+}
+
+/* --isolate in one process: the item whose process dies is lost alone, the run goes on and
+ * fails at the end naming it; a rerun makes it alone. */
+START_TEST(isolate_crashed_item_lost_alone)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], log[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(log, sizeof log, "%s/log", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --out %s/a", bin, plan, d), 0);
+    ck_assert_int_eq(wf_test_run("WFISIM_TEST_CRASH_ITEM=15:3:segv %s survey run --isolate --plan %s " SIX
+                                 " --out %s/b 2>%s", bin, plan, d, log), 1);
+    check_lost_then_rerun(d, "b", log, 15, 3, "signal 11 (SIGSEGV");
+    /* without --isolate the hook is never read: the crash would be the run's own */
+    ck_assert_int_eq(wf_test_run("WFISIM_TEST_CRASH_ITEM=15:3 %s survey run --plan %s " SIX " --out %s/b 2>%s", bin,
+                                 plan, d, log), 0);
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (0 replacing damaged ones, 0 made from other inputs), "
+                                             "5 already done"), "the rerun did not make exactly the lost item");
+    assert_six_but(d, "b", 0, 0, 0, 1);
+    snprintf(log, sizeof log, "%s/b/wfisim_e000015_sca03.fits.tmp", d);
+    ck_assert(!exists(log));
+}
+END_TEST
+
+/* Under mpirun, an item whose process is killed (the OOM killer's SIGKILL) is lost alone:
+ * rank 0 hands out the others, which are the bytes one process makes; the job fails naming
+ * it; a rerun makes it alone. */
+START_TEST(mpi_crashed_item_lost_alone)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *mpi = getenv("WFISIM_MPI_BIN");
+    if (!mpi || !exists(mpi) || wf_test_run("command -v mpirun >/dev/null 2>&1"))
+        WF_SKIP("Open MPI (mpirun) and bin/wfisim-mpi ($WFISIM_MPI_BIN, make MPI=1) not installed");
+#define MPIRUN "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 ASAN_OPTIONS=detect_leaks=0 " \
+               "mpirun --oversubscribe -np 3"
+    const char *d = wf_test_tmpdir();
+    char plan[4200], log[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(log, sizeof log, "%s/log", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --out %s/a", bin, plan, d), 0);
+    ck_assert_int_ne(wf_test_run("WFISIM_TEST_CRASH_ITEM=16:7 " MPIRUN " %s survey run --plan %s " SIX
+                                 " --out %s/b >%s 2>&1", mpi, plan, d, log), 0);
+    check_lost_then_rerun(d, "b", log, 16, 7, "signal 9 (SIGKILL");
+    ck_assert_msg(wf_test_file_contains(log, "[5/6] "), "the five others were not all made");
+    ck_assert_int_eq(wf_test_run(MPIRUN " %s survey run --plan %s " SIX " --out %s/b 2>%s", mpi, plan, d, log), 0);
+    ck_assert_msg(wf_test_file_contains(log, "1 products rendered (0 replacing damaged ones, 0 made from other inputs), "
+                                             "5 already done"), "the rerun did not make exactly the lost item");
+    assert_six_but(d, "b", 0, 0, 0, 1);
+    snprintf(log, sizeof log, "%s/b/wfisim_e000016_sca07.fits.tmp", d);
+    ck_assert(!exists(log));
+#undef MPIRUN
+}
+END_TEST
+
 START_TEST(bad_arguments)
 {
     const char *bin = wf_test_program();
@@ -828,6 +937,8 @@ static Suite *suite(void)
     tcase_add_test(tc, parse_lists);
     tcase_add_test(tc, index_and_area);
     tcase_add_test(tc, mpi_matches_one_process);
+    tcase_add_test(tc, isolate_crashed_item_lost_alone);
+    tcase_add_test(tc, mpi_crashed_item_lost_alone);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -63,11 +63,13 @@ static const char *usage_text =
     "                       (docs/ACCURACY.md)\n"
     "  survey plan --out F  the deep-tier observation plan and its coverage map (docs/SURVEY.md)\n"
     "  survey run --plan F [--exposures A:B] [--scas 1,2,5-7] [--area RA,DEC,R] [--sne SNE.fits]\n"
-    "             [--on-change refuse|redo]\n"
+    "             [--on-change refuse|redo] [--isolate]\n"
     "                       render every (exposure, SCA) of the range (whose SCA overlaps the\n"
     "                       circle of R deg); resumable: a product made from other inputs\n"
     "                       refuses the run (default) or is redone; with bin/wfisim-mpi under\n"
-    "                       mpirun, on many processes (docs/SURVEY.md)\n"
+    "                       mpirun, on many processes; --isolate (always so under MPI): each\n"
+    "                       item in a process of its own, a crash loses that item alone\n"
+    "                       (docs/SURVEY.md)\n"
     "  survey index DIR     the index table of the products in DIR, from their headers\n"
     "  sn generate|lightcurves|lightcurve   supernova sample, truth light curves, one light\n"
     "                       curve (see wfisim sn --help; docs/SUPERNOVAE.md)\n"
@@ -117,6 +119,7 @@ typedef struct cli {
     const char *id;
     const char *plan, *exposures, *scas, *sne, *model, *area, *on_change;
     int ma_table_given;
+    int isolate;
 } cli;
 
 /* Options that are shorthands for configuration keys. */
@@ -182,6 +185,7 @@ static int parse(int argc, char **argv, cli *c)
         else if (!strcmp(a, "--model") && val) { c->model = val; i++; }
         else if (!strcmp(a, "--area") && val) { c->area = val; i++; }
         else if (!strcmp(a, "--on-change") && val) { c->on_change = val; i++; }
+        else if (!strcmp(a, "--isolate")) c->isolate = 1;
         else if (a[0] == '-' && a[1] == '-') {
             fprintf(stderr, "wfisim: unknown option '%s' (see wfisim --help)\n", a);
             return 2;
@@ -353,6 +357,7 @@ static int cmd_survey_run(cli *c)
         return 2;
     }
     opt.redo_changed = c->on_change && !strcmp(c->on_change, "redo");
+    opt.isolate = c->isolate;
     wf_status st = WF_OK;
     if (c->exposures) st = wf_survey_parse_range(c->exposures, &opt.first, &opt.last);
     if (!st && c->scas) st = wf_survey_parse_scas(c->scas, opt.scas, &opt.nscas);

@@ -1,5 +1,7 @@
 #include "tools/survey_mpi.h"
 
+#include "tools/isolate.h"
+
 #include <mpi.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -14,6 +16,7 @@ enum { TAG_REPORT = 1, TAG_WORK = 2 };
 typedef struct report {
     int32_t status;      /* wf_status of the item */
     int32_t has_result;
+    int32_t crashed;     /* the item's process died (wf_isolate_run): the item alone is lost */
     int64_t item;
     wf_survey_item_result res;
     char message[1024];
@@ -31,6 +34,8 @@ typedef struct shared {
     wf_survey_ctx *ctx;
     size_t next, n, done_items;
     int stop;             /* an item failed: hand out no more */
+    unsigned char *lost;  /* per item, 1: its process crashed; the others go on */
+    size_t nlost;
     int local_done;
     wf_status st;         /* the first failure */
     char message[1200];
@@ -48,10 +53,15 @@ static long long take(shared *s)
     return i;
 }
 
-static void record(shared *s, int rank, size_t i, wf_status st, const char *msg, const wf_survey_item_result *res)
+static void record(shared *s, int rank, size_t i, wf_status st, int crashed, const char *msg,
+                   const wf_survey_item_result *res)
 {
     pthread_mutex_lock(&s->mu);
-    if (st) {
+    if (st && crashed) {
+        s->lost[i] = 1;
+        s->nlost++;
+        fprintf(stderr, "wfisim survey: lost on rank %d, the other items go on: %s\n", rank, msg);
+    } else if (st) {
         if (!s->st) {
             s->st = st;
             snprintf(s->message, sizeof s->message, "rank %d: %s", rank, msg);
@@ -75,9 +85,10 @@ static void *local_worker(void *arg)
     shared *s = arg;
     for (long long i; (i = take(s)) >= 0;) {
         wf_survey_item_result res;
-        wf_status st = wf_survey_make_item(s->ctx, (size_t)i, &res);
-        record(s, 0, (size_t)i, st, st ? wf_error_message() : "", &res);
-        if (st) break;
+        int crashed;
+        wf_status st = wf_survey_make_item_isolated(s->ctx, (size_t)i, &res, &crashed);
+        record(s, 0, (size_t)i, st, crashed, st ? wf_error_message() : "", &res);
+        if (st && !crashed) break;
     }
     pthread_mutex_lock(&s->mu);
     s->local_done = 1;
@@ -107,7 +118,7 @@ static wf_status dispatch(shared *s, int nranks, int threaded)
             continue;
         }
         MPI_Recv(&r, (int)sizeof r, MPI_BYTE, ms.MPI_SOURCE, TAG_REPORT, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-        if (r.has_result) record(s, ms.MPI_SOURCE, (size_t)r.item, r.status, r.message, &r.res);
+        if (r.has_result) record(s, ms.MPI_SOURCE, (size_t)r.item, r.status, r.crashed, r.message, &r.res);
         int64_t next = take(s);
         MPI_Send(&next, 1, MPI_INT64_T, ms.MPI_SOURCE, TAG_WORK, MPI_COMM_WORLD);
         if (next < 0) active--;
@@ -116,7 +127,8 @@ static wf_status dispatch(shared *s, int nranks, int threaded)
     return s->st;
 }
 
-/* Ranks > 0: report, receive an item, make it, until told to stop. */
+/* Ranks > 0: report, receive an item, make it, until told to stop. An item whose process
+ * crashed is rank 0's to report (the rank goes on); another failure is the rank's own too. */
 static wf_status work(wf_survey_ctx *ctx)
 {
     report r;
@@ -127,12 +139,14 @@ static wf_status work(wf_survey_ctx *ctx)
         int64_t i;
         MPI_Recv(&i, 1, MPI_INT64_T, 0, TAG_WORK, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
         if (i < 0) break;
-        wf_status st = wf_survey_make_item(ctx, (size_t)i, &r.res);
+        int crashed;
+        wf_status st = wf_survey_make_item_isolated(ctx, (size_t)i, &r.res, &crashed);
         r.item = i;
         r.has_result = 1;
         r.status = st;
+        r.crashed = crashed;
         snprintf(r.message, sizeof r.message, "%s", st ? wf_error_message() : "");
-        if (st && !mine) mine = wf_error(st, "%s", r.message);
+        if (st && !crashed && !mine) mine = wf_error(st, "%s", r.message);
     }
     return mine;
 }
@@ -177,6 +191,9 @@ wf_status wf_survey_run_mpi(const wf_config *cfg, const wf_survey_run_options *o
 {
     memset(stats, 0, sizeof *stats);
     int provided = 0, rank = 0, nranks = 1;
+    /* the items are made in forked processes that never call MPI: nothing to warn about
+     * (the user's own setting is kept) */
+    setenv("OMPI_MCA_mpi_warn_on_fork", "0", 0);
     if (MPI_Init_thread(NULL, NULL, MPI_THREAD_FUNNELED, &provided) != MPI_SUCCESS)
         return wf_error(WF_ERR_IO, "MPI_Init_thread failed");
     MPI_Comm_rank(MPI_COMM_WORLD, &rank);
@@ -201,17 +218,20 @@ wf_status wf_survey_run_mpi(const wf_config *cfg, const wf_survey_run_options *o
         s.quiet = cfg->quiet;
         s.t0 = time(NULL);
         s.res = calloc(n, sizeof *s.res);
-        if (!s.res) { /* the workers must still be told to stop */
+        s.lost = calloc(n, 1);
+        if (!s.res || !s.lost) { /* the workers must still be told to stop */
             s.stop = 1;
             s.st = WF_ERR_NOMEM;
             snprintf(s.message, sizeof s.message, "out of memory for %zu results", n);
         }
         st = dispatch(&s, nranks, provided >= MPI_THREAD_FUNNELED);
-        if (st) st = wf_error(st, "%s", s.message);
+        if (s.nlost) st = wf_survey_lost(ctx, s.lost, st ? s.message : "");
+        else if (st) st = wf_error(st, "%s", s.message);
         else if (s.done_items != n) st = wf_error(WF_ERR_IO, "%zu of %zu items reported", s.done_items, n);
-        if (s.res) st = st ? wf_survey_end_failed(ctx, s.res, st, stats) : wf_survey_end(ctx, s.res, stats);
+        if (s.res && s.lost) st = st ? wf_survey_end_failed(ctx, s.res, st, stats) : wf_survey_end(ctx, s.res, stats);
         stats->silent = 0;
         free(s.res);
+        free(s.lost);
         pthread_mutex_destroy(&s.mu);
     } else if (!st) {
         st = work(ctx);

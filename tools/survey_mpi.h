@@ -12,10 +12,13 @@
  * millisecond and sleeps in between, so dispatching costs no core. Waiting ranks sleep too
  * (a non-blocking barrier polled with sleeps) instead of spinning in MPI_Finalize.
  *
- * A failed item stops the handing out; the items in flight finish, and the run fails naming
- * the rank and the item. A rank that dies takes the job down (mpirun's default) and loses only
- * the items in flight: products are renamed into place when whole, so a rerun redoes exactly
- * the missing ones. survey_run.txt is written by rank 0 alone ("in progress"
+ * Every rank makes each item in a forked child (tools/isolate.h): an item whose child dies (a
+ * signal: SIGSEGV, the OOM killer's SIGKILL, abort) is reported to rank 0, which counts it
+ * lost and hands out the rest; the run then fails listing the lost items. A failed item (an
+ * error the program reports) stops the handing out; the items in flight finish, and the run
+ * fails naming the rank and the item. A rank that dies itself takes the job down (mpirun's
+ * default) and loses only the items in flight. Products are renamed into place when whole,
+ * so a rerun redoes exactly the missing ones. survey_run.txt is written by rank 0 alone ("in progress"
  * after the check, then with the index and release at the end, or "failed"). */
 #ifndef WF_SURVEY_MPI_H
 #define WF_SURVEY_MPI_H

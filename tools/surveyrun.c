@@ -15,6 +15,7 @@
 #include "sim/survey/skyindex.h"
 #include "sim/survey/survey.h"
 #include "tools/digest.h"
+#include "tools/isolate.h"
 #include "tools/pipeline.h"
 #include "tools/surveyrelease.h"
 wf_status wf_survey_parse_range(const char *text, long *first, long *last)
@@ -489,6 +490,11 @@ unsigned char *wf_survey_item_states(wf_survey_ctx *ctx)
     return ctx->state;
 }
 
+wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i)
+{
+    return prepare(ctx->base, ctx->opt, &ctx->rows[ctx->items[i].row], ctx->items[i].sca, ctx->cache, ctx->p);
+}
+
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap)
 {
     snprintf(buf, cap, "exposure %d SCA %d", ctx->rows[ctx->items[i].row].expid, ctx->items[i].sca);
@@ -536,6 +542,25 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
     st = wf_survey_index_read(p->cfg.out_dir, file ? file + 1 : p->image, &res->row);
     res->done = !st;
     return st;
+}
+
+wf_status wf_survey_lost(const wf_survey_ctx *ctx, const unsigned char *lost, const char *prefix)
+{
+    size_t nlost = 0, named = 0, k = 0;
+    for (size_t i = 0; i < ctx->nitems; i++) nlost += lost[i] != 0;
+    char buf[2048], name[64];
+    k = (size_t)snprintf(buf, sizeof buf, "%s%s%zu of %zu items lost (their process crashed; a rerun makes them): ",
+                         prefix, *prefix ? "; " : "", nlost, ctx->nitems);
+    for (size_t i = 0; i < ctx->nitems && k < sizeof buf; i++) {
+        if (!lost[i]) continue;
+        if (named == 20) {
+            snprintf(buf + k, sizeof buf - k, ", ... (%zu more)", nlost - named);
+            break;
+        }
+        wf_survey_item_name(ctx, i, name, sizeof name);
+        k += (size_t)snprintf(buf + k, sizeof buf - k, "%s%s", named++ ? ", " : "", name);
+    }
+    return wf_error(WF_ERR_INTERNAL, "%s", buf);
 }
 
 static void tally(const wf_survey_ctx *ctx, const wf_survey_item_result *res, wf_survey_run_stats *stats)
@@ -598,8 +623,20 @@ wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt,
         return st;
     }
     time_t t0 = time(NULL);
+    unsigned char *lost = opt->isolate ? calloc(n, 1) : NULL;
+    size_t nlost = 0;
+    if (opt->isolate && !lost) st = wf_error(WF_ERR_NOMEM, "out of memory");
     for (size_t i = 0; i < n && !st; i++) {
-        if ((st = wf_survey_make_item(ctx, i, &res[i]))) break;
+        int crashed = 0;
+        st = opt->isolate ? wf_survey_make_item_isolated(ctx, i, &res[i], &crashed) : wf_survey_make_item(ctx, i, &res[i]);
+        if (st && crashed) { /* that item alone is lost: the run goes on, and fails at the end */
+            fprintf(stderr, "wfisim survey: lost, the other items go on: %s\n", wf_error_message());
+            lost[i] = 1;
+            nlost++;
+            st = WF_OK;
+            continue;
+        }
+        if (st) break;
         if (!base->quiet && res[i].made) {
             const wf_survey_row *x = &ctx->rows[ctx->items[i].row];
             fprintf(stderr, "wfisim survey: [%zu/%zu] exposure %d SCA %d %s MJD %.5f%s (%.0f s)\n", i + 1, n,
@@ -607,7 +644,13 @@ wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt,
                     difftime(time(NULL), t0));
         }
     }
+    if (nlost) {
+        char first[1100] = "";
+        if (st) snprintf(first, sizeof first, "%s", wf_error_message());
+        st = wf_survey_lost(ctx, lost, first);
+    }
     st = st ? wf_survey_end_failed(ctx, res, st, stats) : wf_survey_end(ctx, res, stats);
+    free(lost);
     free(res);
     wf_survey_free(ctx);
     return st;

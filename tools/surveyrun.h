@@ -52,6 +52,8 @@ typedef struct wf_survey_run_options {
     int area;                  /* 1: only the items whose SCA footprint overlaps the circle */
     double area_ra, area_dec, area_radius; /* deg */
     int redo_changed;          /* a product made from other inputs: 1 redo, 0 refuse the run */
+    int isolate;               /* 1: each item in a child process (tools/isolate.h); a crash
+                                * loses that item alone (the MPI program always isolates) */
 } wf_survey_run_options;
 
 typedef struct wf_survey_run_stats {
@@ -106,10 +108,17 @@ unsigned char *wf_survey_item_states(wf_survey_ctx *ctx);
 /* Item i (0-based, plan order), after the check: skipped when its products are whole and
  * from this run's inputs, else rendered. */
 wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_result *res);
+/* Computes item i's input digest in this process, so that its files' digests stay in the
+ * run's cache (a child process that then makes the item finds them there). */
+wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i);
 /* "exposure E SCA S" of item i, for messages. */
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap);
 /* How item i's result reads in a progress line: "", " (damaged product redone)", ... */
 const char *wf_survey_item_note(const wf_survey_item_result *res);
+/* The run's error after lost[i] items (1: their process crashed) were lost, the others
+ * made: "N of M items lost (...): exposure E SCA S, ...", with prefix (a failure of another
+ * kind, or "") before it. */
+wf_status wf_survey_lost(const wf_survey_ctx *ctx, const unsigned char *lost, const char *prefix);
 /* With every item's result: the stats, the index and survey_run.txt "complete" (and, with an
  * SN sample, the release's catalogs and light curves), each through a temporary file and a
  * rename. */
