@@ -25,8 +25,6 @@
  * bits (sim/draw/profile_kernels.c). */
 #include <fftw3.h>
 #include <math.h>
-#include <stdint.h>
-#include <stdlib.h>
 #include <string.h>
 
 #include "hal/simd.h"
@@ -101,6 +99,8 @@ wf_status wf_profile_galaxy_job(wf_profile_work *w, const wf_galaxy *g, wf_draw_
     jb->fd = disk - jb->fk;
     return WF_OK;
 }
+
+/* ------------------------------------------------------------------------ the draw */
 
 static void phase_line_to(double theta, int n, double *re, double *im, size_t st)
 {
@@ -232,7 +232,8 @@ static wf_status draw_job(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
         psf = &view;
     }
     double rfold = wf_profile_object_radius(jb, t, psf, w->acc.folding_threshold, split);
-    double rown = split ? 0.0 : wf_profile_object_radius(jb, t, psf, 1.0 - w->acc.flux_fraction, 0);
+    double rown =
+        split ? 0.0 : wf_profile_object_radius(jb, t, psf, 1.0 - w->acc.flux_fraction, 0);
     double need_fold = 2.0 * ceil(fmax(rfold, rown) / p) + 2.0;
     int mi = wf_profile_choose_size(w, psf, split ? need_fold : fmax((double)need, need_fold));
     gd.m = w->sizes[mi];
@@ -288,14 +289,16 @@ static wf_status draw_job(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
         int js = wf_profile_tail_cut(jb, t, psf, gd.dk, gd.m, us, tol, 0);
         if (js < us) {
             int from = above ? (int)lround(kcs / dkt) : psf->kr;
-            int keep = (int)floor(wf_profile_psf_kcut_from(jb, t, psf, WF_PROFILE_CUT_KEEP, 0, from) / gd.dk);
+            double kk = wf_profile_psf_kcut_from(jb, t, psf, WF_PROFILE_CUT_KEEP, 0, from);
+            int keep = (int)floor(kk / gd.dk);
             us = js > keep ? js : keep < us ? keep : us;
         }
         if (gd.nk) {
             int jk = wf_profile_tail_cut(jb, t, psf, gd.dk, gd.m, uk, tol, 1);
             if (jk < uk) {
                 int from = above ? (int)lround(kck / dkt) : psf->kr;
-                int keep = (int)floor(wf_profile_psf_kcut_from(jb, t, psf, WF_PROFILE_CUT_KEEP, 1, from) / gd.dk);
+                double kk = wf_profile_psf_kcut_from(jb, t, psf, WF_PROFILE_CUT_KEEP, 1, from);
+                int keep = (int)floor(kk / gd.dk);
                 uk = jk > keep ? jk : keep < uk ? keep : uk;
             }
         }
@@ -376,7 +379,8 @@ static wf_status draw_job(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
         for (long xx = xb; xx < (long)stamp->x0 + stamp->nx; xx++) dst[xx - stamp->x0] = 0.0;
     }
     if (split && wing) wf_profile_wing_stamp(psf, split, jb->flux, x, y, stamp);
-    if (clamped && jb->fpoint == 0.0 && (st = wf_profile_dewrap(w, jb, &gd, x, y, stamp, split))) return st;
+    if (clamped && jb->fpoint == 0.0 && (st = wf_profile_dewrap(w, jb, &gd, x, y, stamp, split)))
+        return st;
     clip_negatives(stamp, w->keep_negatives);
     stamp->fft = gd.m;
     return WF_OK;
@@ -405,7 +409,8 @@ static wf_status draw_galaxy(wf_profile_work *work, const wf_galaxy *g, const wf
     wf_status st = wf_profile_check_stamp(stamp);
     if (st) return st;
     wf_draw_job jb;
-    if ((st = wf_profile_galaxy_job(work, g, &jb)) || (st = wf_profile_check_position(x, y))) return st;
+    if ((st = wf_profile_galaxy_job(work, g, &jb)) || (st = wf_profile_check_position(x, y)))
+        return st;
     if (jb.flux == 0.0) {
         clear_stamp(stamp);
         return WF_OK;

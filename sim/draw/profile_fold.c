@@ -157,7 +157,8 @@ void wf_profile_fold_pass(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
         const double *lr[WF_LAT_WMAX], *li[WF_LAT_WMAX];
         if (lat) { /* the w coarse rows this row interpolates, and their weights */
             int tv = wf_floor_div(v, lat->r), m0 = tv - lat->w / 2 + 1;
-            for (; lat->next <= m0 + lat->w - 1; lat->next++) wf_profile_lat_row(fk, lat, lat->next, m);
+            for (; lat->next <= m0 + lat->w - 1; lat->next++)
+                wf_profile_lat_row(fk, lat, lat->next, m);
             const double *wt = lat->wt[v - tv * lat->r];
             const double sg = (v & 1) ? -1.0 : 1.0;
             for (int i = 0; i < lat->w; i++) {
@@ -213,8 +214,8 @@ void wf_profile_fold_pass(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
             }
             if (sa <= sb) fk->smooth(&sp, sa, sb - sa + 1, runr + (sa - ua), runi + (sa - ua));
             if (nkb > 0) /* rounded up to whole vectors: the lines and the run have room */
-                wf_profile_knot_sum((n + 7) & ~7, nkb, ckr, cki, w->kx + (size_t)(ua + u_all), ks, runr,
-                                    runi);
+                wf_profile_knot_sum((n + 7) & ~7, nkb, ckr, cki, w->kx + (size_t)(ua + u_all), ks,
+                                    runr, runi);
             if (lat) fk->latadd(n, lat->w, wy, lr, li, ua, runr, runi);
             /* times PSF x pixel, into the bins */
             double *bins = crow + 2 * (size_t)(ua - a * m);
@@ -238,8 +239,8 @@ void wf_profile_fold_pass(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
  * galaxy size)^2), on a lattice of DEWRAP_NODES + 1 nodes per side of the FFT box,
  * interpolated bilinearly, and subtracted. The lattice belongs to the box, not to the
  * stamp asked for, so pieces of a stamp get the same pixels. */
-wf_status wf_profile_dewrap(const wf_profile_work *w, const wf_draw_job *jb, const wf_draw_grid *gd, double x,
-                            double y, wf_stamp *stamp, int box_only)
+wf_status wf_profile_dewrap(const wf_profile_work *w, const wf_draw_job *jb, const wf_draw_grid *gd,
+                            double x, double y, wf_stamp *stamp, int box_only)
 {
     const wf_sersic_table *t = w->sersic;
     const double p = w->acc.pixel_scale, period = gd->m * p;
@@ -265,7 +266,9 @@ wf_status wf_profile_dewrap(const wf_profile_work *w, const wf_draw_job *jb, con
             double wsum = 0.0;
             for (int ny = -nimg; ny <= nimg; ny++)
                 for (int nx = -nimg; nx <= nimg; nx++)
-                    if (nx || ny) wsum += wf_profile_smooth_density(jb, t, px + nx * period, py + ny * period);
+                    if (nx || ny)
+                        wsum += wf_profile_smooth_density(jb, t, px + nx * period,
+                                                          py + ny * period);
             node[b * (DEWRAP_NODES + 1) + a] = wsum * p * p;
         }
     for (int yy = 0; yy < stamp->ny; yy++) {

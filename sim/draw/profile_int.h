@@ -78,11 +78,11 @@ typedef struct wf_shape {
 
 wf_status wf_profile_shape(double e1, double e2, double rotation, wf_shape *out);
 
-/* Knots in Fourier space (sim/draw/profile_lattice.c). The direct sum costs one complex multiply-add per
- * knot and Fourier sample. The lattice method sums the knots only on a coarse lattice
- * (every r-th sample per axis, which still resolves their transform because they occupy a
- * small part of the FFT box) and interpolates the fine samples with a compact kernel
- * (w taps per axis); each knot's weight is divided by the kernel's transform at its
+/* Knots in Fourier space (sim/draw/profile_lattice.c). The direct sum costs one complex
+ * multiply-add per knot and Fourier sample. The lattice method sums the knots only on a
+ * coarse lattice (every r-th sample per axis, which still resolves their transform because
+ * they occupy a small part of the FFT box) and interpolates the fine samples with a compact
+ * kernel (w taps per axis); each knot's weight is divided by the kernel's transform at its
  * position, which makes the interpolation exact up to the kernel's aliasing, ~1e-9 of a
  * stamp's peak (tests/test_profile.c bounds it against the direct sum). AUTO takes the
  * lattice, with the few farthest knots summed directly, wherever that costs less; DIRECT
@@ -199,7 +199,10 @@ extern wf_fold_kernels wf_profile_fold_k;
 static inline long wf_floor_div_l(long a, long b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 static inline int wf_floor_div(int a, int b) { return (int)wf_floor_div_l(a, b); }
 
-static inline int wf_profile_ladder_max(const wf_profile_work *w) { return w->sizes[w->nsizes - 1]; }
+static inline int wf_profile_ladder_max(const wf_profile_work *w)
+{
+    return w->sizes[w->nsizes - 1];
+}
 
 /* profile.c */
 wf_status wf_profile_check_position(double x, double y);
@@ -211,9 +214,9 @@ wf_status wf_profile_draw_plan(wf_profile_work *w, int mi);
 
 /* profile_size.c: radii (arcsec) holding all but eps of the light, the stamp of an object,
  * the Fourier cuts, the FFT side. */
-struct radius_hint;
+struct wf_radius_hint;
 double wf_profile_galaxy_radius(const wf_draw_job *jb, const wf_sersic_table *t, double eps,
-                                struct radius_hint *hint);
+                                struct wf_radius_hint *hint);
 double wf_profile_object_radius(const wf_draw_job *jb, const wf_sersic_table *t,
                                 const wf_profile_psf *psf, double eps, int core);
 wf_status wf_profile_bounds(const wf_profile_work *w, const wf_draw_job *jb,

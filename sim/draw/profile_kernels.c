@@ -1,9 +1,9 @@
 /* The drawing's inner loops: the direct knot sums, the fold pass's per-sample kernels (the
- * smooth profile, the knot lattice's rows, the product with PSF x pixel), and the split
- * PSF's wing added to a stamp or to a row; each in a scalar version and, with GCC, vector
- * versions that give the same bits, the widest the CPU has chosen once per process. GCC's
- * vector extensions (__builtin_shuffle, which clang lacks): the fuzz build compiles this file
- * with gcc (Makefile, FUZZ_GCC). */
+ * smooth profile, the knot lattice's rows, the product with PSF x pixel) and the split PSF's
+ * wing added to a stamp or to a row; each in a scalar version and, with GCC on x86-64,
+ * vector versions that give the same bits, the widest the CPU has taken once per process
+ * (wf_profile_simd). The vector versions use GCC's vector extensions, __builtin_shuffle among
+ * them, which clang lacks: the fuzz build compiles this file with gcc (Makefile, FUZZ_GCC). */
 #include <math.h>
 #include <pthread.h>
 #include <stddef.h>
@@ -11,6 +11,8 @@
 
 #include "sim/draw/profile.h"
 #include "sim/draw/profile_int.h"
+
+/* ------------------------------------------------------------------------ knot sums */
 
 /* run[i] += sum_j c_j x_j[i] for i < n, complex, split into real and imaginary arrays; knot
  * j's phase line is x_j = kx + 2 j ks (real parts, then ks further the imaginary ones).
@@ -155,8 +157,8 @@ static void latadd_scalar(int n, int nw, const double *wy, const double *const *
 
 /* A coarse row g (pointers at n = 0) interpolated along u at u, times (-1)^u (the box's
  * centring), into ar[u], ai[u]. */
-static inline void latrow_one(const wf_knot_lattice *l, const double *gr, const double *gi, int u,
-                              double *ar, double *ai)
+static inline void latrow_one(const wf_knot_lattice *l, const double *gr, const double *gi,
+                              int u, double *ar, double *ai)
 {
     int t = wf_floor_div(u, l->r), rho = u - t * l->r, h = l->w / 2 - 1;
     const double *wt = l->wt[rho];
@@ -170,8 +172,8 @@ static inline void latrow_one(const wf_knot_lattice *l, const double *gr, const 
     ai[u] = sg * si;
 }
 
-static void latrow_scalar(const wf_knot_lattice *l, const double *gr, const double *gi, int ua, int ub,
-                          double *ar, double *ai)
+static void latrow_scalar(const wf_knot_lattice *l, const double *gr, const double *gi, int ua,
+                          int ub, double *ar, double *ai)
 {
     for (int u = ua; u <= ub; u++) latrow_one(l, gr, gi, u, ar, ai);
 }
@@ -304,7 +306,7 @@ static void wingclip_scalar(long n, const double *w, const float *const *r, cons
 #define LATROW_BODY(V, NL, ZU)                                                             \
     const int r = l->r, wd = l->w, h = wd / 2 - 1;                                         \
     for (int rho = 0; rho < r; rho++) {                                                    \
-        int t0 = wf_floor_div(ua - rho + r - 1, r), t1 = wf_floor_div(ub - rho, r);              \
+        int t0 = wf_floor_div(ua - rho + r - 1, r), t1 = wf_floor_div(ub - rho, r);        \
         if (t1 - t0 + 1 < (NL)) {                                                          \
             for (int t = t0; t <= t1; t++) latrow_one(l, gr, gi, r * t + rho, ar, ai);    \
             continue;                                                                      \
@@ -438,8 +440,8 @@ static void latadd_v2(int n, int nw, const double *wy, const double *const *lr,
 {
     LATADD_BODY(fv2, 2, no_zeroupper)
 }
-static void latrow_v2(const wf_knot_lattice *l, const double *gr, const double *gi, int ua, int ub,
-                      double *ar, double *ai)
+static void latrow_v2(const wf_knot_lattice *l, const double *gr, const double *gi, int ua,
+                      int ub, double *ar, double *ai)
 {
     LATROW_BODY(fv2, 2, no_zeroupper)
 }
@@ -499,9 +501,9 @@ latadd_v4(int n, int nw, const double *wy, const double *const *lr, const double
 {
     LATADD_BODY(fv4, 4, _mm256_zeroupper)
 }
-__attribute__((target("avx2"))) static void latrow_v4(const wf_knot_lattice *l, const double *gr,
-                                                      const double *gi, int ua, int ub,
-                                                      double *ar, double *ai)
+__attribute__((target("avx2"))) static void latrow_v4(const wf_knot_lattice *l,
+                                                      const double *gr, const double *gi,
+                                                      int ua, int ub, double *ar, double *ai)
 {
     LATROW_BODY(fv4, 4, _mm256_zeroupper)
 }
@@ -519,7 +521,7 @@ __attribute__((target("avx2"))) static void wing_v4(long n, double w00, double w
     WING_BODY(fv4, ff4, 4, _mm256_zeroupper)
 }
 __attribute__((target("avx2"))) static void wingclip_v4(long n, const double *w, const float *const *r,
-                                                           const float *box, double *acc)
+                                                        const float *box, double *acc)
 {
     WINGCLIP_BODY(fv4, ff4, fi4, 4, _mm256_zeroupper)
 }
@@ -567,9 +569,9 @@ latadd_v8(int n, int nw, const double *wy, const double *const *lr, const double
 {
     LATADD_BODY(fv8, 8, _mm256_zeroupper)
 }
-__attribute__((target("avx512f"))) static void latrow_v8(const wf_knot_lattice *l, const double *gr,
-                                                         const double *gi, int ua, int ub,
-                                                         double *ar, double *ai)
+__attribute__((target("avx512f"))) static void latrow_v8(const wf_knot_lattice *l,
+                                                         const double *gr, const double *gi,
+                                                         int ua, int ub, double *ar, double *ai)
 {
     LATROW_BODY(fv8, 8, _mm256_zeroupper)
 }
@@ -587,7 +589,7 @@ __attribute__((target("avx512f"))) static void wing_v8(long n, double w00, doubl
     WING_BODY(fv8, ff8, 8, _mm256_zeroupper)
 }
 __attribute__((target("avx512f"))) static void wingclip_v8(long n, const double *w, const float *const *r,
-                                                              const float *box, double *acc)
+                                                           const float *box, double *acc)
 {
     WINGCLIP_LOOP(fv8, ff8, fi8, 8)
     if (k < n) { /* the last few columns (a row is ~100 wide) in one masked vector */
@@ -606,7 +608,8 @@ __attribute__((target("avx512f"))) static void wingclip_v8(long n, const double 
 }
 #endif
 
-/* acc[i - xa] += max(box[i - ca], 0) for the columns i in [lo, hi) within [ca, cb) */
+/* acc[i - xa] += max(box[i - ca], 0) for the columns i in [lo, hi) within [ca, cb): a wing
+ * row's columns the wing table does not reach (sim/draw/profile_wing.c). */
 void wf_profile_box_clipped(const float *box, int ca, int cb, int lo, int hi, int xa, double *acc)
 {
     if (lo < ca) lo = ca;
@@ -633,29 +636,29 @@ void wf_profile_box_clipped(const float *box, int ca, int cb, int lo, int hi, in
     }
 }
 
-wf_fold_kernels wf_profile_fold_k = {smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar, wing_scalar,
-                              wingclip_scalar};
+wf_fold_kernels wf_profile_fold_k = {smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar,
+                                     wing_scalar, wingclip_scalar};
 static pthread_once_t simd_once = PTHREAD_ONCE_INIT;
 static int simd_lanes;
 
 static int simd_select(int lanes)
 {
-    wf_profile_fold_k = (wf_fold_kernels){smooth_scalar, latrow_scalar, latadd_scalar, psfmul_scalar, wing_scalar,
-                            wingclip_scalar};
+    wf_profile_fold_k = (wf_fold_kernels){smooth_scalar, latrow_scalar, latadd_scalar,
+                                          psfmul_scalar, wing_scalar, wingclip_scalar};
     int used = 0;
 #if defined(FOLD_SIMD)
     __builtin_cpu_init();
     if (lanes >= 8 && __builtin_cpu_supports("avx512f")) {
-        wf_profile_fold_k = (wf_fold_kernels){smooth_v8, latrow_v8, latadd_v8, psfmul_v8, wing_v8,
-                                wingclip_v8};
+        wf_profile_fold_k = (wf_fold_kernels){smooth_v8, latrow_v8, latadd_v8, psfmul_v8,
+                                              wing_v8, wingclip_v8};
         used = 8;
     } else if (lanes >= 4 && __builtin_cpu_supports("avx2")) {
-        wf_profile_fold_k = (wf_fold_kernels){smooth_v4, latrow_v4, latadd_v4, psfmul_v4, wing_v4,
-                                wingclip_v4};
+        wf_profile_fold_k = (wf_fold_kernels){smooth_v4, latrow_v4, latadd_v4, psfmul_v4,
+                                              wing_v4, wingclip_v4};
         used = 4;
     } else if (lanes >= 2) {
-        wf_profile_fold_k = (wf_fold_kernels){smooth_v2, latrow_v2, latadd_v2, psfmul_v2, wing_v2,
-                                wingclip_v2};
+        wf_profile_fold_k = (wf_fold_kernels){smooth_v2, latrow_v2, latadd_v2, psfmul_v2,
+                                              wing_v2, wingclip_v2};
         used = 2;
     }
 #endif

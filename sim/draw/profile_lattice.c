@@ -1,7 +1,22 @@
-/* The knot lattice: the knots' transform summed on a grid r times coarser than the fine one
- * and interpolated with a Kaiser-Bessel kernel (the method, its error and its costs below);
- * which knots it takes, its step and its width, by operation count; its rows interpolated
- * along u as the fold pass (sim/draw/profile_fold.c) reaches them. */
+/* The knot lattice. The knots' transform K(k) = sum_j f_j e^{-i k.x_j} is needed on the fine
+ * grid k = (u, v) dk out to the PSF's band, ~2.2 M^2 samples for an FFT box of M pixels, but
+ * the knots lie within a few hlr of the object, a small part of the box: sampled on a lattice r
+ * times coarser (period L = M p / r, at least X / rho for knots within X of the object) it is
+ * still resolved. With a kernel psi of w taps (spacing Delta = r dk) and Phi its transform,
+ * sum_n g(n Delta) psi(k / Delta - n), g the sum over knots of f_j Delta / Phi(x_j)
+ * e^{-i n Delta x_j}, equals by Poisson's formula K(k) plus the knots' images at
+ * x_j + m L (m != 0) weighted by Phi(x_j + m L) / Phi(x_j): with the Kaiser-Bessel shape
+ * (sim/draw/profile_int.h) and beta = pi w (1 - rho) that ratio is ~exp(-pi w sqrt(1 - 2 rho)),
+ * exp(-E) with E = -ln(acc.knot_accuracy), times a prefactor of order 10: at the default E = 20
+ * the stamps differ from the direct sum's by <= 2e-9 of their peak in tests/test_profile.c,
+ * 1e-8 over the GalSim scene (bench/bench_profile.c); a scene lowers E for faint objects
+ * (sim/draw/scene.c), down to narrower kernels and coarser lattices. Separable in x and y: g on
+ * ~(2 U / r + w)^2 lattice points costs one complex multiply-add per knot (half of them, g
+ * being Hermitian); each coarse row is interpolated along u once, each fine sample then takes w
+ * real-by-complex multiply-adds from w such rows. Wider kernels allow a larger rho, hence a
+ * coarser lattice, for more taps per sample: each draw takes the cheapest
+ * (wf_profile_knot_plan), and its coarse rows are interpolated along u as the fold pass
+ * (sim/draw/profile_fold.c) reaches them. */
 #include <math.h>
 #include <stddef.h>
 #include <stdlib.h>
@@ -10,25 +25,6 @@
 #include "sim/draw/profile.h"
 #include "sim/draw/profile_int.h"
 
-/* ------------------------------------------------------------------------ knot wf_knot_lattice */
-
-/* The knots' transform K(k) = sum_j f_j e^{-i k.x_j} is needed on the fine grid k = (u, v) dk
- * out to the PSF's band, ~2.2 M^2 samples for an FFT box of M pixels, but the knots lie
- * within a few hlr of the object, a small part of the box: sampled on a lattice r times
- * coarser (period L = M p / r, at least X / rho for knots within X of the object) it is
- * still resolved. With a kernel psi of w taps (spacing Delta = r dk) and Phi its transform,
- * sum_n g(n Delta) psi(k / Delta - n), g the sum over knots of f_j Delta / Phi(x_j)
- * e^{-i n Delta x_j}, equals by Poisson's formula K(k) plus the knots' images at x_j + m L
- * (m != 0) weighted by Phi(x_j + m L) / Phi(x_j): with the Kaiser-Bessel shape
- * (sim/draw/profile_int.h) and beta = pi w (1 - rho) that ratio is ~exp(-pi w sqrt(1 - 2 rho)),
- * exp(-E) with E = -ln(acc.knot_accuracy), times a prefactor of order 10: at the default
- * E = 20 the stamps differ from the direct sum's by <= 2e-9 of their peak in
- * tests/test_profile.c, 1e-8 over the GalSim scene (bench/bench_profile.c); a scene lowers E
- * for faint objects (sim/draw/scene.c), down to narrower kernels and coarser lattices. Separable in x and y: g on ~(2 U / r + w)^2 lattice
- * points costs one complex multiply-add per knot (half of them, g being Hermitian); each
- * coarse row is interpolated along u once, each fine sample then takes w real-by-complex
- * multiply-adds from w such rows. Wider kernels allow a larger rho, hence a coarser
- * lattice, for more taps per sample: each draw takes the cheapest. */
 /* rho for a kernel of w taps: pi w sqrt(1 - 2 rho) = E (negative: w too narrow for E). */
 static double lat_rho(int w, double e)
 {
@@ -71,8 +67,8 @@ static int lat_step(const wf_draw_grid *gd, double p, double x, int w)
 
 /* Sets the lattice's sizes for step r and w taps; 0 when it does not fit the work's
  * buffers. *c0 + *c1 nk is its cost for nk knots (the direct sum's: nk per fine sample). */
-static int lat_size(const wf_profile_work *w, const wf_draw_grid *gd, int r, int wd, wf_knot_lattice *l,
-                    double *c0, double *c1)
+static int lat_size(const wf_profile_work *w, const wf_draw_grid *gd, int r, int wd,
+                    wf_knot_lattice *l, double *c0, double *c1)
 {
     l->r = r;
     l->w = wd;
@@ -104,7 +100,8 @@ static int lat_size(const wf_profile_work *w, const wf_draw_grid *gd, int r, int
 
 /* Kernel weights, knot weights and the coarse rows m >= 0 of g (the knots' phase lines in
  * w->kx and w->ky, free again afterwards). */
-void wf_profile_lat_build(wf_profile_work *w, const wf_draw_job *jb, wf_draw_grid *gd, wf_knot_lattice *l)
+void wf_profile_lat_build(wf_profile_work *w, const wf_draw_job *jb, wf_draw_grid *gd,
+                          wf_knot_lattice *l)
 {
     const int r = l->r, wd = l->w, nh = l->nh, mh = l->mh;
     const double delta = r * gd->dk;

@@ -5,13 +5,13 @@
 #include <math.h>
 #include <stddef.h>
 #include <stdlib.h>
-#include <string.h>
 
 #include "sim/draw/profile.h"
 #include "sim/draw/profile_int.h"
 
 /* Surface brightness of the smooth galaxy (flux per arcsec^2) at (x, y) arcsec from it. */
-double wf_profile_smooth_density(const wf_draw_job *jb, const wf_sersic_table *t, double x, double y)
+double wf_profile_smooth_density(const wf_draw_job *jb, const wf_sersic_table *t, double x,
+                                 double y)
 {
     const double(*ai)[2] = jb->shape.ainv;
     double r = hypot(ai[0][0] * x + ai[0][1] * y, ai[1][0] * x + ai[1][1] * y), d = 0.0;
@@ -20,8 +20,6 @@ double wf_profile_smooth_density(const wf_draw_job *jb, const wf_sersic_table *t
     if (jb->fd > 0.0) d += jb->fd / (2.0 * M_PI * jb->r0 * jb->r0) * exp(-r / jb->r0);
     return d;
 }
-
-/* ------------------------------------------------------------ no PSF: real space */
 
 /* Light of the smooth round galaxy within radius r, as a fraction of its flux (bulge and
  * smooth disk only; knots are drawn apart). */
@@ -104,8 +102,8 @@ static double gk_adapt(const fan *f, double a, double b, double tol, int depth)
  * P -> Q turns counter-clockwise: in polar coordinates the radial integral is the
  * enclosed-light function, so the cusp at the centre needs no quadrature at all and the
  * angular integrand E(d / cos(theta - phi)) / (2 pi) is smooth. */
-static double fan_triangle(const wf_draw_job *jb, const wf_sersic_table *t, double px, double py,
-                           double qx, double qy)
+static double fan_triangle(const wf_draw_job *jb, const wf_sersic_table *t, double px,
+                           double py, double qx, double qy)
 {
     double cross = px * qy - py * qx;
     double ex = qx - px, ey = qy - py, len = hypot(ex, ey);
@@ -130,8 +128,8 @@ static double fan_triangle(const wf_draw_job *jb, const wf_sersic_table *t, doub
 }
 
 /* Light of the smooth galaxy in one pixel (corners in arcsec from the centre). */
-static double pixel_light(const wf_draw_job *jb, const wf_sersic_table *t, double x0, double y0,
-                          double p, int near)
+static double pixel_light(const wf_draw_job *jb, const wf_sersic_table *t, double x0,
+                          double y0, double p, int near)
 {
     const double(*ai)[2] = jb->shape.ainv;
     if (near) { /* the pixel's corners in round coordinates, counter-clockwise */
@@ -158,8 +156,8 @@ static double pixel_light(const wf_draw_job *jb, const wf_sersic_table *t, doubl
     double sum = 0.0;
     for (int b = 0; b < n; b++)
         for (int a = 0; a < n; a++)
-            sum += g[a][1] * g[b][1] *
-                   wf_profile_smooth_density(jb, t, xc + 0.5 * p * g[a][0], yc + 0.5 * p * g[b][0]);
+            sum += g[a][1] * g[b][1] * wf_profile_smooth_density(jb, t, xc + 0.5 * p * g[a][0],
+                                                                 yc + 0.5 * p * g[b][0]);
     return sum * 0.25 * p * p;
 }
 

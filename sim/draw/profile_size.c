@@ -60,9 +60,10 @@ static double galaxy_miss_slope(const wf_draw_job *jb, const wf_sersic_table *t,
     return m / jb->flux;
 }
 
-/* The last root the radius search found: wf_profile_object_radius asks for several eps in a row, and
- * a start extrapolated from the previous root takes 1.5 steps on average instead of 2.8. */
-typedef struct radius_hint {
+/* The last root the radius search found: wf_profile_object_radius asks for several eps in a
+ * row, and a start extrapolated from the previous root takes 1.5 steps on average instead of
+ * 2.8. */
+typedef struct wf_radius_hint {
     double s, slope, curv, leps; /* ln r, d ln miss / ds and d2 ln miss / ds2 there, ln eps;
                                   * leps NAN: none yet */
 } radius_hint;
@@ -187,8 +188,8 @@ static double psf_radius(const wf_profile_psf *psf, double eps, int core)
  * (1 - eps_g)(1 - eps_p) >= 1 - eps within R_g + R_p when eps_g + eps_p = eps; the split
  * giving the smallest radius is chosen. The sheared galaxy's radius is the round one's
  * times the shear's largest stretch. */
-double wf_profile_object_radius(const wf_draw_job *jb, const wf_sersic_table *t, const wf_profile_psf *psf,
-                                double eps, int core)
+double wf_profile_object_radius(const wf_draw_job *jb, const wf_sersic_table *t,
+                                const wf_profile_psf *psf, double eps, int core)
 {
     double r;
     if (jb->fpoint > 0.0 && psf) r = psf_radius(psf, eps, core);
@@ -206,7 +207,8 @@ double wf_profile_object_radius(const wf_draw_job *jb, const wf_sersic_table *t,
              * (a step function of eps, constant with core) its sum is no larger and this
              * one cannot change the minimum: skips half the searches in the GalSim scene. */
             if (i < 4 && rp[i] == rp[i + 1]) continue;
-            double c = jb->shape.smax * wf_profile_galaxy_radius(jb, t, eps * split[i], &hint) + rp[i];
+            double rg = wf_profile_galaxy_radius(jb, t, eps * split[i], &hint);
+            double c = jb->shape.smax * rg + rp[i];
             if (c < r) r = c;
         }
     }
@@ -217,8 +219,9 @@ double wf_profile_object_radius(const wf_draw_job *jb, const wf_sersic_table *t,
     return r;
 }
 
-wf_status wf_profile_bounds(const wf_profile_work *w, const wf_draw_job *jb, const wf_profile_psf *psf,
-                            double x, double y, wf_stamp *stamp, double *fraction)
+wf_status wf_profile_bounds(const wf_profile_work *w, const wf_draw_job *jb,
+                            const wf_profile_psf *psf, double x, double y, wf_stamp *stamp,
+                            double *fraction)
 {
     wf_status st = wf_profile_check_position(x, y);
     if (st) return st;
@@ -276,7 +279,8 @@ wf_status wf_profile_point_bounds(const wf_profile_work *work, const wf_profile_
 
 /* |object(k)| along its minor axis (the largest on the ring |k|: both parts fall with |k|);
  * `part` 0 is the smooth galaxy (or the point source), 1 the knots. */
-static inline double minor_kvalue(const wf_draw_job *jb, const wf_sersic_table *t, double k, int part)
+static inline double minor_kvalue(const wf_draw_job *jb, const wf_sersic_table *t, double k,
+                                  int part)
 {
     if (part == 1) return jb->fk;
     if (jb->fpoint > 0.0) return jb->fpoint;
@@ -292,8 +296,8 @@ static inline double minor_kvalue(const wf_draw_job *jb, const wf_sersic_table *
 /* With a PSF: |k| beyond which |object(k)| |PSF(k) pixel(k)| stays below kvalue_accuracy
  * of the flux, from the PSF's envelope ring by ring; `part` 0 is the smooth galaxy (or the
  * point source), 1 the knots. */
-double wf_profile_psf_kcut_from(const wf_draw_job *jb, const wf_sersic_table *t, const wf_profile_psf *psf,
-                                double kvalue, int part, int from)
+double wf_profile_psf_kcut_from(const wf_draw_job *jb, const wf_sersic_table *t,
+                                const wf_profile_psf *psf, double kvalue, int part, int from)
 {
     double dkt = 2.0 * M_PI / (psf->table_fft * psf->pixel_scale), tol = kvalue * jb->flux;
     for (int i = from < psf->kr ? from : psf->kr; i >= 0; i--) {
@@ -302,10 +306,10 @@ double wf_profile_psf_kcut_from(const wf_draw_job *jb, const wf_sersic_table *t,
     return 0.0;
 }
 
-/* From the table's edge; wf_profile_psf_kcut_from may start at a ring known to lie beyond the cut (one
- * whose value exceeds a smaller kvalue: both factors fall with |k|). */
-double wf_profile_psf_kcut(const wf_draw_job *jb, const wf_sersic_table *t, const wf_profile_psf *psf,
-                           double kvalue, int part)
+/* From the table's edge; wf_profile_psf_kcut_from may start at a ring known to lie beyond the
+ * cut (one whose value exceeds a smaller kvalue: both factors fall with |k|). */
+double wf_profile_psf_kcut(const wf_draw_job *jb, const wf_sersic_table *t,
+                           const wf_profile_psf *psf, double kvalue, int part)
 {
     return wf_profile_psf_kcut_from(jb, t, psf, kvalue, part, psf->kr);
 }
@@ -321,8 +325,8 @@ double wf_profile_psf_kcut(const wf_draw_job *jb, const wf_sersic_table *t, cons
  * table_fft) may exceed the envelope by a little; the count's margin covers it. Far below
  * the pointwise cut of kvalue_accuracy for faint objects: that bound counts every sample of
  * the band at the threshold. */
-int wf_profile_tail_cut(const wf_draw_job *jb, const wf_sersic_table *t, const wf_profile_psf *psf,
-                        double dk, int m, int lim, double tol, int part)
+int wf_profile_tail_cut(const wf_draw_job *jb, const wf_sersic_table *t,
+                        const wf_profile_psf *psf, double dk, int m, int lim, double tol, int part)
 {
     const double dkt = 2.0 * M_PI / (psf->table_fft * psf->pixel_scale);
     const double norm = 1.0 / ((double)m * m);

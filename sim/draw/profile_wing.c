@@ -3,14 +3,10 @@
  * renderer, to a row together with the object's core box, clipped at zero. */
 #include <math.h>
 #include <stddef.h>
-#include <string.h>
 
 #include "sim/draw/profile.h"
 #include "sim/draw/profile_int.h"
 
-/* stamp += flux x wing at (x, y): bilinear between the table's 1 / wing_os pixel samples.
- * The fractional position is the same for every pixel, so each row reads four contiguous
- * runs of the phase planes. */
 /* Where flux x core's wing falls for an object at (x, y): the four phase planes around its
  * fine offset and the bilinear weights (wf_profile_wing_at). */
 static void wing_place(const wf_profile_psf *psf, int core, double flux, double x, double y,
@@ -22,8 +18,10 @@ static void wing_place(const wf_profile_psf *psf, int core, double flux, double 
     double sx = K * (h - x), sy = K * (h - y);
     double fx0 = floor(sx), fy0 = floor(sy), fx = sx - fx0, fy = sy - fy0;
     long ax = (long)fx0, ay = (long)fy0;
-    int a0 = (int)(ax - wf_floor_div_l(ax, K) * K), a1 = (int)(ax + 1 - wf_floor_div_l(ax + 1, K) * K);
-    int b0 = (int)(ay - wf_floor_div_l(ay, K) * K), b1 = (int)(ay + 1 - wf_floor_div_l(ay + 1, K) * K);
+    int a0 = (int)(ax - wf_floor_div_l(ax, K) * K);
+    int a1 = (int)(ax + 1 - wf_floor_div_l(ax + 1, K) * K);
+    int b0 = (int)(ay - wf_floor_div_l(ay, K) * K);
+    int b1 = (int)(ay + 1 - wf_floor_div_l(ay + 1, K) * K);
     *at = (wf_profile_wing_at){
         .wing = psf->core[core - 1].wing,
         .np = np,
@@ -36,6 +34,9 @@ static void wing_place(const wf_profile_psf *psf, int core, double flux, double 
     };
 }
 
+/* stamp += flux x wing at (x, y): bilinear between the table's 1 / wing_os pixel samples.
+ * The fractional position is the same for every pixel, so each row reads four contiguous
+ * runs of the phase planes. */
 void wf_profile_wing_stamp(const wf_profile_psf *psf, int core, double flux, double x, double y,
                            wf_stamp *stamp)
 {
@@ -55,13 +56,14 @@ void wf_profile_wing_stamp(const wf_profile_psf *psf, int core, double flux, dou
         const float *r10 = at.wing + at.plane[2] + ny1 * np + (i0 + at.ox[0]);
         const float *r11 = at.wing + at.plane[3] + ny1 * np + (i0 + at.ox[1]);
         double *dst = stamp->pix + (size_t)yy * stamp->nx + (size_t)(i0 - stamp->x0);
-        wf_profile_fold_k.wing(i1 - i0 + 1, at.w[0], at.w[1], at.w[2], at.w[3], r00, r01, r10, r11, dst);
+        wf_profile_fold_k.wing(i1 - i0 + 1, at.w[0], at.w[1], at.w[2], at.w[3], r00, r01, r10, r11,
+                               dst);
     }
 }
 
-/* wf_profile_wing_stamp's wing for one row j, summed with the box's pixels and clipped, into acc[i - xa]
- * for the columns i in [xa, xb): the columns the wing table covers in one kernel, with or
- * without box pixels, the rest box only. */
+/* The wing for one row j, summed with the box's pixels and clipped, into acc[i - xa] for the
+ * columns i in [xa, xb): the columns the wing table covers in one kernel, with or without
+ * box pixels, the rest box only. */
 static void wing_row(const wf_profile_wing_at *at, int j, int xa, int xb, const float *box,
                      int ca, int cb, double *acc)
 {
@@ -81,7 +83,8 @@ static void wing_row(const wf_profile_wing_at *at, int j, int xa, int xb, const 
                                    at->wing + (at->plane[0] + ny0 * np + at->ox[0] + c),
                                    at->wing + (at->plane[1] + ny0 * np + at->ox[1] + c),
                                    at->wing + (at->plane[2] + ny1 * np + at->ox[0] + c),
-                                   at->wing + (at->plane[3] + ny1 * np + at->ox[1] + c), acc + (wa - xa));
+                                   at->wing + (at->plane[3] + ny1 * np + at->ox[1] + c),
+                                   acc + (wa - xa));
         }
         return;
     }
@@ -98,7 +101,8 @@ static void wing_row(const wf_profile_wing_at *at, int j, int xa, int xb, const 
             if (lo >= hi) continue;
             const float *const r[4] = {at->wing + (e[0] + lo), at->wing + (e[1] + lo),
                                        at->wing + (e[2] + lo), at->wing + (e[3] + lo)};
-            wf_profile_fold_k.wingclip(hi - lo, at->w, r, seg == 1 ? box + (lo - ca) : NULL, acc + (lo - xa));
+            wf_profile_fold_k.wingclip(hi - lo, at->w, r, seg == 1 ? box + (lo - ca) : NULL,
+                                       acc + (lo - xa));
         }
     }
     wf_profile_box_clipped(box, ca, cb, wb, xb, xa, acc);
