@@ -150,7 +150,7 @@ $(BUILD)/bench/%: bench/%.c $(LIB) $(HEADERS) $(FLAGS)
 # extensions clang lacks, no parser in it) is built by gcc without instrumentation.
 FUZZ_SECONDS ?= 60
 FUZZ_JOBS    ?= 1
-FUZZ_GCC     := hal/noise_batch.c firmware/detector.c sim/draw/profile.c
+FUZZ_GCC     := hal/noise_batch.c firmware/detector.c sim/draw/profile_kernels.c
 FUZZBIN := $(patsubst fuzz/%.c,$(BUILD)/bin/%,$(wildcard fuzz/fuzz_*.c))
 ifeq ($(FUZZ),1)
 $(FUZZ_GCC:%.c=$(BUILD)/%.o): $(BUILD)/%.o: %.c $(HEADERS) $(FLAGS)

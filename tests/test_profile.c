@@ -1989,7 +1989,7 @@ static wf_stamp draw_knots(ctx *c, const wf_galaxy *g, double x, double y, const
     return s;
 }
 
-/* The knot lattice (sim/draw/profile.c "knot lattice") against the direct sum over knots, which
+/* The knot lattice (sim/draw/profile_lattice.c) against the direct sum over knots, which
  * it replaces where it is cheaper: the same stamps to its aliasing error, asserted 1e-7 of
  * the peak (reached 2e-9) and 1e-8 of the flux (reached 2e-10); with the planner's choice (some far knots
  * summed directly, the rest on the lattice) and with every knot forced onto the lattice.

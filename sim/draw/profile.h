@@ -185,7 +185,7 @@ typedef struct wf_profile_work {
     double *run;           /* one alias run of a row: complex, max_fft / 2 + 1 entries */
     double *knot_pos;      /* 2 x WF_PROFILE_MAX_KNOTS, arcsec after shear and rotation */
     double *knot_box;      /* the knots of one draw that lie inside its FFT box */
-    double *lat;           /* the knots' coarse lattice (sim/draw/profile.c), cap_lat doubles */
+    double *lat;           /* the knots' coarse lattice (sim/draw/profile_lattice.c), cap_lat doubles */
     size_t cap_lat;
     double *ring;          /* its rows interpolated along u, and a mirrored row */
     int *rim;              /* per draw: the extent of each row of the fine grid */

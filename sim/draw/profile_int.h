@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "hal/status.h"
+#include "sim/draw/profile.h"
 
 /* The de Vaucouleurs (Sersic n = 4) profile I(r) ~ exp(-b (r / Re)^(1/4)) has no closed-form
  * Fourier transform. F(q), q = k Re, normalised to F(0) = 1, is tabulated once against
@@ -77,11 +78,11 @@ typedef struct wf_shape {
 
 wf_status wf_profile_shape(double e1, double e2, double rotation, wf_shape *out);
 
-/* Knots in Fourier space (sim/draw/profile.c). The direct sum costs one complex multiply-add per
- * knot and Fourier sample. The lattice method sums the knots only on a coarse lattice
- * (every r-th sample per axis, which still resolves their transform because they occupy a
- * small part of the FFT box) and interpolates the fine samples with a compact kernel
- * (w taps per axis); each knot's weight is divided by the kernel's transform at its
+/* Knots in Fourier space (sim/draw/profile_lattice.c). The direct sum costs one complex
+ * multiply-add per knot and Fourier sample. The lattice method sums the knots only on a
+ * coarse lattice (every r-th sample per axis, which still resolves their transform because
+ * they occupy a small part of the FFT box) and interpolates the fine samples with a compact
+ * kernel (w taps per axis); each knot's weight is divided by the kernel's transform at its
  * position, which makes the interpolation exact up to the kernel's aliasing, ~1e-9 of a
  * stamp's peak (tests/test_profile.c bounds it against the direct sum). AUTO takes the
  * lattice, with the few farthest knots summed directly, wherever that costs less; DIRECT
@@ -110,5 +111,154 @@ void wf_profile_phase_lines(int n, const double *theta, int lo, int hi, double *
 double wf_bessel_i0(double x);
 double wf_knot_kernel(double s, int w, double beta);
 double wf_knot_kernel_ft(double a, double beta);
+
+/* ------------------------------------------------------------ between the drawer's files:
+ * sim/draw/profile.c drives a draw through the others, profile_size.c (stamp, box and band),
+ * profile_lattice.c (the knot lattice), profile_fold.c (the fine grid into the box's bins),
+ * profile_kernels.c (their inner loops), profile_wing.c (the split PSF's wing),
+ * profile_real.c (no PSF) and profile_work.c (knobs, buffers, plans). */
+
+/* The knot lattice: most kernel taps per axis, coarsest step. */
+#define WF_LAT_WMAX 16
+#define WF_LAT_RMAX 64
+
+/* What a draw needs, in arcsec and absolute flux. A point source is a "galaxy" with only
+ * point flux. */
+typedef struct wf_draw_job {
+    double flux;                 /* total */
+    double fb, fd, fk, fpoint;   /* bulge, smooth disk, all knots, point */
+    double re, r0;               /* de Vaucouleurs half-light radius, exponential scale */
+    wf_shape shape;
+    int nk;
+    double fknot;                /* flux per knot */
+    const double *knots;         /* nk (x, y) after shear and rotation */
+    double knot_rmax;            /* farthest knot from the centre */
+} wf_draw_job;
+
+/* One Fourier draw's fine grid: the box's side m, the band's radius u in steps dk, and how
+ * the PSF's table is read (WF_GRID_EXACT: every st-th entry, WF_GRID_INTERP: bicubic). */
+enum { WF_GRID_EXACT, WF_GRID_INTERP };
+
+typedef struct wf_draw_grid {
+    int m, half, mode, st, u;
+    double dk;
+    int ic, jc;
+    double dx, dy;       /* arcsec from the centre of pixel (ic, jc) to the object */
+    int nk;              /* knots drawn in Fourier space: those inside the FFT box */
+    const double *kpos;  /* their (x, y), arcsec from the object */
+    size_t ks;           /* entries per knot phase line (2 u + 1, and 8 or more of padding) */
+    struct wf_knot_lattice *lat; /* the knots on a coarse lattice, or NULL (direct sums) */
+    const int *rim;      /* rim[|v|] = floor(sqrt(u^2 - v^2)): the row's extent */
+    double lat_exp;      /* the knot lattice's E = -ln(knot_accuracy) */
+} wf_draw_grid;
+
+/* The knots of one draw on the knot lattice (sim/draw/profile_lattice.c). */
+typedef struct wf_knot_lattice {
+    int r, w, mh, nh, U;
+    int nk;                        /* the knots it holds, (x, y) from the object */
+    const double *pos;
+    const int *rim;                /* the fine grid's |u| <= rim[|v|] */
+    double rho, beta;
+    size_t gw;                     /* stored row width: 2 nh + 1 and padding */
+    const double *gr, *gi;         /* rows m = 0..mh of g(n, m) at [m gw + n + nh]; rows
+                                      m < 0 are conj g(-n, -m) */
+    double wt[WF_LAT_RMAX][WF_LAT_WMAX]; /* psi at s = rho / r + w / 2 - 1 - i, rho = u mod r */
+    double *ar, *ai;               /* ring of w interpolated rows: row m in slot m mod w,
+                                      entries [u + U], padded */
+    size_t al;                     /* ring row stride */
+    double *tmp;                   /* a mirrored row */
+    int next;                      /* next coarse row the ring takes */
+} wf_knot_lattice;
+
+/* What the smooth kernel needs of a row (sim/draw/profile_kernels.c). */
+typedef struct wf_smooth_par {
+    double qa, qb, qc;        /* q2 = |A^T k|^2 = (qa u + qb) u + qc along the row */
+    double re2, r02, fb, fd;  /* bulge and disk: F(re2 q2), (1 + r02 q2)^-3/2 */
+    double fpoint;            /* > 0: a point source of this flux instead */
+    int bulge, disk;
+    const wf_sersic_table *t;
+    double eyr, eyi;          /* the row's phase */
+    const double *exr, *exi;  /* the columns' phases, indexed by u */
+} wf_smooth_par;
+
+/* The kernels in use (sim/draw/profile_kernels.c), set by wf_profile_simd only. */
+typedef struct wf_fold_kernels {
+    void (*smooth)(const wf_smooth_par *, int, int, double *, double *);
+    void (*latrow)(const wf_knot_lattice *, const double *, const double *, int, int, double *,
+                   double *);
+    void (*latadd)(int, int, const double *, const double *const *, const double *const *,
+                   int, double *, double *);
+    void (*psfmul)(int, const float *, const float *, size_t, const double *, const double *,
+                   double *);
+    void (*wing)(long, double, double, double, double, const float *, const float *, const float *,
+                 const float *, double *);
+    void (*wingclip)(long, const double *, const float *const *, const float *, double *);
+} wf_fold_kernels;
+extern wf_fold_kernels wf_profile_fold_k;
+
+static inline long wf_floor_div_l(long a, long b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+static inline int wf_floor_div(int a, int b) { return (int)wf_floor_div_l(a, b); }
+
+static inline int wf_profile_ladder_max(const wf_profile_work *w)
+{
+    return w->sizes[w->nsizes - 1];
+}
+
+/* profile.c */
+wf_status wf_profile_check_position(double x, double y);
+wf_status wf_profile_check_stamp(const wf_stamp *stamp);
+wf_status wf_profile_galaxy_job(wf_profile_work *w, const wf_galaxy *g, wf_draw_job *jb);
+
+/* profile_work.c: the plan of the work's side mi (shared by the process's works). */
+wf_status wf_profile_draw_plan(wf_profile_work *w, int mi);
+
+/* profile_size.c: radii (arcsec) holding all but eps of the light, the stamp of an object,
+ * the Fourier cuts, the FFT side. */
+struct wf_radius_hint;
+double wf_profile_galaxy_radius(const wf_draw_job *jb, const wf_sersic_table *t, double eps,
+                                struct wf_radius_hint *hint);
+double wf_profile_object_radius(const wf_draw_job *jb, const wf_sersic_table *t,
+                                const wf_profile_psf *psf, double eps, int core);
+wf_status wf_profile_bounds(const wf_profile_work *w, const wf_draw_job *jb,
+                            const wf_profile_psf *psf, double x, double y, wf_stamp *stamp,
+                            double *fraction);
+double wf_profile_psf_kcut_from(const wf_draw_job *jb, const wf_sersic_table *t,
+                                const wf_profile_psf *psf, double kvalue, int part, int from);
+double wf_profile_psf_kcut(const wf_draw_job *jb, const wf_sersic_table *t,
+                           const wf_profile_psf *psf, double kvalue, int part);
+int wf_profile_tail_cut(const wf_draw_job *jb, const wf_sersic_table *t, const wf_profile_psf *psf,
+                        double dk, int m, int lim, double tol, int part);
+int wf_profile_choose_size(const wf_profile_work *w, const wf_profile_psf *psf, double need);
+
+/* profile_lattice.c: the plan (0: every knot summed directly), the coarse rows, and coarse
+ * row m interpolated along u for a box of side mbox. */
+int wf_profile_knot_plan(wf_profile_work *w, wf_draw_grid *gd, double p, wf_knot_lattice *l);
+void wf_profile_lat_build(wf_profile_work *w, const wf_draw_job *jb, wf_draw_grid *gd,
+                          wf_knot_lattice *l);
+void wf_profile_lat_row(const wf_fold_kernels *fk, wf_knot_lattice *l, int m, int mbox);
+
+/* profile_kernels.c */
+void wf_profile_knot_sum(int n, int nkb, const double *ckr, const double *cki, const double *kx,
+                         size_t ks, double *restrict rr, double *restrict ri);
+void wf_profile_box_clipped(const float *box, int ca, int cb, int lo, int hi, int xa,
+                            double *acc);
+
+/* profile_fold.c */
+void wf_profile_fold_pass(wf_profile_work *w, const wf_draw_job *jb, const wf_profile_psf *psf,
+                          const wf_draw_grid *gd, int us, int knot0, int nkb);
+wf_status wf_profile_dewrap(const wf_profile_work *w, const wf_draw_job *jb,
+                            const wf_draw_grid *gd, double x, double y, wf_stamp *stamp,
+                            int box_only);
+
+/* profile_wing.c: stamp += flux x that core's wing at (x, y). */
+void wf_profile_wing_stamp(const wf_profile_psf *psf, int core, double flux, double x, double y,
+                           wf_stamp *stamp);
+
+/* profile_real.c: surface brightness (flux / arcsec^2) of the smooth galaxy at (x, y) arcsec
+ * from it; the stamp without a PSF. */
+double wf_profile_smooth_density(const wf_draw_job *jb, const wf_sersic_table *t, double x,
+                                 double y);
+wf_status wf_profile_draw_nopsf(wf_profile_work *w, const wf_draw_job *jb, double x, double y,
+                                wf_stamp *stamp);
 
 #endif

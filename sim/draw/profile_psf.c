@@ -262,7 +262,7 @@ static wf_status transform_fft(const wf_psf_image *img, const support *sp, int o
         return st;
     const int len[1] = {np};
     /* no buffered passes, whose buffers each execution allocates (as the draws' plans,
-     * sim/draw/profile.c's draw_plan_flags) */
+     * sim/draw/profile_work.c's draw_plan_flags) */
     wf_fftw_lock();
     fftw_plan pr = fftw_plan_many_dft_r2c(1, len, TRANSFORM_RB, rows, NULL, 1, (int)rowlen, (fftw_complex *)rows,
                                           NULL, 1, (int)half, FFTW_ESTIMATE | FFTW_NO_BUFFERING);

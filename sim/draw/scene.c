@@ -668,7 +668,7 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
      * count over the box's M^2 pixels, modes x kvalue x flux, with modes = pi (kmax p / 2 pi)^2
      * the fine-grid samples per box pixel out to the PSF's band (4.5 at Y106, 13 at R062), and
      * it moves further in where the sum over the modes beyond it bounds every pixel's change
-     * by the same tolerance (acc.cut_tolerance, sim/draw/profile.c tail_cut); the
+     * by the same tolerance (acc.cut_tolerance, sim/draw/profile_size.c); the
      * split PSF's wing moves none by more than 2 flux wing_max; the knot lattice's aliasing
      * none by more than WF_SCENE_KNOT_BOUND knot_accuracy x the knots' flux (measured <= 0.13
      * in tests/test_profile.c); knots drawn as their expectation, the smooth disk, none by

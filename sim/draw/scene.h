@@ -69,7 +69,7 @@ typedef struct wf_scene_setup {
 #define WF_SCENE_KVALUE_MAX 1e-3  /* and the Fourier cut at most this (docs/ACCURACY.md) */
 #define WF_SCENE_KNOT_MAX 1e-2    /* and the knot lattice's accuracy at most this */
 #define WF_SCENE_KNOT_BOUND 10.0  /* a pixel moves by at most this x knot_accuracy x the knots'
-                                     flux (sim/draw/profile.c "knot lattice") */
+                                     flux (sim/draw/profile_lattice.c) */
 
 typedef struct wf_scene_stats {
     long galaxies, stars, sne; /* drawn (reach the SCA) */
