@@ -51,7 +51,8 @@ size_t wf_corrnoise_arena_need(int ncols)
     size_t nw = (size_t)(nchan + 1) * WF_CN_CHANNEL_COLS;
     return wf_arena_cost((size_t)nchan * sizeof(double)) +
            2 * wf_arena_cost((size_t)(nchan + 1) * WF_CN_NCOMP * sizeof(double)) +
-           wf_arena_cost(4 * nw * sizeof(uint32_t)) + wf_arena_cost(WF_CN_NCOMP * nw * sizeof(float));
+           wf_arena_cost(4 * nw * sizeof(uint32_t)) + wf_arena_cost(WF_CN_NCOMP * nw * sizeof(float)) +
+           wf_arena_cost(nw * sizeof(double));
 }
 
 wf_status wf_corrnoise_init(wf_corrnoise *cn, const wf_detector *det, const wf_noise *noise, int ncols,
@@ -90,6 +91,8 @@ wf_status wf_corrnoise_init(wf_corrnoise *cn, const wf_detector *det, const wf_n
     cn->w = p;
     if ((st = wf_arena_calloc(arena, WF_CN_NCOMP * nw, sizeof(float), "1/f normals", &p))) return st;
     cn->z = p;
+    if ((st = wf_arena_calloc(arena, nw, sizeof(double), "1/f paths", &p))) return st;
+    cn->path = p;
     if (det->on.channel_offsets && noise->kind != WF_NOISE_OFF)
         for (int c = 0; c < cn->nchan; c++) {
             wf_rng rng;
@@ -167,19 +170,28 @@ static void step_normals(wf_corrnoise *cn, uint32_t key, int Y)
     }
 }
 
-/* Adds amp x (process c's value at each readout position) to v[i], i < 128. */
-static void channel_path(const wf_corrnoise *cn, int c, double amp, double *v)
+/* path[c][i] = amplitude x process c's value at readout position i, for the processes
+ * c0 .. c1 - 1: all channels advance together, so the sequential recursion of one channel
+ * overlaps the others' (independent chains) rather than waiting on its own latency. */
+static void paths(wf_corrnoise *cn, int c0, int c1, const double *amp)
 {
     const int nw = words_of(cn);
+    double (*path)[WF_CN_CHANNEL_COLS] = (double (*)[WF_CN_CHANNEL_COLS])cn->path;
+    double x[WF_CN_FRAME_ROWS / WF_CN_CHANNEL_COLS + 2], end[WF_CN_FRAME_ROWS / WF_CN_CHANNEL_COLS + 2];
+    memset(path + c0, 0, (size_t)(c1 - c0) * sizeof *path);
     for (int j = 0; j < WF_CN_NCOMP; j++) {
-        const float *z = cn->z + (size_t)j * nw + (size_t)c * WF_CN_CHANNEL_COLS;
-        const double end = cn->x1[c * WF_CN_NCOMP + j], sd = cn->sd;
-        double x = cn->x0[c * WF_CN_NCOMP + j];
-        v[0] += amp * x;
+        const float *z = cn->z + (size_t)j * nw;
+        for (int c = c0; c < c1; c++) {
+            x[c] = cn->x0[c * WF_CN_NCOMP + j];
+            end[c] = cn->x1[c * WF_CN_NCOMP + j];
+            path[c][0] += amp[c] * x[c];
+        }
         for (int i = 1; i < WF_CN_CHANNEL_COLS; i++) {
-            const double *s = cn->step[j][i];
-            x = s[0] * x + s[1] * end + s[2] * sd * (double)z[i];
-            v[i] += amp * x;
+            const double a = cn->step[j][i][0], b = cn->step[j][i][1], sd = cn->step[j][i][2] * cn->sd;
+            for (int c = c0; c < c1; c++) {
+                x[c] = a * x[c] + b * end[c] + sd * (double)z[c * WF_CN_CHANNEL_COLS + i];
+                path[c][i] += amp[c] * x[c];
+            }
         }
     }
 }
@@ -199,13 +211,18 @@ void wf_corrnoise_row(wf_corrnoise *cn, uint32_t key, int Y, double scale, doubl
     cn->next_row = Y + 1;
     cn->next_key = key;
     step_normals(cn, key, Y);
-    double shared[WF_CN_CHANNEL_COLS] = {0}, own[WF_CN_CHANNEL_COLS];
-    if (cn->amp_c > 0.0) channel_path(cn, cn->nchan, cn->amp_c * scale, shared);
+    double amp[WF_CN_FRAME_ROWS / WF_CN_CHANNEL_COLS + 2];
+    for (int c = 0; c < cn->nchan; c++) amp[c] = cn->amp_u * scale;
+    amp[cn->nchan] = cn->amp_c * scale;
+    /* the processes with an amplitude: the channels' own, the shared one, or both */
+    paths(cn, cn->amp_u > 0.0 ? 0 : cn->nchan, cn->amp_c > 0.0 ? cn->nchan + 1 : cn->nchan, amp);
+    const double (*path)[WF_CN_CHANNEL_COLS] = (const double (*)[WF_CN_CHANNEL_COLS])cn->path;
     for (int c = 0; c < cn->nchan; c++) {
-        memcpy(own, shared, sizeof own);
-        if (cn->amp_u > 0.0) channel_path(cn, c, cn->amp_u * scale, own);
         int X0 = c * WF_CN_CHANNEL_COLS, X1 = X0 + WF_CN_CHANNEL_COLS < W ? X0 + WF_CN_CHANNEL_COLS : W;
-        for (int X = X0; X < X1; X++) out[X] += own[wf_corrnoise_position(X)];
+        for (int X = X0; X < X1; X++) {
+            int i = wf_corrnoise_position(X);
+            out[X] += (cn->amp_u > 0.0 ? path[c][i] : 0.0) + (cn->amp_c > 0.0 ? path[cn->nchan][i] : 0.0);
+        }
     }
 }
 

@@ -45,6 +45,7 @@ typedef struct wf_corrnoise {
     double *x0, *x1;    /* [nchan + 1][comp]: values at this row's start and the next's */
     uint32_t *w;        /* [4][(nchan + 1) x 128] noise words */
     float *z;           /* [comp][(nchan + 1) x 128] normals, by channel and readout position */
+    double *path;       /* [nchan + 1][128] one row's processes by readout position */
     int have_row;       /* x1 holds row next_row's start for key next_key */
     int next_row;
     uint32_t next_key;
