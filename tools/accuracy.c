@@ -1368,8 +1368,9 @@ static void write_md(FILE *f, const acc_run *run, const char *unused)
               "cosmic rays off), assembly and ramp fit; the mean fitted rate of each mode against "
               "per-read sampling over pixels unflagged in both (± its standard error, from the "
               "per-pixel differences); `sampling-nl` with nonlinearity on, `sampling-lin` off. "
-              "`readnoise`: per-read sampling with the correlated read noise (1/f and channel "
-              "offsets) off, on, and on with the reference-pixel correction; notes: a "
+              "`readnoise` (knob `corr_noise`): per-read sampling with the correlated read noise "
+              "(1/f and channel offsets) off, on, and on with the reference-pixel correction; the "
+              "mean rate's ± assumes independent pixels, which this noise is not; notes: a "
               "3-pixel-radius aperture's flux error from it (its rms over a grid of places, against "
               "the aperture's noise from ERR, and as a share of a 25 mag star's flux). "
               "CPU s: readout, assembly and fit.\n\n", f);
