@@ -455,6 +455,53 @@ START_TEST(border_written_when_asked)
 }
 END_TEST
 
+/* The reference packets are not taken in any order: a row fitted before its reference pixels
+ * could not be corrected, so such a stream is refused, and no FITS is left. Ramp mode only. */
+START_TEST(refused_out_of_order_and_single)
+{
+    const char *bin = wf_test_program(), *dir = wf_test_tmpdir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *on = "--set detector.effects.refpix=true --set readout.compress=false";
+    ck_assert_int_eq(wf_test_run("cd %s && %s expose " SMALL " %s --stream s.bin", dir, bin, on), 0);
+    char path[4200];
+    snprintf(path, sizeof path, "%s/s.bin", dir);
+    size_t len = 0;
+    unsigned char *b = (unsigned char *)wf_test_slurp(path, &len);
+    ck_assert_ptr_nonnull(b);
+    /* packets: 48-byte header, payload_len at byte 32; REFROWS (kind 8) moved just before END */
+    unsigned char *out = malloc(len);
+    size_t at = 0, o = 0, rr_at = 0, rr_len = 0, end_at = 0;
+    while (at + 48 <= len) {
+        unsigned k = b[at + 6] | b[at + 7] << 8;
+        size_t n = 48 + (size_t)(b[at + 32] | b[at + 33] << 8 | b[at + 34] << 16 | (size_t)b[at + 35] << 24);
+        if (k == WF_PK_REFROWS) { rr_at = at; rr_len = n; }
+        else if (k == WF_PK_END) end_at = at;
+        at += n;
+    }
+    ck_assert(at == len && rr_len && end_at);
+    memcpy(out, b, rr_at);
+    o = rr_at;
+    memcpy(out + o, b + rr_at + rr_len, end_at - rr_at - rr_len);
+    o += end_at - rr_at - rr_len;
+    memcpy(out + o, b + rr_at, rr_len);
+    o += rr_len;
+    memcpy(out + o, b + end_at, len - end_at);
+    snprintf(path, sizeof path, "%s/late.bin", dir);
+    FILE *f = fopen(path, "wb");
+    ck_assert(f && fwrite(out, 1, len, f) == len && fclose(f) == 0);
+    ck_assert_int_ne(wf_test_run("cd %s && %s assemble late.bin --out late 2> late.txt", dir, bin), 0);
+    snprintf(path, sizeof path, "%s/late.txt", dir);
+    ck_assert_msg(wf_test_file_contains(path, "before its reference pixels arrived"), "message of the refusal");
+    ck_assert_int_ne(wf_test_run("ls %s/late/*.fits > /dev/null 2>&1", dir), 0);
+    ck_assert_int_ne(wf_test_run("cd %s && %s expose " SMALL " %s --set exposure.mode=single 2> single.txt", dir,
+                                 bin, on), 0);
+    snprintf(path, sizeof path, "%s/single.txt", dir);
+    ck_assert_msg(wf_test_file_contains(path, "need exposure.mode ramp"), "message of the refusal");
+    free(b);
+    free(out);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("corrnoise");
@@ -467,6 +514,7 @@ static Suite *suite(void)
     tcase_add_test(t, refpix_leaves_the_model_residual);
     tcase_add_test(t, off_changes_nothing);
     tcase_add_test(t, border_written_when_asked);
+    tcase_add_test(t, refused_out_of_order_and_single);
     suite_add_tcase(s, t);
     return s;
 }
