@@ -72,6 +72,16 @@ wf_status wf_corrnoise_init(wf_corrnoise *cn, const wf_detector *det, const wf_n
         cn->amp_u = det->rn1f_uncorr_e;
     }
     wf_corrnoise_components(cn->lambda, &cn->sd);
+    /* the bridge's coefficients depend on the level only: intervals of a level are alike */
+    const double P = WF_CN_ROW_TIME, N = (double)(1 << cn->levels);
+    for (int j = 0; j < WF_CN_NCOMP; j++) {
+        cn->frame_end[j][0] = exp(-cn->lambda[j] * P * N);
+        cn->frame_end[j][1] = sqrt(-expm1(-2.0 * cn->lambda[j] * P * N));
+        for (int l = 0; l < cn->levels; l++) {
+            double h = P * (double)(1 << (cn->levels - l - 1));
+            bridge_coef(cn->lambda[j], h, h, &cn->mid[l][j][0], &cn->mid[l][j][1], &cn->mid[l][j][2]);
+        }
+    }
     for (int j = 0; j < WF_CN_NCOMP; j++) {
         cn->step[j][0][0] = 1.0; /* position 0 is the row's start itself */
         for (int i = 1; i < WF_CN_CHANNEL_COLS; i++)
@@ -108,10 +118,9 @@ static void node_normals(wf_corrnoise *cn, uint32_t key, uint32_t m, double *z)
     int n = (cn->nchan + 1) * WF_CN_NCOMP, nb = (n + 3) / 4;
     uint32_t *w = cn->w; /* idle between rows: the step words are drawn after the nodes */
     wf_noise_stream_blocks(&cn->noise, m, key, WF_PURPOSE_1F_TREE, 0, nb, w, w + nb, w + 2 * nb, w + 3 * nb);
-    for (int i = 0; i < n; i++) {
-        uint32_t v = w[(i % 4) * nb + i / 4];
-        z[i] = wf_norm_ppf(((double)v + 0.5) * (1.0 / 4294967296.0));
-    }
+    float *zf = cn->z; /* idle too */
+    wf_norm_from_u32(w, 4 * nb, zf);
+    for (int i = 0; i < n; i++) z[i] = zf[(i % 4) * nb + i / 4];
 }
 
 /* The processes' values at the start of row Y (xs[c x 12 + j], unit amplitude): down the
@@ -122,13 +131,12 @@ static void row_start(wf_corrnoise *cn, uint32_t key, int Y, double *xs)
     double xa[MAXN], xb[MAXN], z[MAXN];
     const int n = (cn->nchan + 1) * WF_CN_NCOMP;
     const int N = 1 << cn->levels;
-    const double P = WF_CN_ROW_TIME;
     node_normals(cn, key, 0, z);
     for (int i = 0; i < n; i++) xa[i] = cn->sd * z[i];
     if (Y == 0) { memcpy(xs, xa, (size_t)n * sizeof *xs); return; }
     node_normals(cn, key, (uint32_t)N, z);
     for (int j = 0; j < WF_CN_NCOMP; j++) {
-        double r = exp(-cn->lambda[j] * P * N), q = sqrt(-expm1(-2.0 * cn->lambda[j] * P * N));
+        double r = cn->frame_end[j][0], q = cn->frame_end[j][1];
         for (int c = 0; c <= cn->nchan; c++) {
             int i = c * WF_CN_NCOMP + j;
             xb[i] = r * xa[i] + q * cn->sd * z[i];
@@ -136,13 +144,12 @@ static void row_start(wf_corrnoise *cn, uint32_t key, int Y, double *xs)
     }
     if (Y == N) { memcpy(xs, xb, (size_t)n * sizeof *xs); return; }
     int a = 0, b = N;
-    for (;;) {
+    for (int level = 0;; level++) {
         int m = (a + b) / 2;
         double *xm = Y < m ? xb : xa; /* the end replaced by the midpoint */
         node_normals(cn, key, (uint32_t)m, z);
         for (int j = 0; j < WF_CN_NCOMP; j++) {
-            double ca, cb, cc;
-            bridge_coef(cn->lambda[j], P * (m - a), P * (b - m), &ca, &cb, &cc);
+            const double ca = cn->mid[level][j][0], cb = cn->mid[level][j][1], cc = cn->mid[level][j][2];
             for (int c = 0; c <= cn->nchan; c++) {
                 int i = c * WF_CN_NCOMP + j;
                 xm[i] = ca * xa[i] + cb * xb[i] + cc * cn->sd * z[i];

@@ -41,6 +41,8 @@ typedef struct wf_corrnoise {
     double sd;                         /* each component's stationary rms per unit amplitude */
     double step[WF_CN_NCOMP][WF_CN_CHANNEL_COLS][3]; /* bridge step into position i:
                                                         a x_(i-1) + b x_end, rms c (unit sd) */
+    double mid[WF_CN_MAX_LEVELS][WF_CN_NCOMP][3]; /* bridge midpoint of a level's interval */
+    double frame_end[WF_CN_NCOMP][2];   /* the frame's far end from its start: r, rms */
     double *offset;     /* [nchan]: the channel offsets, e- */
     double *x0, *x1;    /* [nchan + 1][comp]: values at this row's start and the next's */
     uint32_t *w;        /* [4][(nchan + 1) x 128] noise words */
