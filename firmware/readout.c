@@ -583,10 +583,6 @@ static void side_read(wf_readout *ro, int y, int y0, int rows, uint32_t key, int
     if (last) wf_det_resultant_row(s, S, nreads, ro->side_out + ((size_t)r * rows + (size_t)(y - y0)) * S);
 }
 
-static inline double digitise(const wf_detector *d, double e, double noise_sigma, double z,
-                              int *clipped);
-static uint16_t to_u16(double v);
-
 /* Resultant r of row y's side reference pixels drawn at once (n reads). */
 static void side_direct(wf_readout *ro, int y, int y0, int rows, int r, int n)
 {
