@@ -49,6 +49,9 @@ void wf_detector_defaults(wf_detector *det)
     det->cr_dedx_loc = 120.0;
     det->cr_dedx_scale = 50.0;
     det->cr_ev_per_e = 3.8; /* romanisim cr.py "gain" of 3.8 eV per count */
+    det->rn1f_corr_e = 3.0;
+    det->rn1f_uncorr_e = 1.0;
+    det->channel_offset_adu = 20.0;
 }
 
 double wf_det_reciprocity(double q, double exptime, double alpha, double f0)

@@ -11,6 +11,7 @@ typedef struct wf_detector {
     struct {              /* switches (1 on, 0 off) */
         int photon_noise, reciprocity, dark, nonlinearity, ipc, read_noise, quantize,
             saturation, cosmic_rays;
+        int read_1f, channel_offsets, refpix; /* off by default (firmware/corrnoise.h) */
     } on;
     double dark_current;   /* e-/pixel/s [0.015] */
     double read_noise_e;   /* e- rms: per read in ramp mode, per exposure in single mode [8.5] */
@@ -30,9 +31,13 @@ typedef struct wf_detector {
     double cr_lmin_um, cr_lmax_um, cr_slope; /* path-length power law [10, 2000, -4.33] */
     double cr_dedx_loc, cr_dedx_scale;       /* Moyal, eV/um [120, 50] */
     double cr_ev_per_e;    /* eV per electron [3.8, romanisim] */
+    /* correlated read noise (firmware/corrnoise.h; NGHXRG's JWST values, SPEC gives none) */
+    double rn1f_corr_e;    /* e- rms per read of the 1/f shared by all channels [3] */
+    double rn1f_uncorr_e;  /* e- rms per read of each channel's own 1/f [1] */
+    double channel_offset_adu; /* rms of the per-channel offsets, ADU [20] */
 } wf_detector;
 
-/* SPEC §2 values, every effect on. */
+/* SPEC §2 values, every effect on but the correlated read noise's (off). */
 void wf_detector_defaults(wf_detector *det);
 
 /* The raw GalSim IPC kernel (SPEC §2), normalised to sum 1 into out. */

@@ -5,6 +5,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "firmware/corrnoise.h"
 #include "firmware/cosmic.h"
 #include "hal/packet.h"
 #include "hal/simd.h"
@@ -54,7 +55,23 @@ struct wf_readout {
     wf_cosmic cosmic;
     int cosmic_on;
     wf_packer packer;
+    /* correlated read noise and reference pixels (NULL / 0 when off: firmware/corrnoise.h) */
+    wf_corrnoise *cn;
+    double *cn_row;                /* [ncols + 8] one full-frame row's correlated noise, e- */
+    double *cn_v;                  /* [ncols] an active row's signal plus it */
+    int refpix;                    /* the border is simulated and sent */
+    double *side_sum;              /* [tile_rows][8] ADU summed over the resultant's reads */
+    uint16_t *side_out;            /* [nres][tile_rows][8] */
+    double *zero;                  /* [ncols + 8] no charge (reference pixels), then scratch */
+    float *ref_z;                  /* [ncols + 8] reference pixels' read-noise normals */
+    uint8_t *ref_sat;              /* [ncols + 8] saturation flags nobody reads */
 };
+
+static int corr_on(const wf_readout_config *cfg)
+{
+    const wf_detector *d = &cfg->det;
+    return d->on.read_1f || d->on.channel_offsets || d->on.refpix;
+}
 
 static int nres_of(const wf_readout_config *cfg, const wf_clock *clock)
 {
@@ -103,6 +120,11 @@ static size_t packet_buffer_raw(const wf_readout_config *cfg, const wf_clock *cl
 {
     size_t n = tile_payload_max(cfg, clock), t = thresholds_bytes(cfg);
     if (t > n) n = t;
+    if (cfg->det.on.refpix) { /* the REFROWS packet */
+        size_t rr = wf_size_mul3((size_t)nres_of(cfg, clock) * 2 * WF_CN_BORDER, (size_t)cfg->ncols + 2 * WF_CN_BORDER,
+                                 sizeof(uint16_t));
+        if (rr > n) n = rr;
+    }
     return cosmic_truth > n ? cosmic_truth : n;
 }
 
@@ -140,6 +162,9 @@ static wf_status check_config(const wf_readout_config *cfg, const wf_clock *cloc
                         WF_EXPOSURE_TIME_MAX);
     if (!(cfg->det.gain > 0.0))
         return wf_error(WF_ERR_RANGE, "readout: gain %g e-/ADU must be > 0", cfg->det.gain);
+    if (corr_on(cfg) && cfg->mode != WF_MODE_RAMP)
+        return wf_error(WF_ERR_INPUT, "readout: detector.effects read_1f, channel_offsets and refpix "
+                        "need exposure.mode ramp (single-frame mode is GalSim's chain)");
     return WF_OK;
 }
 
@@ -185,6 +210,23 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
         n = wf_size_add(n, single_arena_need(cfg));
     }
     ADD(tile);
+    if (corr_on(cfg)) {
+        size_t w = nc + 2 * WF_CN_BORDER;
+        ADD(sizeof(wf_corrnoise));
+        n = wf_size_add(n, wf_corrnoise_arena_need(cfg->ncols));
+        ADD(w * sizeof(double));
+        ADD(nc * sizeof(double));
+        ADD(w * sizeof(double));
+        ADD(w * sizeof(float));
+        ADD(w);
+        if (cfg->det.on.refpix) {
+            ADD(wf_size_mul((size_t)cfg->tile_rows, 2 * WF_CN_BORDER * sizeof(double)));
+            ADD(wf_size_mul3((size_t)cfg->tile_rows, 2 * WF_CN_BORDER * sizeof(uint16_t), (size_t)nres_of(cfg, clock)));
+            /* reference rows, taken while they are sent (send_refrows) */
+            ADD(wf_size_mul(2 * WF_CN_BORDER * sizeof(double), w));
+            ADD(wf_size_mul3((size_t)nres_of(cfg, clock) * 2 * WF_CN_BORDER, w, sizeof(uint16_t)));
+        }
+    }
     n = wf_size_add(n, wf_packer_arena_need(packet_buffer_raw(cfg, clock, cr_truth), cfg->compress));
     n = wf_size_add(n, cr);
     ADD(WF_READOUT_META_MAX); /* wf_readout_send_meta's text, released after it is sent */
@@ -296,6 +338,22 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
                             ro->total_reads, arena);
         if (st) return st;
     }
+    if (corr_on(cfg)) {
+        size_t w = (size_t)cfg->ncols + 2 * WF_CN_BORDER;
+        TAKE(ro->cn, 1, "correlated noise");
+        if ((st = wf_corrnoise_init(ro->cn, &cfg->det, noise, cfg->ncols, cfg->nrows, arena))) return st;
+        TAKE(ro->cn_row, w, "correlated-noise row");
+        TAKE(ro->cn_v, cfg->ncols, "signal and correlated-noise row");
+        TAKE(ro->zero, w, "reference pixels' charge");
+        TAKE(ro->ref_z, w, "reference pixels' normals");
+        TAKE(ro->ref_sat, w, "reference pixels' saturation");
+        ro->refpix = cfg->det.on.refpix;
+        if (ro->refpix) {
+            TAKE(ro->side_sum, (size_t)cfg->tile_rows * 2 * WF_CN_BORDER, "side reference sums");
+            TAKE(ro->side_out, (size_t)cfg->tile_rows * 2 * WF_CN_BORDER * (size_t)nres_of(cfg, clock),
+                 "side reference resultants");
+        }
+    }
     *out = ro;
     return WF_OK;
 }
@@ -307,8 +365,8 @@ void wf_readout_destroy(wf_readout *ro)
     if (ro) wf_packer_close(&ro->packer);
 }
 
-static wf_status send(wf_readout *ro, wf_packet_kind kind, int y0, int rows, int nplanes,
-                      const void *payload, size_t len)
+static wf_status send_cols(wf_readout *ro, wf_packet_kind kind, int y0, int rows, int ncols, int nplanes,
+                           const void *payload, size_t len)
 {
     wf_packet_header h = {0};
     h.kind = (uint16_t)kind;
@@ -316,9 +374,15 @@ static wf_status send(wf_readout *ro, wf_packet_kind kind, int y0, int rows, int
     h.sca = (uint16_t)ro->cfg.sca;
     h.first_row = (uint32_t)y0;
     h.row_count = (uint32_t)rows;
-    h.ncols = (uint32_t)ro->cfg.ncols;
+    h.ncols = (uint32_t)ncols;
     h.nplanes = (uint32_t)nplanes;
     return wf_packer_send(&ro->packer, &ro->link, &h, payload, len);
+}
+
+static wf_status send(wf_readout *ro, wf_packet_kind kind, int y0, int rows, int nplanes,
+                      const void *payload, size_t len)
+{
+    return send_cols(ro, kind, y0, rows, ro->cfg.ncols, nplanes, payload, len);
 }
 
 /* ---- shared per-pixel steps ------------------------------------------------------------ */
@@ -474,6 +538,114 @@ static uint16_t to_u16(double v)
     return (uint16_t)v;
 }
 
+/* ---- correlated read noise and the reference border (firmware/corrnoise.h) ------------- */
+
+/* The realisation of a read (per-read sampling) or of a resultant drawn at once. */
+static uint32_t corr_key(int index, int direct)
+{
+    return direct ? 0x80000000u | (uint32_t)index : (uint32_t)index;
+}
+
+/* Active row y's signal v plus the correlated noise of its full-frame row (left in cn_row). */
+static const double *corr_row(wf_readout *ro, const double *v, int y, uint32_t key, double scale)
+{
+    const int nc = ro->cfg.ncols;
+    wf_corrnoise_row(ro->cn, key, y + WF_CN_BORDER, scale, ro->cn_row);
+    const double *c = ro->cn_row + WF_CN_BORDER;
+    for (int x = 0; x < nc; x++) ro->cn_v[x] = v[x] + c[x];
+    return ro->cn_v;
+}
+
+/* Row y's side reference pixels after corr_row: no charge, the correlated noise in e8, their
+ * read-noise normals in z8 (left four, right four). */
+static void side_pixels(wf_readout *ro, int y, uint32_t key, double *e8, float *z8)
+{
+    const int W = ro->cn->width, B = WF_CN_BORDER;
+    wf_corrnoise_ref_normals(ro->cn, key, y + B, 0, B, z8);
+    wf_corrnoise_ref_normals(ro->cn, key, y + B, W - B, B, z8 + B);
+    for (int i = 0; i < B; i++) {
+        e8[i] = ro->cn_row[i];
+        e8[B + i] = ro->cn_row[W - B + i];
+    }
+}
+
+/* One read of row y's side reference pixels, summed as the active pixels' (resultant r). */
+static void side_read(wf_readout *ro, int y, int y0, int rows, uint32_t key, int r, int last, int nreads)
+{
+    enum { S = 2 * WF_CN_BORDER };
+    double e8[S], q8[S] = {0};
+    float z8[S];
+    uint8_t sat8[S];
+    side_pixels(ro, y, key, e8, z8);
+    memset(sat8, 255, sizeof sat8);
+    double *s = ro->side_sum + (size_t)(y - y0) * S;
+    wf_det_ramp_read_row(&ro->cfg.det, e8, q8, z8, S, (uint8_t)r, s, sat8);
+    if (last) wf_det_resultant_row(s, S, nreads, ro->side_out + ((size_t)r * rows + (size_t)(y - y0)) * S);
+}
+
+/* Resultant r of row y's side reference pixels drawn at once (n reads). */
+static void side_direct(wf_readout *ro, int y, int y0, int rows, int r, int n)
+{
+    enum { S = 2 * WF_CN_BORDER };
+    double e8[S];
+    float z8[S];
+    side_pixels(ro, y, corr_key(r, 1), e8, z8);
+    uint16_t *out = ro->side_out + ((size_t)r * rows + (size_t)(y - y0)) * S;
+    for (int i = 0; i < S; i++) {
+        int clipped = 0;
+        out[i] = to_u16(digitise(&ro->cfg.det, e8[i], ro->cfg.det.read_noise_e / sqrt((double)n), z8[i], &clipped));
+    }
+}
+
+/* The eight reference rows (full-frame rows 0-3 and the last four) of every resultant, as
+ * one REFROWS packet: they hold no charge, so no tile is needed to make them. */
+static wf_status send_refrows(wf_readout *ro)
+{
+    const wf_detector *d = &ro->cfg.det;
+    const wf_ma_table *ma = &ro->clock.ma;
+    const int W = ro->cn->width, B = WF_CN_BORDER, H = ro->cn->height, nres = ma->nresultants;
+    const int direct = ro->cfg.sampling == WF_SAMPLE_DIRECT;
+    size_t mark = wf_arena_mark(ro->arena);
+    void *p;
+    wf_status st = wf_arena_calloc(ro->arena, 2 * B * (size_t)W, sizeof(double), "reference row sums", &p);
+    if (st) return st;
+    double *sum = p;
+    if ((st = wf_arena_calloc(ro->arena, (size_t)nres * 2 * B * (size_t)W, sizeof(uint16_t), "reference rows", &p))) {
+        wf_arena_release(ro->arena, mark);
+        return st;
+    }
+    uint16_t *out = p;
+    memset(ro->zero, 0, (size_t)W * sizeof *ro->zero);
+    for (int i = 0; i < 2 * B; i++) {
+        const int Y = i < B ? i : H - 2 * B + i;
+        for (int r = 0; direct && r < nres; r++) {
+            const int n = ma->first[r + 1] - ma->first[r];
+            const uint32_t key = corr_key(r, 1);
+            wf_corrnoise_row(ro->cn, key, Y, 1.0 / sqrt((double)n), ro->cn_row);
+            wf_corrnoise_ref_normals(ro->cn, key, Y, 0, W, ro->ref_z);
+            uint16_t *o = out + ((size_t)r * 2 * B + (size_t)i) * W;
+            for (int X = 0; X < W; X++) {
+                int clipped = 0;
+                o[X] = to_u16(digitise(d, ro->cn_row[X], d->read_noise_e / sqrt((double)n), ro->ref_z[X], &clipped));
+            }
+        }
+        for (int k = 0; !direct && k < ro->total_reads; k++) {
+            const int r = ro->resultant_of_read[k];
+            if (r < 0) continue;
+            wf_corrnoise_row(ro->cn, corr_key(k, 0), Y, 1.0, ro->cn_row);
+            wf_corrnoise_ref_normals(ro->cn, corr_key(k, 0), Y, 0, W, ro->ref_z);
+            memset(ro->ref_sat, 255, (size_t)W);
+            wf_det_ramp_read_row(d, ro->cn_row, ro->zero, ro->ref_z, W, (uint8_t)r, sum + (size_t)i * W, ro->ref_sat);
+            if (ma->read[ma->first[r + 1] - 1] == k)
+                wf_det_resultant_row(sum + (size_t)i * W, W, ma->first[r + 1] - ma->first[r],
+                                     out + ((size_t)r * 2 * B + (size_t)i) * W);
+        }
+    }
+    st = send_cols(ro, WF_PK_REFROWS, 0, 2 * B, W, nres, out, (size_t)nres * 2 * B * (size_t)W * sizeof *out);
+    wf_arena_release(ro->arena, mark);
+    return st;
+}
+
 /* ---- up-the-ramp, read by read --------------------------------------------------------- */
 
 static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
@@ -560,6 +732,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
         int nreads = ro->clock.ma.first[r + 1] - ro->clock.ma.first[r];
         for (int y = y0; y < y1; y++) {
             const double *v = ipc_row(ro, y, h0, h1);
+            if (ro->cn) v = corr_row(ro, v, y, corr_key(k, 0), 1.0);
             const double *q = ro->charge + (size_t)(y - h0) * nc;
             double *s = ro->sum + (size_t)(y - y0) * nc;
             uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
@@ -567,6 +740,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
             const float *z = ro->gauss + (size_t)(y - y0) * nc;
             wf_det_ramp_read_row(d, v, q, z, nc, (uint8_t)r, s, sat);
             if (last_of_resultant) wf_det_resultant_row(s, nc, nreads, out);
+            if (ro->refpix) side_read(ro, y, y0, rows, corr_key(k, 0), r, last_of_resultant, nreads);
         }
     }
     return WF_OK;
@@ -688,6 +862,10 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
         wf_det_measure_row(d, avg, hn, ro->meas); /* in place: avg is ro->meas */
         for (int y = y0; y < y1; y++) {
             const double *v = ipc_row(ro, y, h0, h1);
+            if (ro->cn) {
+                v = corr_row(ro, v, y, corr_key(r, 1), 1.0 / sqrt((double)n));
+                if (ro->refpix) side_direct(ro, y, y0, rows, r, n);
+            }
             const double *q = ro->charge + (size_t)(y - h0) * nc;
             uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
             uint16_t *out = ro->res_out + (size_t)r * plane + (size_t)(y - y0) * nc;
@@ -861,6 +1039,7 @@ wf_status wf_readout_run_tile(wf_readout *ro, int tile)
     if (cfg->mode == WF_MODE_RAMP) { /* single frame writes every charge and sums nothing */
         memset(ro->charge, 0, (size_t)hn * sizeof *ro->charge);
         memset(ro->sum, 0, (size_t)rows * nc * sizeof *ro->sum);
+        if (ro->refpix) memset(ro->side_sum, 0, (size_t)rows * 2 * WF_CN_BORDER * sizeof *ro->side_sum);
     }
     memset(ro->sat, 255, (size_t)rows * nc);
     if (cfg->mode == WF_MODE_SINGLE) {
@@ -885,6 +1064,9 @@ wf_status wf_readout_run_tile(wf_readout *ro, int tile)
          * resultants' packet as it arrives, and holds nothing of the tile after it */
         if ((st = send(ro, WF_PK_SATURATION, y0, rows, 1, ro->sat, (size_t)rows * nc))) return st;
         int nres = ro->clock.ma.nresultants; /* planes are packed [nres][rows][nc] */
+        if (ro->refpix && (st = send_cols(ro, WF_PK_REFCOLS, y0, rows, 2 * WF_CN_BORDER, nres, ro->side_out,
+                                          (size_t)nres * rows * 2 * WF_CN_BORDER * sizeof *ro->side_out)))
+            return st;
         if ((st = send(ro, WF_PK_RESULTANTS, y0, rows, nres, ro->res_out,
                        (size_t)nres * rows * nc * sizeof(uint16_t))))
             return st;
@@ -945,24 +1127,30 @@ wf_status wf_readout_send_meta(wf_readout *ro, const char *extra)
         }
         bad |= append(buf, cap, &len, "\n");
     }
+    if (corr_on(c)) /* only then: products of a run without them keep their bytes */
+        bad |= append(buf, cap, &len, "rn1f_corr = %.17g\nrn1f_uncorr = %.17g\nchannel_offset = %.17g\n",
+                      d->on.read_1f ? d->rn1f_corr_e : 0.0, d->on.read_1f ? d->rn1f_uncorr_e : 0.0,
+                      d->on.channel_offsets ? d->channel_offset_adu : 0.0);
     bad |= append(buf, cap, &len,
                   "gain = %.17g\nread_noise = %.17g\ndark_current = %.17g\nfull_well = %.17g\n"
                   "adc_max = %.17g\nbias = %.17g\nsaturation_adu = %.17g\nnl_beta = %.17g\neffects = ",
                   d->gain, d->read_noise_e, d->dark_current, d->full_well, d->adc_max, d->bias_adu,
                   wf_det_saturation_adu(d), d->nl_beta);
     const char *names[] = {"photon", "reciprocity", "dark", "nonlinearity", "ipc", "read_noise",
-                           "quantize", "saturation", "cosmic"};
+                           "quantize", "saturation", "cosmic", "read_1f", "channel_offsets", "refpix"};
     const int on[] = {d->on.photon_noise, d->on.reciprocity, d->on.dark, d->on.nonlinearity,
                       d->on.ipc, d->on.read_noise, d->on.quantize, d->on.saturation,
-                      d->on.cosmic_rays && c->mode == WF_MODE_RAMP};
+                      d->on.cosmic_rays && c->mode == WF_MODE_RAMP, d->on.read_1f, d->on.channel_offsets,
+                      d->on.refpix};
     int first = 1;
-    for (int i = 0; i < 9; i++)
+    for (int i = 0; i < 12; i++)
         if (on[i]) { bad |= append(buf, cap, &len, "%s%s", first ? "" : ",", names[i]); first = 0; }
     bad |= append(buf, cap, &len, "\n%s", extra ? extra : "");
     st = bad ? wf_error(WF_ERR_RANGE, "readout: META text longer than %zu bytes (extra lines: %zu bytes)", cap,
                         extra ? strlen(extra) : (size_t)0)
              : send(ro, WF_PK_META, 0, 0, 0, buf, len);
     wf_arena_release(ro->arena, mark);
+    if (!st && ro->refpix) st = send_refrows(ro);
     return st;
 }
 

@@ -64,7 +64,7 @@ wf_status wf_packet_header_read(const unsigned char in[WF_PACKET_HEADER_SIZE], w
     if (h->version != WF_PACKET_VERSION)
         return wf_error(WF_ERR_CORRUPT, "packet version %u, this build reads %d", h->version,
                         WF_PACKET_VERSION);
-    if (h->kind < WF_PK_META || h->kind > WF_PK_END)
+    if (h->kind < WF_PK_META || h->kind > WF_PK_LAST)
         return wf_error(WF_ERR_CORRUPT, "unknown packet kind %u", h->kind);
     return WF_OK;
 }

@@ -25,8 +25,13 @@ typedef enum {
     WF_PK_SINGLE = 3,     /* float32 [row_count][ncols], ADU (single-frame mode) */
     WF_PK_SATURATION = 4, /* uint8 [row_count][ncols]: first resultant with a saturated read, 255 none */
     WF_PK_COSMIC = 5,     /* wf_cosmic_record[nplanes]: cosmic-ray truth of hits starting in these rows */
-    WF_PK_END = 6         /* no payload; row_count = rows the exposure has */
+    WF_PK_END = 6,        /* no payload; row_count = rows the exposure has */
+    WF_PK_REFCOLS = 7,    /* uint16 [nplanes][row_count][8]: side reference pixels of active rows,
+                             full-frame columns 0-3 then the last four; ncols = 8 */
+    WF_PK_REFROWS = 8     /* uint16 [nplanes][8][ncols]: reference rows, full-frame rows 0-3
+                             then the last four, ncols = the full width; first_row 0, row_count 8 */
 } wf_packet_kind;
+#define WF_PK_LAST WF_PK_REFROWS
 
 typedef struct wf_packet_header {
     uint16_t version, kind;

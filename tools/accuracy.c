@@ -864,10 +864,12 @@ static wf_status read_plane(fitsfile *f, const char *path, const char *ext, int 
 }
 
 /* One exposure of the recorded rates through readout, assembly and ramp fit (cosmic rays
- * off: they are not a knob); SCI and DQ of the product, and the CPU seconds of the chain. */
+ * off: they are not a knob); SCI and DQ (and ERR when asked) of the product, and the CPU
+ * seconds of the chain. corr: 0 no correlated read noise, 1 1/f and channel offsets, 2 those
+ * and the reference border with its correction (firmware/corrnoise.h). */
 static wf_status scene_readout(const acc_run *run, const scene_in *in, const float *rate,
-                               wf_mode mode, wf_sampling sampling, int nl, float *sci,
-                               unsigned *dq, double *cpu)
+                               wf_mode mode, wf_sampling sampling, int nl, int corr, float *sci,
+                               unsigned *dq, float *err, double *cpu)
 {
     wf_config cfg = in->cfg;
     cfg.ro.ncols = cfg.ro.nrows = in->n;
@@ -876,6 +878,8 @@ static wf_status scene_readout(const acc_run *run, const scene_in *in, const flo
     cfg.ro.sampling = sampling;
     cfg.ro.det.on.cosmic_rays = 0;
     cfg.ro.det.on.nonlinearity = nl;
+    cfg.ro.det.on.read_1f = cfg.ro.det.on.channel_offsets = corr > 0;
+    cfg.ro.det.on.refpix = corr > 1;
     wf_clock clock;
     wf_status st = wf_config_finish(&cfg, &clock);
     if (st) return st;
@@ -915,6 +919,7 @@ static wf_status scene_readout(const acc_run *run, const scene_in *in, const flo
             long np = (long)in->n * in->n;
             st = read_plane(f, path, "SCI", TFLOAT, np, sci);
             if (!st) st = read_plane(f, path, "DQ", TUINT, np, dq);
+            if (!st && err) st = read_plane(f, path, "ERR", TFLOAT, np, err);
             status = 0;
             fits_close_file(f, &status);
         }
@@ -973,8 +978,8 @@ static wf_status sampling_knob(acc_run *run, const scene_in *in, const float *tr
     for (int k = 0; k < n && !st; k++) {
         row_init(&rows[k], "scene", nl ? "sampling-nl" : "sampling-lin", "sampling", set[k].value);
         rows[k].reference = k == 0;
-        st = scene_readout(run, in, truth, set[k].mode, set[k].sampling, nl, sci + (size_t)k * np,
-                           dq + (size_t)k * np, &rows[k].cpu_seconds);
+        st = scene_readout(run, in, truth, set[k].mode, set[k].sampling, nl, 0, sci + (size_t)k * np,
+                           dq + (size_t)k * np, NULL, &rows[k].cpu_seconds);
     }
     for (int k = 0; k < n && !st; k++) {
         acc_row *r = &rows[k];
@@ -997,6 +1002,70 @@ out:
     free(sci);
     free(dq);
     free(input);
+    return st;
+}
+
+/* Correlated read noise (1/f and channel offsets, with and without the reference-pixel
+ * correction) against none: the Poisson and white read-noise draws are the same in every
+ * run (their keys do not change), so the difference of two products is the effect's alone.
+ * A star's photometry: the sum over a 3-pixel-radius aperture, at a grid of places 8 pixels
+ * apart (the effect adds to the signal, so where the star is does not matter), its error's
+ * rms against the aperture's noise as ERR states it (what the effect adds unannounced). */
+#define CORR_AP 3
+#define CORR_STEP 8
+static wf_status corr_knob(acc_run *run, const scene_in *in, const float *truth)
+{
+    static const char *value[3] = {"off", "1/f+offsets", "1/f+offsets+refpix"};
+    long np = (long)in->n * in->n;
+    float *sci = malloc(sizeof *sci * (size_t)np * 3), *err = malloc(sizeof *err * (size_t)np * 3);
+    unsigned *dq = malloc(sizeof *dq * (size_t)np * 3);
+    wf_status st = WF_OK;
+    if (!sci || !dq || !err) {
+        st = wf_error(WF_ERR_NOMEM, "accuracy: cannot hold 3 exposures of %dx%d", in->n, in->n);
+        goto out;
+    }
+    acc_row rows[3];
+    for (int k = 0; k < 3 && !st; k++) {
+        row_init(&rows[k], "scene", "readnoise", "corr_noise", value[k]);
+        rows[k].reference = k == 0;
+        st = scene_readout(run, in, truth, WF_MODE_RAMP, WF_SAMPLE_PER_READ, 1, k, sci + (size_t)k * np,
+                           dq + (size_t)k * np, err + (size_t)k * np, &rows[k].cpu_seconds);
+    }
+    /* a 25 mag star's rate in this filter (flat f_nu) */
+    const double star = run->bp ? wf_bandpass_countrate_ab(run->bp, 25.0) : NAN;
+    for (int k = 0; k < 3 && !st; k++) {
+        acc_row *r = &rows[k];
+        const float *a = sci + (size_t)k * np;
+        long call;
+        mean_diff(a, sci, dq + (size_t)k * np, dq, truth, -INFINITY, np, &r->d_flux, &r->d_flux_se, &call);
+        double s = 0, s2 = 0, white = 0;
+        long nap = 0;
+        for (int cy = CORR_AP + 1; cy + CORR_AP + 1 < in->n; cy += CORR_STEP)
+            for (int cx = CORR_AP + 1; cx + CORR_AP + 1 < in->n; cx += CORR_STEP) {
+                double d = 0, w = 0;
+                int flagged = 0;
+                for (int y = cy - CORR_AP; y <= cy + CORR_AP; y++)
+                    for (int x = cx - CORR_AP; x <= cx + CORR_AP; x++) {
+                        if ((x - cx) * (x - cx) + (y - cy) * (y - cy) > CORR_AP * CORR_AP) continue;
+                        long i = (long)y * in->n + x;
+                        flagged |= dq[i] || dq[(size_t)k * np + i];
+                        d += (double)a[i] - sci[i];
+                        w += (double)err[i] * err[i];
+                    }
+                if (flagged) continue;
+                s += d, s2 += d * d, white += sqrt(w), nap++;
+            }
+        double rms = nap ? sqrt(s2 / nap) : NAN;
+        snprintf(r->notes, sizeof r->notes,
+                 "r=%d px aperture (%ld places): rms dflux %.3g e-/s = %.2f x its ERR (%.3g), mean %+.2g; "
+                 "%.1f%% of a 25 mag star", CORR_AP, nap, rms, nap ? rms / (white / nap) : NAN, nap ? white / nap : NAN,
+                 nap ? s / nap : NAN, 100.0 * rms / star);
+        if ((st = add_row(run, r))) break;
+    }
+out:
+    free(sci);
+    free(dq);
+    free(err);
     return st;
 }
 
@@ -1058,6 +1127,7 @@ static wf_status sweep_scene(acc_run *run)
         }
         st = scene_render(run, &in, 8, 4, 256, 0.995, 1, 1.0, 2.0, 0, truth, &cpu, notes, sizeof notes);
         if (!st) st = sampling_knob(run, &in, truth, 1);
+        if (!st) st = corr_knob(run, &in, truth);
         if (!st && !q) st = sampling_knob(run, &in, truth, 0);
         free(truth);
     }
@@ -1136,7 +1206,8 @@ static void write_csv(FILE *f, const acc_run *run, const char *kind)
     }
 }
 
-static int is_sampling(const acc_row *r) { return !strcmp(r->knob, "sampling"); }
+/* rows of a readout setting (one table, fitted rates compared): sampling and correlated noise */
+static int is_sampling(const acc_row *r) { return !strcmp(r->knob, "sampling") || !strcmp(r->knob, "corr_noise"); }
 
 static void md_num(FILE *f, double v, int reference)
 {
@@ -1198,7 +1269,7 @@ static void md_table(FILE *f, const acc_run *run, const char *kind, int sampling
         if (strcmp(r->kind, kind) || is_sampling(r) != sampling) continue;
         if (!any) {
             if (sampling)
-                fputs("| case | sampling | Δ mean rate (all pixels) | ± | CPU s | notes |\n"
+                fputs("| case | setting | Δ mean rate (all pixels) | ± | CPU s | notes |\n"
                       "|---|---|---|---|---|---|\n", f);
             else
                 fputs("| case | knob | value | Δflux | Δpeak | 3×3 core | worst pixel | Δσ/σ | Δe1 | "
@@ -1297,6 +1368,11 @@ static void write_md(FILE *f, const acc_run *run, const char *unused)
               "cosmic rays off), assembly and ramp fit; the mean fitted rate of each mode against "
               "per-read sampling over pixels unflagged in both (± its standard error, from the "
               "per-pixel differences); `sampling-nl` with nonlinearity on, `sampling-lin` off. "
+              "`readnoise` (knob `corr_noise`): per-read sampling with the correlated read noise "
+              "(1/f and channel offsets) off, on, and on with the reference-pixel correction; the "
+              "mean rate's ± assumes independent pixels, which this noise is not; notes: a "
+              "3-pixel-radius aperture's flux error from it (its rms over a grid of places, against "
+              "the aperture's noise from ERR, and as a share of a 25 mag star's flux). "
               "CPU s: readout, assembly and fit.\n\n", f);
         md_table(f, run, "scene", 1);
         md_plots(f, run, "scene");

@@ -20,6 +20,8 @@
 #include "sim/fits/fitsdisk.h"
 #include "sim/fits/fitsout.h"
 #include "tools/rampfit.h"
+#include "firmware/corrnoise.h"
+#include "tools/refpix.h"
 
 /* Per-row bookkeeping: which payloads have covered the row. Rows, not tiles, are the unit,
  * so RESULTANTS and SATURATION packets need not share a tiling to be paired. */
@@ -90,6 +92,9 @@ typedef struct exposure {
     /* DATASUM of the image HDUs (index hdu - 1), summed as their rows are written: every row
      * is written once, so the product is closed without reading the pixels back */
     wf_fits_datasum sum[5];
+    /* effects has refpix: the border as received, and one row's corrections [nres][ncols] */
+    wf_refpix *rp;
+    double *corr;
 } exposure;
 
 /* Where an image HDU is being written: the product itself, or its part file (as HDU 2). */
@@ -115,8 +120,9 @@ typedef struct assembler {
 
 static const char *kind_name(unsigned kind)
 {
-    static const char *names[] = {"?", "META", "RESULTANTS", "SINGLE", "SATURATION", "COSMIC", "END"};
-    return kind <= WF_PK_END ? names[kind] : "?";
+    static const char *names[] = {"?", "META", "RESULTANTS", "SINGLE", "SATURATION", "COSMIC", "END",
+                                  "REFCOLS", "REFROWS"};
+    return kind <= WF_PK_LAST ? names[kind] : "?";
 }
 
 /* Every message names the stream, the packet (index, kind, rows, offset) and the exposure. */
@@ -634,6 +640,9 @@ static void exposure_free(exposure *e)
     free(e->cube);
     free(e->charge);
     free(e->sci); /* the block of all three planes */
+    if (e->rp) wf_refpix_free(e->rp);
+    free(e->rp);
+    free(e->corr);
     free(e);
 }
 
@@ -680,6 +689,19 @@ static wf_status exposure_open(assembler *a, const void *payload, exposure **out
         for (int adu = 0; adu < 65536; adu++) {
             double v = (adu - m->bias) * m->gain;
             e->charge[adu] = m->nonlinearity ? linearise(v, m->nl_beta) : v;
+        }
+    }
+    if (m->ramp && m->effects && has_word(m->effects, "refpix")) {
+        int nres = m->clock.ma.nresultants;
+        if (!(e->rp = calloc(1, sizeof *e->rp)) ||
+            !(e->corr = malloc((size_t)nres * (size_t)m->ncols * sizeof *e->corr))) {
+            st = fail(a, WF_ERR_NOMEM, "out of memory for the reference pixels");
+            goto bad;
+        }
+        if ((st = wf_refpix_init(e->rp, nres, (int)m->ncols, (int)m->nrows, m->bias))) {
+            free(e->rp);
+            e->rp = NULL;
+            goto bad;
         }
     }
     if (!(e->rows = calloc((size_t)m->nrows, 1))) {
@@ -834,12 +856,25 @@ static wf_status fit_row(const assembler *a, const exposure *e, uint32_t y, cons
     double q[FIT_CHUNK * WF_MA_MAX_RESULTANTS];
     int first_sat[FIT_CHUNK];
     wf_rampfit_result res[FIT_CHUNK];
+    if (e->rp) {
+        if (!wf_refpix_ready(e->rp, y))
+            return fail(a, WF_ERR_CORRUPT, "row %" PRIu32 " fitted before its reference pixels arrived "
+                        "(REFROWS after META, a tile's REFCOLS before its RESULTANTS)", y);
+        wf_refpix_correction(e->rp, y, e->corr);
+    }
     for (long x0 = 0; x0 < m->ncols; x0 += FIT_CHUNK) {
         int n = m->ncols - x0 < FIT_CHUNK ? (int)(m->ncols - x0) : FIT_CHUNK;
         for (int j = 0; j < n; j++) {
             long x = x0 + j;
-            for (int r = 0; r < nres; r++)
-                q[j * nres + r] = e->charge[cube[(size_t)r * stride + (size_t)x]];
+            for (int r = 0; r < nres; r++) {
+                const uint16_t adu = cube[(size_t)r * stride + (size_t)x];
+                if (!e->rp) {
+                    q[j * nres + r] = e->charge[adu];
+                    continue;
+                }
+                double v = (adu - e->corr[(size_t)r * m->ncols + x] - m->bias) * m->gain;
+                q[j * nres + r] = m->nonlinearity ? linearise(v, m->nl_beta) : v;
+            }
             first_sat[j] = sat[x] < nres ? sat[x] : nres;
         }
         int bad;
@@ -1262,6 +1297,63 @@ static wf_status write_cosmics(const assembler *a, exposure *e)
     return status ? fail_fits(a, e, status, "writing COSMICRAYS") : WF_OK;
 }
 
+/* REFROWS (once) and REFCOLS (each active row once), kept for the correction and the product. */
+static wf_status on_refpix(const assembler *a, exposure *e, const void *payload)
+{
+    const wf_packet_header *h = &a->h;
+    wf_refpix *rp = e->rp;
+    if (!rp) return fail(a, WF_ERR_CORRUPT, "reference pixels, but META's effects have no refpix");
+    if (h->nplanes != (uint32_t)rp->nres)
+        return fail(a, WF_ERR_CORRUPT, "%" PRIu32 " resultants, META's MA table has %d", h->nplanes, rp->nres);
+    wf_status st;
+    if (h->kind == WF_PK_REFROWS) {
+        if (rp->have_rows) return fail(a, WF_ERR_CORRUPT, "duplicate: reference rows already received");
+        if (h->first_row != 0 || h->row_count != 2 * WF_CN_BORDER || h->ncols != (uint32_t)rp->width)
+            return fail(a, WF_ERR_CORRUPT, "reference rows of %" PRIu32 " x %" PRIu32 ", expected %d x %d",
+                        h->row_count, h->ncols, 2 * WF_CN_BORDER, rp->width);
+        if ((st = check_size(a, (uint64_t)rp->nres, 2))) return st;
+        wf_refpix_set_rows(rp, payload);
+        return WF_OK;
+    }
+    if (h->ncols != 2 * WF_CN_BORDER)
+        return fail(a, WF_ERR_CORRUPT, "%" PRIu32 " side reference columns, expected %d", h->ncols, 2 * WF_CN_BORDER);
+    if (h->row_count == 0 || h->first_row >= (uint32_t)e->m.nrows ||
+        h->row_count > (uint32_t)e->m.nrows - h->first_row)
+        return fail(a, WF_ERR_CORRUPT, "rows outside the %ld rows META announced", e->m.nrows);
+    for (uint32_t y = h->first_row; y < h->first_row + h->row_count; y++)
+        if (rp->side_in[y]) return fail(a, WF_ERR_CORRUPT, "duplicate: side reference pixels of row %" PRIu32, y);
+    if ((st = check_size(a, (uint64_t)rp->nres, 2))) return st;
+    wf_refpix_set_cols(rp, h->first_row, h->row_count, payload);
+    return WF_OK;
+}
+
+/* products.border: the border as downlinked, two uint16 images (docs/PACKETS.md). */
+static wf_status write_border(const assembler *a, exposure *e)
+{
+    const wf_refpix *rp = e->rp;
+    const struct {
+        const char *name, *comment;
+        long naxes[3];
+        const uint16_t *data;
+    } hdu[2] = {
+        {"REFROWS", "reference rows [resultant][row][X]: full-frame rows 0-3, then the last four",
+         {rp->width, 2 * WF_CN_BORDER, rp->nres}, rp->rows},
+        {"REFCOLS", "side reference pixels [resultant][y][i]: full-frame columns 0-3, then the last four",
+         {2 * WF_CN_BORDER, rp->nrows, rp->nres}, rp->side},
+    };
+    for (int k = 0; k < 2; k++) {
+        int status = 0;
+        fits_create_img(e->f, USHORT_IMG, 3, (long *)hdu[k].naxes, &status);
+        fits_write_key_str(e->f, "EXTNAME", hdu[k].name, "reference pixels as downlinked", &status);
+        fits_write_key_str(e->f, "BUNIT", "adu", "physical unit of the data", &status);
+        fits_write_comment(e->f, hdu[k].comment, &status);
+        LONGLONG n = (LONGLONG)hdu[k].naxes[0] * hdu[k].naxes[1] * hdu[k].naxes[2];
+        fits_write_img(e->f, TUSHORT, 1, n, (void *)(uintptr_t)hdu[k].data, &status);
+        if (status) return fail_fits(a, e, status, hdu[k].name);
+    }
+    return WF_OK;
+}
+
 static wf_status on_end(assembler *a, exposure *e, char *last_path, size_t last_path_len)
 {
     const wf_packet_header *h = &a->h;
@@ -1280,6 +1372,7 @@ static wf_status on_end(assembler *a, exposure *e, char *last_path, size_t last_
         if (miss_s) snprintf(part_s, sizeof part_s, "rows %s missing (no SATURATION)", sat);
         return fail(a, WF_ERR_CORRUPT, "%s%s%s", part_d, miss_d && miss_s ? "; " : "", part_s);
     }
+    if (e->rp && !e->rp->have_rows) return fail(a, WF_ERR_CORRUPT, "no REFROWS (META's effects have refpix)");
     uint32_t unfit = row_ranges(e->rows, 0, nr, ROW_FIT, 0, data, sizeof data);
     if (unfit || e->sat_wait.n || e->res_wait.n)
         return fail(a, WF_ERR_INTERNAL, "rows %s received but not fitted", data);
@@ -1297,6 +1390,7 @@ static wf_status on_end(assembler *a, exposure *e, char *last_path, size_t last_
     }
     if ((e->m.effects && has_word(e->m.effects, "cosmic")) || e->ncr)
         if ((st = write_cosmics(a, e))) return st;
+    if (e->rp && a->opt && a->opt->border && (st = write_border(a, e))) return st;
     if ((st = wf_fits_checksum_all(e->f, e->tmp, e->sum, (int)(sizeof e->sum / sizeof e->sum[0])))) {
         char why[900];
         snprintf(why, sizeof why, "%s", wf_error_message());
@@ -1354,6 +1448,8 @@ static wf_status handle(assembler *a, const void *payload, char *last_path, size
     case WF_PK_SINGLE: return on_single(a, e, payload);
     case WF_PK_SATURATION: return on_saturation(a, e, payload);
     case WF_PK_COSMIC: return on_cosmic(a, e, payload);
+    case WF_PK_REFROWS:
+    case WF_PK_REFCOLS: return on_refpix(a, e, payload);
     case WF_PK_END:
         if (a->ndone == a->done_cap) {
             size_t cap = a->done_cap ? 2 * a->done_cap : 8;

@@ -21,6 +21,7 @@ typedef struct wf_assemble_options {
     int compress;          /* tile-compress the image HDUs */
     double quantize_level; /* with compress: SCI and ERR step noise / q; 0 lossless */
     int drop_resultants;   /* no RESULTANTS HDU */
+    int border;            /* with the reference border received: HDUs REFROWS and REFCOLS */
 } wf_assemble_options;
 
 /* Reads the whole stream; writes out_dir/wfisim_e<exposure>_sca<NN>.fits per exposure.

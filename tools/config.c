@@ -72,7 +72,10 @@ typedef struct key_desc {
  * KD_RUN never changes a byte of an image product (how the program runs); KD_FILE names a
  * file whose content is digested instead (a path may move, the bytes count); KD_PART has a
  * part of its own (the seed). */
-enum { KD_SHAPES, KD_RUN, KD_FILE, KD_PART };
+enum { KD_SHAPES, KD_RUN, KD_FILE, KD_PART, KD_CORR };
+/* KD_CORR: shapes the product only with a correlated-read-noise effect on (firmware/corrnoise.h),
+ * and is in the digest only then: products made without them keep the digest they had before
+ * those keys existed. */
 #define DIGEST(d) .digest = (d)
 
 #define FIELD(m) .off = offsetof(wf_config, m), .size = sizeof(((wf_config *)0)->m)
@@ -149,6 +152,9 @@ static const key_desc keys[] = {
     {.name = "products.resultants", .type = KT_ENUM, .unit = "", .def = "keep", .choices = keep_drop,
      FIELD(products.drop_resultants),
      .doc = "Up-the-ramp products: `keep` writes the RESULTANTS cube (ADU, ~70% of an uncompressed product); `drop` leaves it out: SCI, ERR, DQ, COSMICRAYS and the truth file are written all the same."},
+    {.name = "products.border", .type = KT_BOOL, .unit = "", .def = "false", FIELD(products.border),
+     DIGEST(KD_CORR),
+     .doc = "With detector.effects.refpix: write the 4-pixel reference border as it was downlinked, HDUs REFROWS (uint16 ADU [resultant][8][ncols + 8]: full-frame rows 0-3, then the last four) and REFCOLS ([resultant][nrows][8]: full-frame columns 0-3, then the last four, of each active row); SCI, ERR, DQ, RESULTANTS and their WCS stay the active area's."},
     {.name = "run.out", .type = KT_STRING, .unit = "", .def = "out", .nonempty = 1,
      FIELD(out_dir), DIGEST(KD_RUN), .doc = "Directory that receives the products."},
 
@@ -194,6 +200,15 @@ static const key_desc keys[] = {
      FIELD(ro.det.cr_dedx_scale), .doc = "Scale of the Moyal energy-loss distribution."},
     {.name = "detector.cr_ev_per_e", .type = KT_DOUBLE, .unit = "eV", ABOVE(0),
      FIELD(ro.det.cr_ev_per_e), .doc = "Energy deposited per electron collected."},
+    {.name = "detector.rn1f_corr", .type = KT_DOUBLE, .unit = "e-", MIN(0), MAX(1000),
+     FIELD(ro.det.rn1f_corr_e), DIGEST(KD_CORR),
+     .doc = "With effects.read_1f: rms per read of the 1/f noise shared by all 32 channels (NGHXRG's JWST value; SPEC gives none)."},
+    {.name = "detector.rn1f_uncorr", .type = KT_DOUBLE, .unit = "e-", MIN(0), MAX(1000),
+     FIELD(ro.det.rn1f_uncorr_e), DIGEST(KD_CORR),
+     .doc = "With effects.read_1f: rms per read of each channel's own 1/f noise."},
+    {.name = "detector.channel_offset", .type = KT_DOUBLE, .unit = "ADU", MIN(0), MAX(10000),
+     FIELD(ro.det.channel_offset_adu), DIGEST(KD_CORR),
+     .doc = "With effects.channel_offsets: rms of the channels' offsets (one draw per channel and exposure)."},
 
     {.name = "detector.effects.photon_noise", .type = KT_BOOL, .unit = "",
      FIELD(ro.det.on.photon_noise), .doc = "Poisson noise on the signal."},
@@ -213,6 +228,13 @@ static const key_desc keys[] = {
      FIELD(ro.det.on.saturation), .doc = "Full-well and ADC saturation."},
     {.name = "detector.effects.cosmic_rays", .type = KT_BOOL, .unit = "",
      FIELD(ro.det.on.cosmic_rays), .doc = "Cosmic-ray hits."},
+    {.name = "detector.effects.read_1f", .type = KT_BOOL, .unit = "", FIELD(ro.det.on.read_1f), DIGEST(KD_CORR),
+     .doc = "Correlated 1/f read noise along each output channel's readout order (ramp mode; docs/ARCHITECTURE.md)."},
+    {.name = "detector.effects.channel_offsets", .type = KT_BOOL, .unit = "", FIELD(ro.det.on.channel_offsets), DIGEST(KD_CORR),
+     .doc = "A constant offset per output channel (ramp mode)."},
+    {.name = "detector.effects.refpix", .type = KT_BOOL, .unit = "", FIELD(ro.det.on.refpix), DIGEST(KD_CORR),
+     .doc = "The 4-pixel reference border is read out and sent; the assembler corrects the resultants with it "
+            "before the ramp fit (ramp mode)."},
 
     {.name = "pointing.ra", .type = KT_DOUBLE, .unit = "deg", .def = "71", MIN(0), MAX(360),
      FIELD(ra), .doc = "Boresight right ascension (deep field centre by default)."},
@@ -1265,9 +1287,11 @@ wf_status wf_config_product_text(const wf_config *cfg, char **text)
     if (!*text) return wf_error(WF_ERR_NOMEM, "out of memory for the configuration text");
     (*text)[0] = '\0';
     int bad = 0;
+    const wf_detector *d = &cfg->ro.det;
+    const int corr = d->on.read_1f || d->on.channel_offsets || d->on.refpix;
     for (int i = 0; i < NKEYS && !bad; i++) {
         const key_desc *k = &keys[i];
-        if (k->digest != KD_SHAPES) continue;
+        if (k->digest != KD_SHAPES && !(k->digest == KD_CORR && corr)) continue;
         const void *src = key_cptr(cfg, k);
         char v[64];
         bad |= append_text(text, &len, &cap, "%s = ", k->name);

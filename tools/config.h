@@ -29,6 +29,7 @@ typedef struct wf_config {
         int compress;              /* WF_COMPRESS_* [auto] */
         double quantize_level;     /* float HDUs' step is noise / this; 0 lossless [16] */
         int drop_resultants;       /* products.resultants: keep (0) or drop (1) [keep] */
+        int border;                /* products.border: write the reference border [false] */
     } products;
     char filter[16];               /* exposure.filter [Y106] */
     /* Built-in grid scene (scene.*) until the renderer lands. */

@@ -156,6 +156,7 @@ void wf_pipeline_assemble_options(const wf_config *cfg, wf_assemble_options *opt
     opt->compress = cfg->products.compress == WF_COMPRESS_RICE;
     opt->quantize_level = cfg->products.quantize_level;
     opt->drop_resultants = cfg->products.drop_resultants;
+    opt->border = cfg->products.border;
 }
 
 static long pipe_read(void *ctx, void *buf, size_t n) { return (long)wf_link_pipe_read(ctx, buf, n); }
