@@ -22,6 +22,7 @@ typedef enum {
     WF_PURPOSE_RESULTANT = 4, /* direct-resultant sampling of the within-group sum */
     WF_PURPOSE_SCENE = 5,     /* scene randomness (knots, positions) */
     WF_PURPOSE_SN = 6,        /* supernova sample: pixel = SN index, read = which draw (sim/sn/) */
+    WF_PURPOSE_PERSIST = 7,   /* persistence: electrons released over the interval ending at read */
     WF_PURPOSE_TEST = 15
 } wf_purpose;
 
