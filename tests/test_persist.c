@@ -2,6 +2,7 @@
  * saturating star's history releases into a dark exposure against the model integrated in
  * closed form here, Poisson statistics of the released electrons, the DQ mark, the switch
  * (off: the stream's bytes unchanged) and independence of tile height and threads. */
+#include <fitsio.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -9,6 +10,8 @@
 #include "firmware/persistence.h"
 #include "firmware/readout.h"
 #include "hal/packet.h"
+#include "sim/survey/survey.h"
+#include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 #include "tools/expose.h"
 
@@ -395,6 +398,132 @@ START_TEST(zero_gap_refused)
 }
 END_TEST
 
+
+/* ---- survey run: the history from the plan ------------------------------------------- */
+
+#define SMALL "--set readout.ncols=128 --set readout.nrows=96 --set detector.cr_rate=0"
+#define NODATA "env -u WFISIM_DATA "
+
+static void assert_same_file(const char *a, const char *b)
+{
+    size_t la, lb;
+    char *x = wf_test_slurp(a, &la), *y = wf_test_slurp(b, &lb);
+    ck_assert_msg(x && y, "%s or %s missing", a, b);
+    ck_assert_msg(la == lb && !memcmp(x, y, la), "%s and %s differ", a, b);
+    free(x);
+    free(y);
+}
+
+/* An image HDU of a product (tile-compressed or not), as doubles. */
+static double *read_hdu(const char *path, const char *name, int type_ok)
+{
+    (void)type_ok;
+    fitsfile *f;
+    int status = 0;
+    fits_open_file(&f, path, READONLY, &status);
+    fits_movnam_hdu(f, ANY_HDU, (char *)name, 0, &status);
+    double *v = calloc(128 * 96, sizeof *v);
+    int anynul = 0;
+    fits_read_img(f, TDOUBLE, 1, 128 * 96, NULL, v, &anynul, &status);
+    fits_close_file(f, &status);
+    ck_assert_msg(status == 0, "%s: HDU %s unreadable (%d)", path, name, status);
+    return v;
+}
+
+/* A bright star (AB 16: ~1.5e4 e-/s, saturating its peak in 294 s) at pixel (40 + 15 (e - 2), 48)
+ * of SCA 3 in each of exposures 2..5 of a one-visit plan: exposure 5's history holds the other
+ * three (ended 56, 406, 756 s before it) and its DQ marks their pixels. The product of exposure
+ * 5 is the same bytes made alone, after 4, or among 2..5, whatever the tile height and threads. */
+START_TEST(survey_history_any_split)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], stars[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(stars, sizeof stars, "%s/stars.csv", d);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    wf_survey_row *rows;
+    size_t nrows;
+    ck_assert_int_eq(wf_survey_read_plan(plan, &rows, &nrows), WF_OK);
+    wf_focal_plane fp;
+    ck_assert_int_eq(wf_wcs_focal_plane(NULL, &fp), WF_OK);
+    FILE *f = fopen(stars, "w");
+    fprintf(f, "id,ra,dec,mag_Y106,mag_J129,mag_H158,mag_F184\n");
+    for (int e = 2; e <= 5; e++) {
+        wf_wcs w;
+        double ra, dec;
+        ck_assert_int_eq(rows[e].expid, e);
+        ck_assert_int_eq(wf_wcs_for_sca(&fp, rows[e].ra, rows[e].dec, rows[e].pa, 3, &w), WF_OK);
+        ck_assert_int_eq(wf_wcs_pix2world(&w, 40 + 15 * (e - 2), 48, &ra, &dec), WF_OK);
+        fprintf(f, "%d,%.10f,%.10f,16,16,16,16\n", e, ra, dec);
+    }
+    fclose(f);
+    free(rows);
+    const char *scene = "--set scene.kind=catalog --set scene.stars=";
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 2:5 --scas 3 " SMALL " %s%s --out %s/a",
+                                 bin, plan, scene, stars, d), 0);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 5 --scas 3 " SMALL " %s%s --out %s/b",
+                                 bin, plan, scene, stars, d), 0);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 4:5 --scas 3 " SMALL
+                                 " --set readout.tile_rows=7 --set run.threads=2 %s%s --out %s/c", bin, plan, scene, stars, d), 0);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 5 --scas 3 " SMALL
+                                 " --set detector.effects.persistence=false %s%s --out %s/off", bin, plan, scene, stars, d), 0);
+    /* without photon noise (released electrons are then their means) for the slope */
+    const char *quiet = "--set detector.effects.photon_noise=false";
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 5 --scas 3 " SMALL " %s %s%s --out %s/qa",
+                                 bin, plan, quiet, scene, stars, d), 0);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 5 --scas 3 " SMALL
+                                 " --set detector.effects.persistence=false %s %s%s --out %s/qoff", bin, plan, quiet, scene,
+                                 stars, d), 0);
+    char a[4300], b[4300], c[4300], off[4300], qa[4300], qoff[4300];
+    snprintf(qa, sizeof qa, "%s/qa/wfisim_e000005_sca03.fits", d);
+    snprintf(qoff, sizeof qoff, "%s/qoff/wfisim_e000005_sca03.fits", d);
+    snprintf(a, sizeof a, "%s/a/wfisim_e000005_sca03.fits", d);
+    snprintf(b, sizeof b, "%s/b/wfisim_e000005_sca03.fits", d);
+    snprintf(c, sizeof c, "%s/c/wfisim_e000005_sca03.fits", d);
+    snprintf(off, sizeof off, "%s/off/wfisim_e000005_sca03.fits", d);
+    assert_same_file(a, b);
+    assert_same_file(a, c);
+    double *dq = read_hdu(a, "DQ", 0), *dq_off = read_hdu(off, "DQ", 0);
+    double *sci = read_hdu(qa, "SCI", 0), *sci_off = read_hdu(qoff, "SCI", 0);
+    int marked = 0, far = 0;
+    for (int y = 0; y < 96; y++)
+        for (int x = 0; x < 128; x++) {
+            unsigned v = (unsigned)dq[y * 128 + x];
+            ck_assert_msg(!((unsigned)dq_off[y * 128 + x] & 32u), "(%d, %d) marked with persistence off", x, y);
+            if (!(v & 32u)) continue;
+            marked++;
+            /* only around the earlier stars (40, 55, 70; 48); the wide PSF's spikes reach further */
+            int near = 0;
+            for (int e = 2; e <= 4; e++) near |= abs(x - (40 + 15 * (e - 2))) <= 12 && abs(y - 48) <= 12;
+            far += !near;
+        }
+    ck_assert_msg(marked >= 3 * 9, "%d pixels marked", marked);
+    ck_assert_msg(far <= marked / 10, "%d of %d marked pixels away from the earlier stars", far, marked);
+    /* the earlier stars' saturated peaks release into this exposure: its slope gains the
+     * model's mean current over the ramp, for exposure 4's peak (56 s before) 12 e- x
+     * ln(350 / 56) / 294 s = 0.075 e-/s (the same read noise in both runs cancels). The
+     * ramp is not a line (the current falls 6x over it at 56 s): the fit's slope is the
+     * mean to within 10% (measured 0.96-1.06), bounds 0.8-1.25 */
+    for (int e = 2; e <= 4; e++) {
+        int i = 48 * 128 + 40 + 15 * (e - 2);
+        ck_assert_msg((unsigned)dq[i] & 32u, "exposure %d's star pixel not marked", e);
+        double gain = sci[i] - sci_off[i];
+        double dt = e == 4 ? 55.9 : e == 3 ? 405.9 : 755.9;
+        double mean = galsim_fermi(1e5, 1000.0) * 1000.0 * log((dt + 294.0) / dt) / 294.0;
+        printf("survey: exposure %d's peak %.1f s before: slope up %.4f e-/s, model mean current %.4f, %d pixels marked\n", e,
+               dt, gain, mean, marked);
+        ck_assert_msg(gain > 0.8 * mean && gain < 1.25 * mean, "exposure %d's peak: slope up %g e-/s, model mean %g", e,
+                      gain, mean);
+    }
+    free(dq);
+    free(dq_off);
+    free(sci);
+    free(sci_off);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("persist");
@@ -408,6 +537,7 @@ static Suite *suite(void)
     tcase_add_test(tc, off_is_byte_identical);
     tcase_add_test(tc, independent_of_tiles_and_threads);
     tcase_add_test(tc, zero_gap_refused);
+    tcase_add_test(tc, survey_history_any_split);
     suite_add_tcase(s, tc);
     return s;
 }
