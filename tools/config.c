@@ -215,7 +215,8 @@ static const key_desc keys[] = {
      FIELD(ro.det.on.cosmic_rays), .doc = "Cosmic-ray hits."},
     {.name = "detector.effects.persistence", .type = KT_BOOL, .unit = "", FIELD(ro.persist.on),
      .doc = "Persistence: charge of earlier exposures of the SCA released (Fermi model); only "
-            "`survey run` has earlier exposures (docs/CONFIG.md), a lone exposure releases nothing."},
+            "`survey run` has earlier exposures, rebuilt for each product from the plan (docs/ARCHITECTURE.md, "
+            "Persistence); `expose` and `demo` make a lone exposure, which releases nothing."},
 
     {.name = "detector.persistence.window", .type = KT_DOUBLE, .unit = "s", .def = "3600", MIN(0),
      MAX(WF_EXPOSURE_TIME_MAX), FIELD(persist.window),

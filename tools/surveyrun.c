@@ -203,10 +203,10 @@ static void history_extra(const wf_config *base, const wf_survey_row *plan, cons
 {
     if (!base->ro.persist.on) return;
     size_t len = strlen(extra);
-    len += (size_t)snprintf(extra + len, cap - len, "hdr.PERSISTN = %d / earlier exposures in the persistence history\n", h->n);
+    len += (size_t)snprintf(extra + len, cap - len, "hdr.PERSISTN = %d / exposures in the persistence history\n", h->n);
     for (int j = 0; j < h->n && len < cap; j++)
-        len += (size_t)snprintf(extra + len, cap - len, "hdr.PERSEX%d = %d / its exposure %d, ended %.3f s before\n",
-                                j + 1, plan[h->row[j]].expid, j + 1, h->dt[j]);
+        len += (size_t)snprintf(extra + len, cap - len, "hdr.PERSEX%d = %d / its EXPID; ended %.3f s before start\n",
+                                j + 1, plan[h->row[j]].expid, h->dt[j]);
 }
 
 static wf_status prepare(const wf_survey_ctx *ctx, size_t item, wf_digest_cache *cache, product *p, history *h);
@@ -247,6 +247,7 @@ struct wf_survey_ctx {
     size_t nplan;
     size_t *full;             /* per row of rows, its index in plan */
     wf_config *scratch;       /* an earlier exposure's configuration */
+    wf_persist_cache *pcache; /* earlier exposures' bright pixels, for the next items */
     unsigned char *state;     /* per item, P_* */
     size_t todo;              /* items the check found to make (0: nothing will be written) */
     product *p;               /* the item's configuration and names (large: on the heap) */
@@ -269,6 +270,7 @@ void wf_survey_free(wf_survey_ctx *ctx)
     free(ctx->plan);
     free(ctx->full);
     free(ctx->scratch);
+    wf_persist_cache_free(ctx->pcache);
     free(ctx->items);
     free(ctx->state);
     free(ctx->p);
@@ -471,7 +473,10 @@ wf_status wf_survey_begin(const wf_config *base, const wf_survey_run_options *op
     if ((st = wf_survey_read_plan(opt->plan_path, &ctx->plan, &ctx->nplan))) { wf_survey_free(ctx); return st; }
     ctx->full = malloc((ctx->nrows ? ctx->nrows : 1) * sizeof *ctx->full);
     ctx->scratch = malloc(sizeof *ctx->scratch);
-    if (!ctx->full || !ctx->scratch) { wf_survey_free(ctx); return wf_error(WF_ERR_NOMEM, "out of memory"); }
+    if (!ctx->full || !ctx->scratch || wf_persist_cache_new(&ctx->pcache)) {
+        wf_survey_free(ctx);
+        return wf_error(WF_ERR_NOMEM, "out of memory");
+    }
     for (size_t i = 0, k = 0; i < ctx->nrows; i++) { /* rows is a subsequence of plan */
         while (k < ctx->nplan && ctx->plan[k].expid != ctx->rows[i].expid) k++;
         ctx->full[i] = k++;
@@ -582,7 +587,7 @@ static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, c
         const wf_survey_row *r = &ctx->plan[h->row[j]];
         wf_clock clock;
         if (!(st = configure(ctx->base, ctx->opt, r, ctx->items[i].sca, ctx->scratch, &clock)))
-            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j]);
+            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache);
         if (st) {
             char msg[1024];
             snprintf(msg, sizeof msg, "%s", wf_error_message());
