@@ -194,6 +194,7 @@ static wf_status bright_subset(const wf_catalog *cat, const wf_bandpass *bp, con
         if (wf_bandpass_countrate_ab(bp, cat->mag[band][i]) * peak_fraction(cat, i) >= min_rate) idx[n++] = (uint32_t)i;
     st = wf_catalog_subset(cat, idx, n, out);
     free(idx);
+    if (!st && n == 0) wf_catalog_free(out); /* held as not there */
     *any = !st && n > 0;
     return st;
 }
