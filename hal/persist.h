@@ -3,8 +3,9 @@
  * WF_PERSIST_DEPTH_MAX earlier exposures ("slots", most recent first), each with the time
  * from its end to this exposure's reset, and per pixel and slot the charge it collected
  * there, as a 16-bit code of WF_PERSIST_UNIT e- (0: below the host's threshold, no release).
- * A code of 2 e- keeps the released current to < 1e-5 of itself and a pixel's history to
- * 2 bytes a slot (a 66-row tile of 4088 columns, depth 8: 4.3 MB). */
+ * A code of 2 e- (rounding: +-1 e-) moves the released current by < 2e-4 of itself at the
+ * 5000 e- threshold (< 2e-5 above the half well) and keeps a pixel's history to 2 bytes a
+ * slot (a 66-row tile of 4088 columns, depth 8: 4.3 MB). */
 #ifndef WF_PERSIST_H
 #define WF_PERSIST_H
 

@@ -14,6 +14,7 @@
 #include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 #include "tools/expose.h"
+#include "tools/persist.h"
 
 /* GalSim's fermi_linear(x, t) with SPEC §2's numbers, written out on its own */
 static double galsim_fermi(double x, double t)
@@ -399,6 +400,65 @@ START_TEST(zero_gap_refused)
 END_TEST
 
 
+
+/* The host's history (tools/persist.c) from a scene source: a pixel is kept exactly where its
+ * charge, rate x exposure time up to the full well, reaches min_stimulus, as that charge in
+ * 2 e- codes; the readout then marks exactly those pixels (SATURATION 254 -> DQ PERSISTENCE). */
+START_TEST(history_threshold_exact)
+{
+    const int n = 40;
+    wf_scene_grid g = {n, n, 0.0, 2.0e5, 1.2, 16}; /* cores saturate, wings cross 5000 e- */
+    wf_scene_source src;
+    ck_assert_int_eq(wf_scene_grid_source(&g, &src), WF_OK);
+    wf_persist_history *h;
+    ck_assert_int_eq(wf_persist_history_new(n, n, 5000.0, 1e5, &h), WF_OK);
+    const double T[2] = {294.0, 20.0};
+    ck_assert_int_eq(wf_persist_history_add_source(h, &src, T[0], 60.0), WF_OK);
+    ck_assert_int_eq(wf_persist_history_add_source(h, &src, T[1], 700.0), WF_OK);
+    wf_persist_source ps;
+    wf_persist_history_source(h, &ps);
+    ck_assert_int_eq(ps.depth, 2);
+    float *rate = malloc(sizeof *rate * (size_t)n * n);
+    uint16_t *code = malloc(sizeof *code * (size_t)n * n * 2);
+    ck_assert_int_eq(src.fill_rate(src.ctx, 0, n, n, rate), WF_OK);
+    /* any row range gives the same codes: rows 7..29 against the whole */
+    ck_assert_int_eq(ps.fill(ps.ctx, 7, 29, n, code), WF_OK);
+    uint16_t *whole = malloc(sizeof *whole * (size_t)n * n * 2);
+    ck_assert_int_eq(ps.fill(ps.ctx, 0, n, n, whole), WF_OK);
+    ck_assert(!memcmp(code, whole + (size_t)7 * n * 2, sizeof *code * (size_t)22 * n * 2));
+    int kept[2] = {0, 0}, sat = 0;
+    for (int i = 0; i < n * n; i++)
+        for (int j = 0; j < 2; j++) {
+            double x = rate[i] * T[j];
+            if (x > 1e5) x = 1e5;
+            int want = x >= 5000.0 ? (int)nearbyint(x / 2.0) : 0;
+            ck_assert_msg(whole[i * 2 + j] == want, "pixel %d slot %d: code %d, want %d", i, j, whole[i * 2 + j], want);
+            kept[j] += want > 0;
+            sat += want == 50000;
+        }
+    ck_assert_msg(kept[0] > kept[1] && kept[1] > 0 && sat > 0, "kept %d, %d; %d at the full well", kept[0], kept[1], sat);
+    ck_assert_uint_eq(wf_persist_history_pixels(h, 0), (unsigned)kept[0]);
+    /* the readout of a dark marks exactly the kept pixels */
+    wf_readout_config cfg;
+    wf_clock clock;
+    dark_config(&cfg, &clock, n);
+    cfg.persist.source = ps;
+    size_t len;
+    unsigned char *buf = run_stream(&cfg, &clock, WF_NOISE_PHILOX, 2, &len);
+    decoded d;
+    decode(buf, len, &d);
+    free(buf);
+    for (int i = 0; i < n * n; i++)
+        ck_assert_msg(d.sat[i] == (whole[2 * i] || whole[2 * i + 1] ? WF_SAT_PERSISTENCE : 255), "pixel %d: mark %d", i,
+                      d.sat[i]);
+    free_decoded(&d);
+    free(rate);
+    free(code);
+    free(whole);
+    wf_persist_history_free(h);
+}
+END_TEST
+
 /* ---- survey run: the history from the plan ------------------------------------------- */
 
 #define SMALL "--set readout.ncols=128 --set readout.nrows=96 --set detector.cr_rate=0"
@@ -537,6 +597,7 @@ static Suite *suite(void)
     tcase_add_test(tc, off_is_byte_identical);
     tcase_add_test(tc, independent_of_tiles_and_threads);
     tcase_add_test(tc, zero_gap_refused);
+    tcase_add_test(tc, history_threshold_exact);
     tcase_add_test(tc, survey_history_any_split);
     suite_add_tcase(s, tc);
     return s;
