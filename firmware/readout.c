@@ -54,6 +54,7 @@ struct wf_readout {
     uint8_t *sat;                  /* [tile_rows][ncols] */
     wf_cosmic cosmic;
     int cosmic_on;
+    wf_persist persist;            /* nhit 0 (nothing done) unless a history reaches the tile */
     wf_packer packer;
     /* correlated read noise and reference pixels (NULL / 0 when off: firmware/corrnoise.h) */
     wf_corrnoise *cn;
@@ -229,6 +230,7 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     }
     n = wf_size_add(n, wf_packer_arena_need(packet_buffer_raw(cfg, clock, cr_truth), cfg->compress));
     n = wf_size_add(n, cr);
+    n = wf_size_add(n, wf_persist_arena_need(&cfg->persist, cfg->ncols, cfg->tile_rows));
     ADD(WF_READOUT_META_MAX); /* wf_readout_send_meta's text, released after it is sent */
 #undef ADD
     n = wf_size_add(n, 4096); /* alignment of the block itself */
@@ -354,6 +356,9 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
                  "side reference resultants");
         }
     }
+    st = wf_persist_init(&ro->persist, &cfg->persist, noise, cfg->det.on.photon_noise && !ro->noise_off,
+                         cfg->mode == WF_MODE_SINGLE, cfg->ncols, cfg->tile_rows, arena);
+    if (st) return st;
     *out = ro;
     return WF_OK;
 }
@@ -670,7 +675,8 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
         if (r < 0) continue; /* charge of skipped reads is drawn with the next digitised one */
         double frames = k - prev_read;
         /* the interval's centre, relative to the mid-time the rates are for */
-        double tau = 0.5 * (wf_clock_read_time(&ro->clock, prev_read) + wf_clock_read_time(&ro->clock, k)) - ro->t_mid;
+        double t1 = wf_clock_read_time(&ro->clock, prev_read), t2 = wf_clock_read_time(&ro->clock, k);
+        double tau = 0.5 * (t1 + t2) - ro->t_mid;
         prev_read = k;
         for (int y = h0; y < h1; y++) {
             double *q = ro->charge + (size_t)(y - h0) * nc;
@@ -722,6 +728,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
         if (ro->cosmic_on)
             for (; next_dep < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[next_dep].read <= k; next_dep++)
                 ro->charge[ro->cosmic.deposits[next_dep].pixel] += ro->cosmic.deposits[next_dep].electrons;
+        wf_persist_release(&ro->persist, k, t1, t2, ro->charge, NULL, 0.0);
         if (d->on.saturation) { /* a select, not a branch: the loop vectorises */
             const double fw = d->full_well;
             double *c = ro->charge;
@@ -786,6 +793,7 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
         double lead = reads[0] - prev_read, span = reads[n - 1] - reads[0];
         const wf_clock *ck = &ro->clock;
         double tau_lead = 0.5 * (wf_clock_read_time(ck, prev_read) + wf_clock_read_time(ck, reads[0])) - ro->t_mid;
+        const int lead_from = prev_read;
         prev_read = reads[n - 1];
         double seen = 0.0; /* frames of charge each read of the group adds, averaged */
         for (int j = 1; j < n; j++) seen += (reads[j] - reads[j - 1]) * (double)(n - j) / n;
@@ -847,6 +855,13 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
                 q[x] += total;
             }
         }
+        /* the same intervals, and draws, as read by read: the lead seen by every read of the
+         * group, interval j by the n - j reads from j on */
+        wf_persist_release(&ro->persist, reads[0], wf_clock_read_time(ck, lead_from),
+                           wf_clock_read_time(ck, reads[0]), ro->charge, avg, 1.0);
+        for (int j = 1; j < n; j++)
+            wf_persist_release(&ro->persist, reads[j], wf_clock_read_time(ck, reads[j - 1]),
+                               wf_clock_read_time(ck, reads[j]), ro->charge, avg, (double)(n - j) / n);
         if (ro->cosmic_on)
             for (; next_dep < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[next_dep].read <= reads[n - 1]; next_dep++) {
                 const wf_cr_deposit *dp = &ro->cosmic.deposits[next_dep];
@@ -997,6 +1012,7 @@ static void single_charge_row(wf_readout *ro, int y, int y0, int y1, int h0)
             for (int x = 0; x < nc; x++) q[x] += dark;
         }
     }
+    wf_persist_single_row(&ro->persist, y, t, q);
     wf_det_measure_row(d, q, nc, ro->meas + (size_t)(y - h0) * nc);
 }
 
@@ -1042,8 +1058,10 @@ wf_status wf_readout_run_tile(wf_readout *ro, int tile)
         if (ro->refpix) memset(ro->side_sum, 0, (size_t)rows * 2 * WF_CN_BORDER * sizeof *ro->side_sum);
     }
     memset(ro->sat, 255, (size_t)rows * nc);
+    if ((st = wf_persist_tile(&ro->persist, h0, h1))) return st;
     if (cfg->mode == WF_MODE_SINGLE) {
         if ((st = single_frame(ro, y0, y1, h0, h1))) return st;
+        wf_persist_mark(&ro->persist, y0, y1, ro->sat, WF_SAT_PERSISTENCE);
         if ((st = send(ro, WF_PK_SINGLE, y0, rows, 1, ro->single_out, (size_t)rows * nc * sizeof(float))))
             return st;
     } else {
@@ -1060,6 +1078,7 @@ wf_status wf_readout_run_tile(wf_readout *ro, int tile)
         st = cfg->sampling == WF_SAMPLE_DIRECT ? ramp_direct(ro, y0, y1, h0, h1)
                                                : ramp_per_read(ro, y0, y1, h0, h1);
         if (st) return st;
+        wf_persist_mark(&ro->persist, y0, y1, ro->sat, WF_SAT_PERSISTENCE);
         /* SATURATION ahead of its RESULTANTS: the assembler then fits each row from the
          * resultants' packet as it arrives, and holds nothing of the tile after it */
         if ((st = send(ro, WF_PK_SATURATION, y0, rows, 1, ro->sat, (size_t)rows * nc))) return st;
@@ -1137,13 +1156,14 @@ wf_status wf_readout_send_meta(wf_readout *ro, const char *extra)
                   d->gain, d->read_noise_e, d->dark_current, d->full_well, d->adc_max, d->bias_adu,
                   wf_det_saturation_adu(d), d->nl_beta);
     const char *names[] = {"photon", "reciprocity", "dark", "nonlinearity", "ipc", "read_noise",
-                           "quantize", "saturation", "cosmic", "read_1f", "channel_offsets", "refpix"};
+                           "quantize", "saturation", "cosmic", "read_1f", "channel_offsets", "refpix",
+                           "persistence"};
     const int on[] = {d->on.photon_noise, d->on.reciprocity, d->on.dark, d->on.nonlinearity,
                       d->on.ipc, d->on.read_noise, d->on.quantize, d->on.saturation,
                       d->on.cosmic_rays && c->mode == WF_MODE_RAMP, d->on.read_1f, d->on.channel_offsets,
-                      d->on.refpix};
+                      d->on.refpix, wf_persist_active(&c->persist)};
     int first = 1;
-    for (int i = 0; i < 12; i++)
+    for (int i = 0; i < (int)(sizeof on / sizeof on[0]); i++)
         if (on[i]) { bad |= append(buf, cap, &len, "%s%s", first ? "" : ",", names[i]); first = 0; }
     bad |= append(buf, cap, &len, "\n%s", extra ? extra : "");
     st = bad ? wf_error(WF_ERR_RANGE, "readout: META text longer than %zu bytes (extra lines: %zu bytes)", cap,

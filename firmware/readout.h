@@ -19,6 +19,7 @@
 
 #include <stdint.h>
 #include "firmware/detector.h"
+#include "firmware/persistence.h"
 #include "hal/arena.h"
 #include "hal/clock.h"
 #include "hal/link.h"
@@ -49,6 +50,7 @@ typedef struct wf_readout_config {
                           * two more halo planes. Single frame needs nothing: a linear rate
                           * integrates to its mid-time value times the exposure time. */
     wf_detector det;
+    wf_persist_config persist; /* persistence: off unless on and given a history */
 } wf_readout_config;
 
 typedef struct wf_readout wf_readout;

@@ -7,5 +7,6 @@
 #define WF_DQ_DO_NOT_USE 0x1u
 #define WF_DQ_SATURATED 0x2u
 #define WF_DQ_JUMP_DET 0x4u
+#define WF_DQ_PERSISTENCE 0x20u /* charge of an earlier exposure released here (romancal's bit) */
 
 #endif

@@ -22,7 +22,7 @@ typedef enum {
     WF_PURPOSE_RESULTANT = 4, /* direct-resultant sampling of the within-group sum */
     WF_PURPOSE_SCENE = 5,     /* scene randomness (knots, positions) */
     WF_PURPOSE_SN = 6,        /* supernova sample: pixel = SN index, read = which draw (sim/sn/) */
-    /* 7: reserved (persistence) */
+    WF_PURPOSE_PERSIST = 7,   /* persistence: electrons released over the interval ending at read */
     WF_PURPOSE_1F_TREE = 8,   /* correlated read noise: bridge nodes, channel offsets (firmware/corrnoise.c) */
     WF_PURPOSE_1F_STEP = 9,   /* correlated read noise: steps along a row, reference pixels' read noise */
     WF_PURPOSE_TEST = 15

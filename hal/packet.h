@@ -17,13 +17,16 @@
 #define WF_PACKET_VERSION 1
 #define WF_PACKET_HEADER_SIZE 48
 #define WF_PACKET_FLAG_DEFLATE 0x1
+/* SATURATION value of an unsaturated pixel into which persistence released charge */
+#define WF_SAT_PERSISTENCE 254
 #define WF_PACKET_MAX_PAYLOAD (1u << 30) /* bytes, wire or raw: a 4088-wide tile of 64 resultants x 1024 rows fits */
 
 typedef enum {
     WF_PK_META = 1,       /* text "key = value" lines: exposure keywords and MA table */
     WF_PK_RESULTANTS = 2, /* uint16 [nplanes][row_count][ncols], ADU */
     WF_PK_SINGLE = 3,     /* float32 [row_count][ncols], ADU (single-frame mode) */
-    WF_PK_SATURATION = 4, /* uint8 [row_count][ncols]: first resultant with a saturated read, 255 none */
+    WF_PK_SATURATION = 4, /* uint8 [row_count][ncols]: first resultant with a saturated read, 255 none,
+                           * WF_SAT_PERSISTENCE none but an earlier exposure's charge released here */
     WF_PK_COSMIC = 5,     /* wf_cosmic_record[nplanes]: cosmic-ray truth of hits starting in these rows */
     WF_PK_END = 6,        /* no payload; row_count = rows the exposure has */
     WF_PK_REFCOLS = 7,    /* uint16 [nplanes][row_count][8]: side reference pixels of active rows,

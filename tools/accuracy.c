@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "hal/arena.h"
+#include "hal/dq.h"
 #include "hal/link.h"
 #include "hal/scene.h"
 #include "sim/optics/bandpass.h"
@@ -25,10 +26,11 @@
 #include "tools/assemble.h"
 #include "tools/config.h"
 #include "tools/expose.h"
+#include "tools/persist.h"
 #include "analysis/plot.h"
 
 static const char *usage =
-    "usage: wfisim accuracy psf|galaxy|scene|all [--filter F] [--sca N] [--out DIR]\n"
+    "usage: wfisim accuracy psf|galaxy|scene|detector|all [--filter F] [--sca N] [--out DIR]\n"
     "                       [--data DIR|none] [--quick]\n"
     "  Sweeps each accuracy knob of the rendering against its highest-fidelity setting and\n"
     "  writes DIR/accuracy_<kind>.csv, DIR/accuracy.md and plots [out/accuracy]; filter [Y106],\n"
@@ -43,7 +45,7 @@ static const char *usage =
                            comparison, where nonlinearity starts to matter */
 
 typedef struct acc_row {
-    char kind[8];
+    char kind[12];
     char tcase[16]; /* what is drawn (docs/ACCURACY.md describes each) */
     char knob[24];
     char value[24];
@@ -1136,6 +1138,96 @@ out:
     return st;
 }
 
+/* ---- detector effects left out ------------------------------------------------------------ */
+
+#define PERSIST_N 33 /* the patch: a Gaussian star (sigma 1 pixel) at its centre */
+
+/* What leaving persistence out does to a faint star's photometry: the star follows, at the
+ * same pixels, a saturating star (AB 14, its core at the full well, ~40 pixels above
+ * detector.persistence.min_stimulus) that ended dt seconds before. Readout (MA table 6),
+ * assembly and ramp fit with photon and read noise off, so the two runs differ only by the
+ * released charge: Δflux is the fitted flux in a 3-pixel-radius aperture without persistence
+ * against with it, Δpeak the same for the brightest pixel. */
+static wf_status persistence_rows(acc_run *run)
+{
+    const int n = PERSIST_N;
+    const long np = (long)n * n;
+    scene_in in;
+    memset(&in, 0, sizeof in);
+    wf_config_defaults(&in.cfg);
+    in.n = n;
+    in.cfg.ro.det.on.photon_noise = in.cfg.ro.det.on.read_noise = 0;
+    wf_clock clock;
+    wf_config tmp = in.cfg;
+    wf_status st = wf_config_finish(&tmp, &clock);
+    if (st) return st;
+    const double t = wf_clock_exposure_time(&clock);
+    float *rate = malloc(sizeof *rate * (size_t)np), *sci = malloc(sizeof *sci * (size_t)np * 2);
+    unsigned *dq = malloc(sizeof *dq * (size_t)np * 2);
+    if (!rate || !sci || !dq) {
+        free(rate), free(sci), free(dq);
+        return wf_error(WF_ERR_NOMEM, "accuracy: persistence patch");
+    }
+    const double mags[2] = {24.0, 22.0}, dts[4] = {56.0, 406.0, 1800.0, 3600.0};
+    wf_scene_grid bright = {n, n, 0.0, wf_bandpass_countrate_ab(run->bp, 14.0), 1.0, n};
+    wf_scene_source bsrc;
+    if (!st) st = wf_scene_grid_source(&bright, &bsrc);
+    for (int m = 0; m < 2 && !st; m++) {
+        wf_scene_grid faint = {n, n, 0.0, wf_bandpass_countrate_ab(run->bp, mags[m]), 1.0, n};
+        wf_scene_source fsrc;
+        if ((st = wf_scene_grid_source(&faint, &fsrc)) || (st = fsrc.fill_rate(fsrc.ctx, 0, n, n, rate))) break;
+        in.cfg.ro.persist.source = (wf_persist_source){0};
+        double cpu_off;
+        if ((st = scene_readout(run, &in, rate, WF_MODE_RAMP, WF_SAMPLE_PER_READ, 1, 0, sci, dq, NULL, &cpu_off))) break;
+        for (int k = 0; k < 4 && !st; k++) {
+            wf_persist_history *h = NULL;
+            st = wf_persist_history_new(n, n, in.cfg.persist.min_stimulus, in.cfg.ro.det.full_well, &h);
+            if (!st) st = wf_persist_history_add_source(h, &bsrc, t, dts[k]);
+            acc_row r;
+            char tcase[16], value[24];
+            snprintf(tcase, sizeof tcase, "star%.0f", mags[m]);
+            snprintf(value, sizeof value, "off (dt %.0f s)", dts[k]); /* no comma: a CSV field */
+            row_init(&r, "detector", tcase, "persistence", value);
+            if (!st) {
+                wf_persist_history_source(h, &in.cfg.ro.persist.source);
+                st = scene_readout(run, &in, rate, WF_MODE_RAMP, WF_SAMPLE_PER_READ, 1, 0, sci + np, dq + np,
+                                   NULL, &r.cpu_seconds);
+            }
+            if (!st) {
+                double on = 0, off = 0, pk_on = 0, pk_off = 0, dark = in.cfg.ro.det.dark_current;
+                const double c = 0.5 * n; /* the grid's one source, between pixels */
+                int marked = 0;
+                for (int y = 0; y < n; y++)
+                    for (int x = 0; x < n; x++) {
+                        long i = (long)y * n + x;
+                        marked += (dq[np + i] & WF_DQ_PERSISTENCE) != 0;
+                        if ((x + 0.5 - c) * (x + 0.5 - c) + (y + 0.5 - c) * (y + 0.5 - c) > 9.0) continue;
+                        on += sci[np + i] - dark;
+                        off += sci[i] - dark;
+                        if (x == n / 2 && y == n / 2) pk_on = sci[np + i] - dark, pk_off = sci[i] - dark;
+                    }
+                r.d_flux = off / on - 1.0;
+                r.d_peak = pk_off / pk_on - 1.0;
+                snprintf(r.notes, sizeof r.notes,
+                         "star %.1f e-/s in the aperture; persistence adds %.3f e-/s there; %d pixels DQ PERSISTENCE",
+                         off, on - off, marked);
+                st = add_row(run, &r);
+            }
+            in.cfg.ro.persist.source = (wf_persist_source){0};
+            wf_persist_history_free(h);
+        }
+    }
+    free(rate);
+    free(sci);
+    free(dq);
+    return st;
+}
+
+static wf_status sweep_detector(acc_run *run)
+{
+    return persistence_rows(run);
+}
+
 /* ---- output ------------------------------------------------------------------------------- */
 
 static wf_status make_dir(const char *dir)
@@ -1377,6 +1469,15 @@ static void write_md(FILE *f, const acc_run *run, const char *unused)
         md_table(f, run, "scene", 1);
         md_plots(f, run, "scene");
     }
+    if (has_kind(run, "detector")) {
+        fputs("## detector\n\nWhat leaving a detector effect out does to a star's photometry. "
+              "`persistence`: a faint star (`starM`, AB M, Gaussian sigma 1 pixel) at the pixels of a "
+              "saturating star (AB 14) that ended dt before, through readout (MA table 6), assembly "
+              "and ramp fit with photon and read noise off; Δflux in a 3-pixel-radius aperture and "
+              "Δpeak of the star without persistence against with it (negative: the simulation "
+              "without it is fainter than the sky would be). CPU s: one exposure with persistence.\n\n", f);
+        md_table(f, run, "detector", 0);
+    }
 }
 
 /* ---- plots -------------------------------------------------------------------------------- */
@@ -1534,11 +1635,12 @@ int wf_cmd_accuracy(int argc, char **argv)
             if (st) return fail(st);
         }
     }
-    if (!kind) return usage_error("%s", "give what to sweep: psf, galaxy, scene or all");
+    if (!kind) return usage_error("%s", "give what to sweep: psf, galaxy, scene, detector or all");
     int do_psf = !strcmp(kind, "psf"), do_gal = !strcmp(kind, "galaxy"), do_scene = !strcmp(kind, "scene");
-    if (!strcmp(kind, "all")) do_psf = do_gal = do_scene = 1;
-    if (!do_psf && !do_gal && !do_scene)
-        return usage_error("unknown sweep '%s' (psf, galaxy, scene or all)", kind);
+    int do_det = !strcmp(kind, "detector");
+    if (!strcmp(kind, "all")) do_psf = do_gal = do_scene = do_det = 1;
+    if (!do_psf && !do_gal && !do_scene && !do_det)
+        return usage_error("unknown sweep '%s' (psf, galaxy, scene, detector or all)", kind);
     if (wf_filter_parse(filter, &run.filt)) {
         fprintf(stderr, "wfisim accuracy: --filter: %s\n%s", wf_error_message(), usage);
         return 2;
@@ -1562,6 +1664,8 @@ int wf_cmd_accuracy(int argc, char **argv)
     if (!st && do_scene) st = sweep_scene(&run);
     if (!st && do_scene) st = write_atomic(&run, "accuracy_scene.csv", write_csv, "scene");
     if (!st && do_scene) st = write_plots(&run, "scene");
+    if (!st && do_det) st = sweep_detector(&run);
+    if (!st && do_det) st = write_atomic(&run, "accuracy_detector.csv", write_csv, "detector");
     if (!st) st = write_atomic(&run, "accuracy.md", write_md, NULL);
     free(run.rows);
     free(run.bp);

@@ -889,7 +889,8 @@ static wf_status fit_row(const assembler *a, const exposure *e, uint32_t y, cons
             double var = (r->var_read > 0 ? r->var_read : 0) + (r->var_poisson > 0 ? r->var_poisson : 0);
             sci[x0 + j] = (float)r->rate;
             err[x0 + j] = (float)sqrt(var);
-            dq[x0 + j] = r->dq | (first_sat[j] < nres ? WF_DQ_SATURATED : 0u);
+            dq[x0 + j] = r->dq | (first_sat[j] < nres ? WF_DQ_SATURATED : 0u) |
+                         (sat[x0 + j] == WF_SAT_PERSISTENCE ? WF_DQ_PERSISTENCE : 0u);
         }
     }
     return WF_OK;
@@ -1201,7 +1202,8 @@ static wf_status on_saturation(const assembler *a, exposure *e, const void *payl
     size_t npix = (size_t)h->row_count * h->ncols;
     if ((st = grow_out(a, e, npix))) return st;
     const uint8_t *sat = payload;
-    for (size_t i = 0; i < npix; i++) e->dq[i] = sat[i] == 0 ? WF_DQ_SATURATED : 0u;
+    for (size_t i = 0; i < npix; i++)
+        e->dq[i] = sat[i] == 0 ? WF_DQ_SATURATED : sat[i] == WF_SAT_PERSISTENCE ? WF_DQ_PERSISTENCE : 0u;
     if ((st = write_rows(a, e, HDU_DQ, TUINT, h->first_row, h->row_count, e->dq, "DQ"))) return st;
     for (uint32_t y = h->first_row; y < h->first_row + h->row_count; y++) e->rows[y] |= ROW_SAT | ROW_FIT;
     return WF_OK;

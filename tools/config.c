@@ -235,6 +235,32 @@ static const key_desc keys[] = {
     {.name = "detector.effects.refpix", .type = KT_BOOL, .unit = "", FIELD(ro.det.on.refpix), DIGEST(KD_CORR),
      .doc = "The 4-pixel reference border is read out and sent; the assembler corrects the resultants with it "
             "before the ramp fit (ramp mode)."},
+    {.name = "detector.effects.persistence", .type = KT_BOOL, .unit = "", FIELD(ro.persist.on),
+     .doc = "Persistence: charge of earlier exposures of the SCA released (Fermi model); only "
+            "`survey run` has earlier exposures, rebuilt for each product from the plan (docs/ARCHITECTURE.md, "
+            "Persistence); `expose` and `demo` make a lone exposure, which releases nothing."},
+
+    {.name = "detector.persistence.window", .type = KT_DOUBLE, .unit = "s", .def = "3600", MIN(0),
+     MAX(WF_EXPOSURE_TIME_MAX), FIELD(persist.window),
+     .doc = "Earlier exposures of the same SCA that ended at most this long before an exposure's start leave it charge."},
+    {.name = "detector.persistence.depth", .type = KT_INT, .unit = "exposures", .def = "8", MIN(0),
+     MAX(WF_PERSIST_DEPTH_MAX), FIELD(persist.depth),
+     .doc = "At most this many of them, the most recent (0: none)."},
+    {.name = "detector.persistence.min_stimulus", .type = KT_DOUBLE, .unit = "e-", .def = "5000", MIN(2),
+     MAX(1e9), FIELD(persist.min_stimulus),
+     .doc = "Pixels that collected less than this in an earlier exposure release nothing (its objects' charge, sky left out)."},
+    {.name = "detector.persistence.A", .type = KT_DOUBLE, .unit = "e-/s", MIN(0), FIELD(ro.persist.model.A),
+     .doc = "Fermi model amplitude (GalSim persistence_fermi_parameters)."},
+    {.name = "detector.persistence.x0", .type = KT_DOUBLE, .unit = "e-", ABOVE(0), FIELD(ro.persist.model.x0),
+     .doc = "Fermi model stimulus scale and edge."},
+    {.name = "detector.persistence.dx", .type = KT_DOUBLE, .unit = "e-", ABOVE(0), FIELD(ro.persist.model.dx),
+     .doc = "Fermi model edge width."},
+    {.name = "detector.persistence.alpha", .type = KT_DOUBLE, .unit = "", MIN(-10), MAX(10),
+     FIELD(ro.persist.model.alpha), .doc = "Fermi model power of the stimulus."},
+    {.name = "detector.persistence.gamma", .type = KT_DOUBLE, .unit = "", MIN(0), MAX(10),
+     FIELD(ro.persist.model.gamma), .doc = "Power of the time since the stimulus ended (r)."},
+    {.name = "detector.persistence.half_well", .type = KT_DOUBLE, .unit = "e-", ABOVE(0),
+     FIELD(ro.persist.model.half_well), .doc = "Below this stimulus the release is linear in it."},
 
     {.name = "pointing.ra", .type = KT_DOUBLE, .unit = "deg", .def = "71", MIN(0), MAX(360),
      FIELD(ra), .doc = "Boresight right ascension (deep field centre by default)."},
@@ -807,6 +833,8 @@ void wf_config_defaults(wf_config *cfg)
     memset(cfg, 0, sizeof *cfg);
     /* the detector's numbers live with its physics, the clock's with the clock */
     wf_detector_defaults(&cfg->ro.det);
+    wf_persist_defaults(&cfg->ro.persist);
+    cfg->ro.persist.on = 1;
     cfg->frame_time = WF_FRAME_TIME_DEFAULT;
     cfg->sky_rate = default_sky_rate();
     default_from_env(cfg->data_dir, sizeof cfg->data_dir, "WFISIM_DATA");
@@ -1175,6 +1203,7 @@ static const struct {
     {"readout", "Firmware readout: image size, tiling, the read pattern and the link."},
     {"run", "How the program runs; none of these changes a product."},
     {"detector", "Detector physics (SPEC §2, §3.2; GalSim and romanisim values)."},
+    {"detector.persistence", "Persistence (SPEC §2, GalSim's Fermi model; docs/ARCHITECTURE.md, Persistence)."},
     {"detector.effects", "Switches of the detector chain, in its order (SPEC §3.1); a "
                          "switched-off effect is skipped, not computed as identity."},
     {"scene", "The built-in grid scene: a uniform sky plus a square grid of Gaussian point "

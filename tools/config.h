@@ -31,6 +31,11 @@ typedef struct wf_config {
         int drop_resultants;       /* products.resultants: keep (0) or drop (1) [keep] */
         int border;                /* products.border: write the reference border [false] */
     } products;
+    struct {                       /* detector.persistence.*: the history survey run builds */
+        double window;             /* s [3600] */
+        int depth;                 /* earlier exposures at most [8] */
+        double min_stimulus;       /* e- [5000] */
+    } persist;
     char filter[16];               /* exposure.filter [Y106] */
     /* Built-in grid scene (scene.*) until the renderer lands. */
     double sky_rate;               /* scene.sky_rate, e-/pixel/s */

@@ -282,6 +282,35 @@ static void *load_inputs(void *arg)
     return NULL;
 }
 
+void wf_pipeline_scene_setup(const wf_config *cfg, const wf_clock *clock, int threads, wf_scene_setup *ss)
+{
+    wf_scene_setup_default(ss);
+    ss->ra = cfg->ra;
+    ss->dec = cfg->dec;
+    ss->pa = cfg->pa;
+    ss->sca = (int)cfg->ro.sca;
+    snprintf(ss->filter, sizeof ss->filter, "%s", cfg->filter);
+    ss->mjd = cfg->mjd;
+    snprintf(ss->data_dir, sizeof ss->data_dir, "%s", cfg->data_dir);
+    ss->ncols = cfg->ro.ncols;
+    ss->nrows = cfg->ro.nrows;
+    ss->pupil_bin = 1 << cfg->pupil_bin;
+    ss->psf_oversample = cfg->psf_oversample;
+    ss->psf_nlambda = cfg->psf_nlambda;
+    ss->jitter = cfg->psf_jitter;
+    ss->diffusion = cfg->psf_diffusion;
+    ss->bright_mag = cfg->psf_bright_mag;
+    ss->flux_fraction = cfg->flux_fraction;
+    ss->core_radius = cfg->psf_core_radius;
+    ss->core_levels = cfg->psf_core_levels;
+    ss->noise_tolerance = cfg->noise_tolerance;
+    ss->exptime = cfg->ro.mode == WF_MODE_SINGLE ? cfg->ro.exptime : wf_clock_exposure_time(clock);
+    ss->sky_on = cfg->sky_on;
+    ss->stray_light = cfg->stray_light;
+    ss->pool_bytes = (size_t)(cfg->stamp_pool_mib * 1048576.0);
+    ss->threads = threads;
+}
+
 wf_status wf_pipeline_expose(wf_pipeline_job *pj)
 {
     const wf_config *cfg = pj->cfg;
@@ -306,31 +335,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
     int objects = !pj->replay && cfg->scene_kind != 2;
     if (objects) {
         wf_scene_setup ss;
-        wf_scene_setup_default(&ss);
-        ss.ra = cfg->ra;
-        ss.dec = cfg->dec;
-        ss.pa = cfg->pa;
-        ss.sca = (int)cfg->ro.sca;
-        snprintf(ss.filter, sizeof ss.filter, "%s", cfg->filter);
-        ss.mjd = cfg->mjd;
-        snprintf(ss.data_dir, sizeof ss.data_dir, "%s", cfg->data_dir);
-        ss.ncols = cfg->ro.ncols;
-        ss.nrows = cfg->ro.nrows;
-        ss.pupil_bin = 1 << cfg->pupil_bin;
-        ss.psf_oversample = cfg->psf_oversample;
-        ss.psf_nlambda = cfg->psf_nlambda;
-        ss.jitter = cfg->psf_jitter;
-        ss.diffusion = cfg->psf_diffusion;
-        ss.bright_mag = cfg->psf_bright_mag;
-        ss.flux_fraction = cfg->flux_fraction;
-        ss.core_radius = cfg->psf_core_radius;
-        ss.core_levels = cfg->psf_core_levels;
-        ss.noise_tolerance = cfg->noise_tolerance;
-        ss.exptime = cfg->ro.mode == WF_MODE_SINGLE ? cfg->ro.exptime : wf_clock_exposure_time(pj->clock);
-        ss.sky_on = cfg->sky_on;
-        ss.stray_light = cfg->stray_light;
-        ss.pool_bytes = (size_t)(cfg->stamp_pool_mib * 1048576.0);
-        ss.threads = T;
+        wf_pipeline_scene_setup(cfg, pj->clock, T, &ss);
         /* one thread: the catalogs first, so that a bad one fails before any PSF work; either
          * way a catalog's failure is the one reported. Both sides may read FITS files (a FITS
          * catalog, the pupil), so only with a cfitsio built reentrant (Debian's is). */
@@ -412,6 +417,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
     wf_expose_job job = {0};
     job.ro = cfg->ro;
     job.ro.time_variable = objscene && wf_scene_time_variable(objscene);
+    if (pj->persist) job.ro.persist.source = *pj->persist; /* survey run's history (tools/persist.h) */
     job.clock = *pj->clock;
     job.noise = (wf_noise){WF_NOISE_PHILOX, cfg->seed, cfg->ro.exposure, cfg->ro.sca};
     job.scenes = scenes;

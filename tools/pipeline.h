@@ -7,6 +7,7 @@
 #define WF_PIPELINE_H
 
 #include "hal/clock.h"
+#include "hal/persist.h"
 #include "hal/scene.h"
 #include "sim/survey/catalog.h"
 #include "sim/draw/scene.h"
@@ -44,6 +45,7 @@ typedef struct wf_pipeline_job {
     wf_sn_injector *injector;    /* and those of an SN sample on this SCA at cfg's MJD, or NULL */
     const char *version;         /* for the ORIGIN keyword and the version part of the digest */
     wf_digest_cache *digests;    /* file digests kept across a run's products, or NULL */
+    const wf_persist_source *persist; /* earlier exposures' charge (tools/persist.h), or NULL: none */
     /* out */
     char image_path[WF_PATH_MAX + 64];
     char truth_path[WF_PATH_MAX + 64];
@@ -56,6 +58,10 @@ wf_status wf_pipeline_expose(wf_pipeline_job *job);
 /* The product names of an exposure and SCA in dir. */
 void wf_pipeline_paths(const char *dir, unsigned exposure, unsigned sca, char *image, char *truth,
                        size_t cap);
+
+/* The scene setup of cfg's exposure (pointing, filter, PSF and drawing knobs) for `threads`
+ * renderers. */
+void wf_pipeline_scene_setup(const wf_config *cfg, const wf_clock *clock, int threads, wf_scene_setup *ss);
 
 /* The built-in grid scene of cfg (scene.sky_rate, scene.grid.*). */
 void wf_pipeline_grid(const wf_config *cfg, wf_scene_grid *g);

@@ -16,6 +16,7 @@
 #include "sim/survey/survey.h"
 #include "tools/digest.h"
 #include "tools/isolate.h"
+#include "tools/persist.h"
 #include "tools/pipeline.h"
 #include "tools/surveyrelease.h"
 wf_status wf_survey_parse_range(const char *text, long *first, long *last)
@@ -166,12 +167,58 @@ typedef struct product {
     wf_digest digest;
 } product;
 
-static wf_status prepare(const wf_config *base, const wf_survey_run_options *opt, const wf_survey_row *x, int sca,
-                         wf_digest_cache *cache, product *p)
+/* Where an item's persistence history comes from: the plan's earlier exposures of its SCA. */
+typedef struct history {
+    int n;
+    size_t row[WF_PERSIST_DEPTH_MAX]; /* in the whole plan, most recent first */
+    double dt[WF_PERSIST_DEPTH_MAX];  /* s from its end to this exposure's start */
+} history;
+
+/* The earlier rows of the whole plan (before row `full`) whose exposure of the SCA ended at
+ * most detector.persistence.window before this one's start, the most recent first, at most
+ * detector.persistence.depth: from the plan alone, so a run that starts mid-plan (--exposures,
+ * another rank, a resume) finds the same ones. Their end is their start plus the exposure
+ * time they are read for (the MA table's last read). */
+static wf_status history_rows(const wf_config *base, const wf_survey_run_options *opt, const wf_survey_row *plan,
+                              size_t full, int sca, wf_config *scratch, history *h)
+{
+    h->n = 0;
+    if (!base->ro.persist.on) return WF_OK;
+    const wf_survey_row *x = &plan[full];
+    for (size_t k = full; k-- > 0 && h->n < base->persist.depth;) {
+        wf_clock clock;
+        wf_status st = configure(base, opt, &plan[k], sca, scratch, &clock);
+        if (st) return st;
+        double t = scratch->ro.mode == WF_MODE_SINGLE ? scratch->ro.exptime : wf_clock_exposure_time(&clock);
+        double dt = (x->mjd_start - plan[k].mjd_start) * 86400.0 - t;
+        if (dt > base->persist.window) break;
+        h->row[h->n] = k;
+        h->dt[h->n++] = dt;
+    }
+    return WF_OK;
+}
+
+/* The history's exposures in the product's header (and so in its input digest: a plan whose
+ * earlier rows changed remakes the product). */
+static void history_extra(const wf_config *base, const wf_survey_row *plan, const history *h, char *extra, size_t cap)
+{
+    if (!base->ro.persist.on) return;
+    size_t len = strlen(extra);
+    len += (size_t)snprintf(extra + len, cap - len, "hdr.PERSISTN = %d / exposures in the persistence history\n", h->n);
+    for (int j = 0; j < h->n && len < cap; j++)
+        len += (size_t)snprintf(extra + len, cap - len, "hdr.PERSEX%d = %d / its EXPID; ended %.3f s before start\n",
+                                j + 1, plan[h->row[j]].expid, h->dt[j]);
+}
+
+static wf_status prepare(const wf_survey_ctx *ctx, size_t item, wf_digest_cache *cache, product *p, history *h);
+
+static wf_status prepare_row(const wf_config *base, const wf_survey_run_options *opt, const wf_survey_row *x, int sca,
+                             wf_digest_cache *cache, product *p, const wf_survey_row *plan, const history *h)
 {
     wf_status st = configure(base, opt, x, sca, &p->cfg, &p->clock);
     if (st) return st;
     plan_extra(x, p->extra, sizeof p->extra);
+    history_extra(base, plan, h, p->extra, sizeof p->extra);
     wf_pipeline_paths(p->cfg.out_dir, p->cfg.ro.exposure, p->cfg.ro.sca, p->image, p->truth, sizeof p->image);
     if (!cache) return WF_OK; /* no digest asked for */
     wf_digest_inputs in = {&p->cfg, &p->clock, p->extra, NULL, opt->sne, NULL, 0, opt->version};
@@ -197,6 +244,11 @@ struct wf_survey_ctx {
     wf_survey_item *items;
     size_t nitems;
     long outside;
+    wf_survey_row *plan;      /* the whole plan, whatever the range: the persistence history */
+    size_t nplan;
+    size_t *full;             /* per row of rows, its index in plan */
+    wf_config *scratch;       /* an earlier exposure's configuration */
+    wf_persist_cache *pcache; /* earlier exposures' bright pixels, for the next items */
     unsigned char *state;     /* per item, P_* */
     size_t todo;              /* items the check found to make (0: nothing will be written) */
     product *p;               /* the item's configuration and names (large: on the heap) */
@@ -204,10 +256,22 @@ struct wf_survey_ctx {
     wf_digest_cache *cache;   /* file digests, computed once per process */
 };
 
+static wf_status prepare(const wf_survey_ctx *ctx, size_t item, wf_digest_cache *cache, product *p, history *h)
+{
+    const wf_survey_item *it = &ctx->items[item];
+    wf_status st = history_rows(ctx->base, ctx->opt, ctx->plan, ctx->full[it->row], it->sca, ctx->scratch, h);
+    if (st) return st;
+    return prepare_row(ctx->base, ctx->opt, &ctx->rows[it->row], it->sca, cache, p, ctx->plan, h);
+}
+
 void wf_survey_free(wf_survey_ctx *ctx)
 {
     if (!ctx) return;
     free(ctx->rows);
+    free(ctx->plan);
+    free(ctx->full);
+    free(ctx->scratch);
+    wf_persist_cache_free(ctx->pcache);
     free(ctx->items);
     free(ctx->state);
     free(ctx->p);
@@ -288,7 +352,8 @@ static wf_status write_manifest(wf_survey_ctx *ctx, const wf_survey_run_stats *s
     fits_clear_errmsg();
     int nscas = opt->nscas ? opt->nscas : WF_NSCA;
     /* the run-wide parts: those of the first item (only the configuration's is per product) */
-    wf_status st = prepare(cfg, opt, &rows[ctx->items[0].row], ctx->items[0].sca, ctx->cache, p);
+    history h;
+    wf_status st = prepare(ctx, 0, ctx->cache, p, &h);
     if (st) return st;
     wf_digest run = p->digest;
     char *lines = NULL;
@@ -344,7 +409,7 @@ static wf_status write_manifest(wf_survey_ctx *ctx, const wf_survey_run_stats *s
     /* every item of the run as it stands */
     fprintf(out, "# the products of the run: file, WFDIGEST in its header, whether this run's inputs made it\n");
     for (size_t i = 0; i < ctx->nitems && !st; i++) {
-        if ((st = prepare(cfg, opt, &rows[ctx->items[i].row], ctx->items[i].sca, ctx->cache, p))) break;
+        if ((st = prepare(ctx, i, ctx->cache, p, &h))) break;
         const char *name = strrchr(p->image, '/') ? strrchr(p->image, '/') + 1 : p->image;
         wf_digest_found was;
         if (!exists(p->image)) fprintf(out, "product %s missing\n", name);
@@ -406,6 +471,17 @@ wf_status wf_survey_begin(const wf_config *base, const wf_survey_run_options *op
     ctx->opt = opt;
     wf_status st = read_plan(opt->plan_path, opt->first, opt->last, &ctx->rows, &ctx->nrows);
     if (st) { free(ctx); return st; }
+    if ((st = wf_survey_read_plan(opt->plan_path, &ctx->plan, &ctx->nplan))) { wf_survey_free(ctx); return st; }
+    ctx->full = malloc((ctx->nrows ? ctx->nrows : 1) * sizeof *ctx->full);
+    ctx->scratch = malloc(sizeof *ctx->scratch);
+    if (!ctx->full || !ctx->scratch || wf_persist_cache_new(&ctx->pcache)) {
+        wf_survey_free(ctx);
+        return wf_error(WF_ERR_NOMEM, "out of memory");
+    }
+    for (size_t i = 0, k = 0; i < ctx->nrows; i++) { /* rows is a subsequence of plan */
+        while (k < ctx->nplan && ctx->plan[k].expid != ctx->rows[i].expid) k++;
+        ctx->full[i] = k++;
+    }
     if (!ctx->nrows) st = wf_error(WF_ERR_INPUT, "%s: no exposure in the range asked for", opt->plan_path);
     int nscas = opt->nscas ? opt->nscas : WF_NSCA;
     size_t most = (ctx->nrows ? ctx->nrows : 1) * (size_t)nscas;
@@ -444,7 +520,8 @@ wf_status wf_survey_check_inputs(wf_survey_ctx *ctx)
      * done; the damage of a product with this run's digest is left to wf_survey_make_item
      * (its checksums are verified where it is made). */
     for (size_t i = 0; i < ctx->nitems && !st; i++) {
-        if ((st = prepare(ctx->base, opt, &ctx->rows[ctx->items[i].row], ctx->items[i].sca, ctx->cache, p))) break;
+        history h;
+        if ((st = prepare(ctx, i, ctx->cache, p, &h))) break;
         unsigned char *s = &ctx->state[i];
         *s = P_MISSING;
         if (!exists(p->image)) continue;
@@ -492,7 +569,8 @@ unsigned char *wf_survey_item_states(wf_survey_ctx *ctx)
 
 wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i)
 {
-    return prepare(ctx->base, ctx->opt, &ctx->rows[ctx->items[i].row], ctx->items[i].sca, ctx->cache, ctx->p);
+    history h;
+    return prepare(ctx, i, ctx->cache, ctx->p, &h);
 }
 
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap)
@@ -505,6 +583,30 @@ const char *wf_survey_item_note(const wf_survey_item_result *res)
     return res->changed ? " (made from other inputs: redone)" : res->redone ? " (damaged product redone)" : "";
 }
 
+/* The item's history, each earlier exposure drawn as its own product would be (tools/persist.h). */
+static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, const wf_config *cfg,
+                               wf_persist_history **out, wf_persist_source *src)
+{
+    wf_persist_history *ph;
+    wf_status st = wf_persist_history_new(cfg->ro.ncols, cfg->ro.nrows, cfg->persist.min_stimulus,
+                                          cfg->ro.det.on.saturation ? cfg->ro.det.full_well : INFINITY, &ph);
+    for (int j = 0; j < h->n && !st; j++) {
+        const wf_survey_row *r = &ctx->plan[h->row[j]];
+        wf_clock clock;
+        if (!(st = configure(ctx->base, ctx->opt, r, ctx->items[i].sca, ctx->scratch, &clock)))
+            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache);
+        if (st) {
+            char msg[1024];
+            snprintf(msg, sizeof msg, "%s", wf_error_message());
+            st = wf_error(st, "persistence history from exposure %d: %s", r->expid, msg);
+        }
+    }
+    if (st) { wf_persist_history_free(ph); return st; }
+    wf_persist_history_source(ph, src);
+    *out = ph;
+    return WF_OK;
+}
+
 wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_result *res)
 {
     memset(res, 0, sizeof *res);
@@ -513,7 +615,8 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
     wf_survey_item_name(ctx, i, name, sizeof name);
     if (state == P_UNCHECKED) return wf_error(WF_ERR_INPUT, "%s: made before the run's check", name);
     product *p = ctx->p;
-    wf_status st = prepare(ctx->base, ctx->opt, &ctx->rows[ctx->items[i].row], ctx->items[i].sca, NULL, p);
+    history h;
+    wf_status st = prepare(ctx, i, NULL, p, &h);
     if (st) return st;
     if (!(state == P_SAME && wf_survey_product_ok(p->image) && wf_survey_product_ok(p->truth))) {
         /* the truth beside an image from other inputs goes first: an interruption then
@@ -528,7 +631,13 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         job->version = ctx->opt->version;
         job->digests = ctx->cache;
         p->cfg.quiet = 1;
-        if ((st = wf_pipeline_expose(job))) {
+        wf_persist_history *ph = NULL;
+        wf_persist_source src;
+        if (h.n && (st = build_history(ctx, i, &h, &p->cfg, &ph, &src))) return wf_error(st, "%s: %s", name, wf_error_message());
+        if (ph) job->persist = &src;
+        st = wf_pipeline_expose(job);
+        wf_persist_history_free(ph);
+        if (st) {
             char msg[1024];
             snprintf(msg, sizeof msg, "%s", wf_error_message());
             return wf_error(st, "%s: %s", name, msg);

@@ -1,0 +1,311 @@
+#include "tools/persist.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "hal/clock.h"
+#include "sim/draw/scene.h"
+#include "sim/optics/bandpass.h"
+#include "tools/pipeline.h"
+
+typedef struct entry {
+    uint32_t pixel; /* y * ncols + x */
+    uint16_t code;
+} entry;
+
+/* One earlier exposure's kept pixels, in pixel order (as the rows are scanned). */
+typedef struct slot_list {
+    entry *e;
+    size_t n;
+} slot_list;
+
+struct wf_persist_history {
+    int ncols, nrows, depth;
+    double min_stimulus, full_well;
+    double dt[WF_PERSIST_DEPTH_MAX];
+    slot_list slot[WF_PERSIST_DEPTH_MAX];
+    int own[WF_PERSIST_DEPTH_MAX]; /* 1: freed with the history; 0: the cache's */
+};
+
+#define CACHE_SLOTS 16 /* > WF_PERSIST_DEPTH_MAX: one history's slots are never evicted */
+
+struct wf_persist_cache {
+    struct {
+        long long expid;
+        int sca;
+        slot_list list;
+        unsigned long used; /* 0: empty */
+    } s[CACHE_SLOTS];
+    unsigned long tick;
+};
+
+wf_status wf_persist_cache_new(wf_persist_cache **out)
+{
+    *out = calloc(1, sizeof **out);
+    return *out ? WF_OK : wf_error(WF_ERR_NOMEM, "out of memory for the persistence cache");
+}
+
+void wf_persist_cache_free(wf_persist_cache *c)
+{
+    if (!c) return;
+    for (int i = 0; i < CACHE_SLOTS; i++) free(c->s[i].list.e);
+    free(c);
+}
+
+wf_status wf_persist_history_new(int ncols, int nrows, double min_stimulus, double full_well,
+                                 wf_persist_history **out)
+{
+    *out = NULL;
+    if (ncols < 1 || nrows < 1 || (double)ncols * nrows > 4294967295.0)
+        return wf_error(WF_ERR_RANGE, "persistence history: SCA of %d x %d pixels", ncols, nrows);
+    if (!(min_stimulus >= WF_PERSIST_UNIT) || !(full_well > 0))
+        return wf_error(WF_ERR_RANGE, "persistence history: min_stimulus %g e- (at least %g), full well %g",
+                        min_stimulus, WF_PERSIST_UNIT, full_well);
+    wf_persist_history *h = calloc(1, sizeof *h);
+    if (!h) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence history");
+    h->ncols = ncols;
+    h->nrows = nrows;
+    h->min_stimulus = min_stimulus;
+    h->full_well = full_well;
+    *out = h;
+    return WF_OK;
+}
+
+void wf_persist_history_free(wf_persist_history *h)
+{
+    if (!h) return;
+    for (int j = 0; j < h->depth; j++)
+        if (h->own[j]) free(h->slot[j].e);
+    free(h);
+}
+
+#define ROWS 64 /* rows asked of a source at once */
+
+/* The kept pixels of rate x exptime from src, in pixel order. */
+static wf_status scan(const wf_persist_history *h, const wf_scene_source *src, double exptime, slot_list *out)
+{
+    const int nc = h->ncols;
+    /* a stimulus above 2^16 codes (131 ke-) is kept at the largest: the full well is below */
+    const double top = 65535.0 * WF_PERSIST_UNIT;
+    size_t cap = 0;
+    out->e = NULL;
+    out->n = 0;
+    float *rate = malloc((size_t)ROWS * nc * sizeof *rate);
+    if (!rate) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence history");
+    wf_status st = WF_OK;
+    for (int y0 = 0; y0 < h->nrows && !st; y0 += ROWS) {
+        int y1 = y0 + ROWS < h->nrows ? y0 + ROWS : h->nrows;
+        if ((st = src->fill_rate(src->ctx, y0, y1, nc, rate))) break;
+        for (size_t i = 0; i < (size_t)(y1 - y0) * nc; i++) {
+            double x = rate[i] > 0.0f ? rate[i] * exptime : 0.0;
+            if (x > h->full_well) x = h->full_well;
+            if (!(x >= h->min_stimulus)) continue;
+            if (x > top) x = top;
+            if (out->n == cap) {
+                size_t nc2 = cap ? 2 * cap : 4096;
+                entry *e = realloc(out->e, nc2 * sizeof *e);
+                if (!e) { st = wf_error(WF_ERR_NOMEM, "out of memory for the persistence history"); break; }
+                out->e = e;
+                cap = nc2;
+            }
+            out->e[out->n++] = (entry){(uint32_t)((size_t)y0 * nc + i), (uint16_t)nearbyint(x / WF_PERSIST_UNIT)};
+        }
+    }
+    free(rate);
+    if (st) { free(out->e); out->e = NULL; out->n = 0; }
+    return st;
+}
+
+static wf_status add_slot(wf_persist_history *h, slot_list list, int own, double dt)
+{
+    if (h->depth >= WF_PERSIST_DEPTH_MAX) {
+        if (own) free(list.e);
+        return wf_error(WF_ERR_RANGE, "persistence history: more than %d earlier exposures", WF_PERSIST_DEPTH_MAX);
+    }
+    if (!(dt >= 0) || !isfinite(dt)) {
+        if (own) free(list.e);
+        return wf_error(WF_ERR_RANGE, "persistence history: an exposure ending %g s before", dt);
+    }
+    h->slot[h->depth] = list;
+    h->own[h->depth] = own;
+    h->dt[h->depth++] = dt;
+    return WF_OK;
+}
+
+wf_status wf_persist_history_add_source(wf_persist_history *h, const wf_scene_source *src,
+                                        double exptime, double dt)
+{
+    if (!(exptime > 0))
+        return wf_error(WF_ERR_RANGE, "persistence history: exposure of %g s", exptime);
+    slot_list list;
+    wf_status st = scan(h, src, exptime, &list);
+    return st ? st : add_slot(h, list, 1, dt);
+}
+
+/* Most of an object's light one 0.11" pixel can hold. A point source: at most PSF_PEAK of it
+ * (Roman's PSF with the pixel puts < 45% in one pixel even at Z087's lambda/D = 0.076"; 0.6
+ * leaves room). A galaxy: no more than a point source, nor than its unconvolved profile puts
+ * within the circle around a pixel (radius 0.0778"), stretched by 1/q along the minor axis
+ * (q the axis ratio from its distortion), plus its knots as point sources. Only a bound: it
+ * decides which objects are drawn, never what they give. */
+#define PSF_PEAK 0.6
+#define PIXEL_R 0.0778
+
+/* Fraction of a Sersic-n = 1 (exponential) or n = 4 (de Vaucouleurs) profile of half-light
+ * radius hlr within radius r: P(2n, b x^(1/n)), b the constant that makes hlr the half. */
+static double sersic_within(int n, double hlr, double r)
+{
+    if (!(hlr > 0)) return 1.0;
+    const double a = 2.0 * n, b = n == 1 ? 1.678347 : 7.669249;
+    double z = b * pow(r / hlr, 1.0 / n);
+    double term = 1.0 / a, sum = term; /* P(a, z) = z^a e^-z / Gamma(a) sum z^k / (a (a+1) .. (a+k)) */
+    for (int k = 1; k < 500 && term > 1e-16 * sum; k++) {
+        term *= z / (a + k);
+        sum += term;
+    }
+    double p = exp(a * log(z) - z - lgamma(a)) * sum;
+    return p < 1.0 ? p : 1.0;
+}
+
+static double peak_fraction(const wf_catalog *cat, size_t i)
+{
+    if (!cat->hlr_disk) return PSF_PEAK;
+    double e = hypot(cat->e1[i], cat->e2[i]);
+    double q = e < 1.0 ? sqrt((1.0 - e) / (1.0 + e)) : 0.0;
+    double r = q > 0.0 ? PIXEL_R / q : INFINITY;
+    double bf = cat->bulge_frac[i], kf = cat->knot_frac[i];
+    double f = bf * sersic_within(4, cat->hlr_bulge[i], r) + (1.0 - bf) * (1.0 - kf) * sersic_within(1, cat->hlr_disk[i], r) +
+               (1.0 - bf) * kf * PSF_PEAK;
+    return f < PSF_PEAK ? f : PSF_PEAK;
+}
+
+/* The objects one pixel of which could reach min_stimulus in the exposure. */
+static wf_status bright_subset(const wf_catalog *cat, const wf_bandpass *bp, const char *filter,
+                               double min_rate, wf_catalog *out, int *any)
+{
+    int band;
+    wf_status st = wf_catalog_band(cat, filter, &band);
+    if (st) return st;
+    uint32_t *idx = malloc((cat->n ? cat->n : 1) * sizeof *idx);
+    if (!idx) return wf_error(WF_ERR_NOMEM, "out of memory for the bright objects");
+    size_t n = 0;
+    for (size_t i = 0; i < cat->n; i++)
+        if (wf_bandpass_countrate_ab(bp, cat->mag[band][i]) * peak_fraction(cat, i) >= min_rate) idx[n++] = (uint32_t)i;
+    st = wf_catalog_subset(cat, idx, n, out);
+    free(idx);
+    if (!st && n == 0) wf_catalog_free(out); /* held as not there */
+    *any = !st && n > 0;
+    return st;
+}
+
+/* The kept pixels of the exposure cfg describes. */
+static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg, const wf_clock *clock,
+                               slot_list *out)
+{
+    out->e = NULL;
+    out->n = 0;
+    double t = cfg->ro.mode == WF_MODE_SINGLE ? cfg->ro.exptime : wf_clock_exposure_time(clock);
+    if (cfg->scene_kind == 2) { /* the grid: the same pixels every time */
+        wf_scene_grid g;
+        wf_scene_source src;
+        wf_pipeline_grid(cfg, &g);
+        wf_status st = wf_scene_grid_source(&g, &src);
+        return st ? st : scan(h, &src, t, out);
+    }
+    wf_scene_inputs in;
+    memset(&in, 0, sizeof in);
+    wf_catalog gal, stars;
+    memset(&gal, 0, sizeof gal);
+    memset(&stars, 0, sizeof stars);
+    int have_gal = 0, have_stars = 0;
+    wf_scene *scene = NULL;
+    wf_bandpass *bp = malloc(sizeof *bp);
+    wf_filter f;
+    wf_status st = bp ? wf_filter_parse(cfg->filter, &f) : wf_error(WF_ERR_NOMEM, "out of memory");
+    if (!st) st = wf_bandpass_load(f, cfg->data_dir[0] ? cfg->data_dir : NULL, bp);
+    if (!st) st = wf_pipeline_load_catalogs(cfg, &in);
+    const double min_rate = h->min_stimulus / t;
+    if (!st && in.have_gal) st = bright_subset(&in.gal, bp, cfg->filter, min_rate, &gal, &have_gal);
+    if (!st && in.have_stars) st = bright_subset(&in.stars, bp, cfg->filter, min_rate, &stars, &have_stars);
+    if (!st && (have_gal || have_stars)) { /* else nothing bright: an empty list */
+        wf_scene_setup ss;
+        wf_pipeline_scene_setup(cfg, clock, 1, &ss);
+        ss.sky_on = 0;
+        wf_scene_source src;
+        st = wf_scene_create(&ss, have_gal ? &gal : NULL, have_stars ? &stars : NULL, &scene);
+        if (!st) st = wf_scene_source_for(scene, 0, &src);
+        if (!st) st = scan(h, &src, t, out);
+    }
+    wf_scene_destroy(scene);
+    if (have_gal) wf_catalog_free(&gal);
+    if (have_stars) wf_catalog_free(&stars);
+    wf_pipeline_inputs_free(&in);
+    free(bp);
+    return st;
+}
+
+wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config *cfg,
+                                          const wf_clock *clock, double dt, wf_persist_cache *cache)
+{
+    if (!cache) {
+        slot_list list;
+        wf_status st = exposure_list(h, cfg, clock, &list);
+        return st ? st : add_slot(h, list, 1, dt);
+    }
+    long long expid = cfg->ro.exposure;
+    int sca = (int)cfg->ro.sca, k = -1;
+    for (int i = 0; i < CACHE_SLOTS && k < 0; i++)
+        if (cache->s[i].used && cache->s[i].expid == expid && cache->s[i].sca == sca) k = i;
+    if (k < 0) { /* the least recently used goes */
+        k = 0;
+        for (int i = 1; i < CACHE_SLOTS; i++)
+            if (cache->s[i].used < cache->s[k].used) k = i;
+        slot_list list;
+        wf_status st = exposure_list(h, cfg, clock, &list);
+        if (st) return st;
+        free(cache->s[k].list.e);
+        cache->s[k].list = list;
+        cache->s[k].expid = expid;
+        cache->s[k].sca = sca;
+    }
+    cache->s[k].used = ++cache->tick;
+    return add_slot(h, cache->s[k].list, 0, dt);
+}
+
+static wf_status fill(void *ctx, int y0, int y1, int ncols, uint16_t *code)
+{
+    const wf_persist_history *h = ctx;
+    const int d = h->depth;
+    memset(code, 0, (size_t)(y1 - y0) * ncols * d * sizeof *code);
+    const uint32_t lo = (uint32_t)y0 * (uint32_t)ncols, hi = (uint32_t)y1 * (uint32_t)ncols;
+    for (int j = 0; j < d; j++) {
+        const entry *e = h->slot[j].e;
+        size_t a = 0, b = h->slot[j].n; /* first entry at or after lo */
+        while (a < b) {
+            size_t m = a + (b - a) / 2;
+            if (e[m].pixel < lo) a = m + 1;
+            else b = m;
+        }
+        for (size_t k = a; k < h->slot[j].n && e[k].pixel < hi; k++)
+            code[(size_t)(e[k].pixel - lo) * d + j] = e[k].code;
+    }
+    return WF_OK;
+}
+
+void wf_persist_history_source(wf_persist_history *h, wf_persist_source *out)
+{
+    memset(out, 0, sizeof *out);
+    size_t kept = 0;
+    for (int j = 0; j < h->depth; j++) kept += h->slot[j].n;
+    if (kept == 0) return; /* nothing to release: the firmware does nothing at all */
+    out->ctx = h;
+    out->depth = h->depth;
+    memcpy(out->dt, h->dt, sizeof out->dt);
+    out->fill = fill;
+}
+
+size_t wf_persist_history_pixels(const wf_persist_history *h, int slot)
+{
+    return slot >= 0 && slot < h->depth ? h->slot[slot].n : 0;
+}

@@ -1,0 +1,48 @@
+/* The persistence history of one exposure of one SCA (hal/persist.h), built on the host from
+ * the earlier exposures themselves, never from what this process ran before: for each earlier
+ * exposure (a slot, most recent first) the charge its bright objects put in each pixel,
+ * rate x exposure time up to the full well, kept where it reaches min_stimulus. The objects
+ * are those of the earlier exposure's own scene (its pointing, filter, catalogs, PSF) whose
+ * whole flux could reach min_stimulus, drawn as the scene draws them, without sky (~0.4
+ * e-/s: < 400 e- in 900 s) or supernovae. So an item's history is a function of the plan,
+ * the configuration and the catalogs: any split of a survey run gives the same bytes.
+ * Memory: 8 bytes per pixel and slot kept (a saturated star keeps ~100 pixels); a run's
+ * cache holds 16 exposures' lists. */
+#ifndef WF_TOOLS_PERSIST_H
+#define WF_TOOLS_PERSIST_H
+
+#include "hal/persist.h"
+#include "hal/scene.h"
+#include "tools/config.h"
+
+typedef struct wf_persist_history wf_persist_history;
+
+wf_status wf_persist_history_new(int ncols, int nrows, double min_stimulus, double full_well,
+                                 wf_persist_history **out);
+void wf_persist_history_free(wf_persist_history *h);
+
+/* The next slot (older than those added): rate x exptime of every pixel of src, capped at
+ * full_well, where it reaches min_stimulus; the exposure ended dt seconds before the reset. */
+wf_status wf_persist_history_add_source(wf_persist_history *h, const wf_scene_source *src,
+                                        double exptime, double dt);
+
+/* Earlier exposures' kept pixels, by (exposure id, SCA), kept across a survey run's items in
+ * one process: an exposure is the history of up to `depth` later ones. What it holds is a
+ * function of its key and the run's inputs, so using it changes no byte, only the cost. */
+typedef struct wf_persist_cache wf_persist_cache;
+wf_status wf_persist_cache_new(wf_persist_cache **out);
+void wf_persist_cache_free(wf_persist_cache *c);
+
+/* The next slot from the exposure cfg describes (its scene as `wfisim expose` would draw it,
+ * bright objects only; the grid scene whole), clock its read pattern; through cache when not
+ * NULL (which must outlive h). */
+wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config *cfg,
+                                          const wf_clock *clock, double dt, wf_persist_cache *cache);
+
+/* The history as the firmware's source (valid while h lives); depth 0 when no slot kept a pixel. */
+void wf_persist_history_source(wf_persist_history *h, wf_persist_source *out);
+
+/* Pixels kept in slot j (for tests and the log). */
+size_t wf_persist_history_pixels(const wf_persist_history *h, int slot);
+
+#endif
