@@ -149,24 +149,26 @@ MJD0=$(awk 'NR == 1 || $3 < m { m = $3 } END { print m }' products.txt)
 MJD1=$(awk 'NR == 1 || $3 > m { m = $3 } END { print m }' products.txt)
 MID=$(awk -v a="$MJD0" -v b="$MJD1" 'BEGIN { printf "%.6f", (a + b) / 2 }')
 
-# 4. coadds: per patch every epoch (the deep coadd), the first and the last TEMPLATE_DAYS
+# 4. coadds: per patch every epoch (the deep coadd), and the templates: the epochs of the
+#    first and of the last TEMPLATE_DAYS
 mkdir -p coadd diff cat
 : > coadd/jobs.txt
 while read -r P PRA PDEC; do
     patch_inputs "$PRA" "$PDEC" > "coadd/$P.inputs"
     awk '{ print "render/" $4 }' "coadd/$P.inputs" > "coadd/$P.all.list"
-    awk -v m="$MJD0" -v d="$TEMPLATE_DAYS" '$3 <= m + d { print "render/" $4 }' "coadd/$P.inputs" > "coadd/$P.early.list"
-    awk -v m="$MJD1" -v d="$TEMPLATE_DAYS" '$3 >= m - d { print "render/" $4 }' "coadd/$P.inputs" > "coadd/$P.late.list"
-    for k in all early late; do
-        [ -s "coadd/$P.$k.list" ] && echo "$P $PRA $PDEC $k" >> coadd/jobs.txt
-    done
+    [ -s "coadd/$P.all.list" ] || continue
+    echo "$P $PRA $PDEC all :" >> coadd/jobs.txt
+    awk -v p="$P" -v ra="$PRA" -v dec="$PDEC" -v a="$MJD0" -v b="$MJD1" -v d="$TEMPLATE_DAYS" 'BEGIN {
+        printf "%s %s %s early :%.6f\n%s %s %s late %.6f:\n", p, ra, dec, a + d, p, ra, dec, b - d }' >> coadd/jobs.txt
 done < patches.txt
 : > coadd/errors.txt
 export WFISIM NPIX
+# a template is the deep coadd's list within a range of dates (coadd --mjd); a patch none of
+# whose inputs reach it, or none of them in the range, has no coadd
 # shellcheck disable=SC2016
-xargs -P "$THREADS" -L 1 sh -c '"$WFISIM" coadd --center "$1,$2" --size "$NPIX,$NPIX" --quiet \
-    --out "coadd/$0.$3.fits" "@coadd/$0.$3.list" > "coadd/$0.$3.log" 2>&1 ||
-    { [ $? -eq 2 ] && grep -q "overlaps" "coadd/$0.$3.log"; } || cat "coadd/$0.$3.log" >> coadd/errors.txt' \
+xargs -P "$THREADS" -L 1 sh -c '"$WFISIM" coadd --center "$1,$2" --size "$NPIX,$NPIX" --mjd "$4" --quiet \
+    --out "coadd/$0.$3.fits" "@coadd/$0.all.list" > "coadd/$0.$3.log" 2>&1 ||
+    { [ $? -eq 2 ] && grep -q "overlaps\|MJD-OBS within" "coadd/$0.$3.log"; } || cat "coadd/$0.$3.log" >> coadd/errors.txt' \
     < coadd/jobs.txt
 fail_if coadd/errors.txt "a coadd failed"
 stage coadd
