@@ -83,7 +83,7 @@ stage() { # name: close the running stage
     T0=$t
     echo "paper.sh: $1 done" >&2
 }
-fail_if() { [ -s "$1" ] && { cat "$1" >&2; die "$2"; } || true; }
+fail_if() { if [ -s "$1" ]; then cat "$1" >&2; die "$2"; fi; }
 
 # 1. plan: the deep tier's visits in Y106 only (the Y106 pass opens every visit, so its
 #    exposures fall on the same dates as in the four-filter plan)
@@ -99,11 +99,11 @@ stage plan
 card() { head -c 28800 plan.fits | fold -w 80 | sed -n "s/^$1 *= *\([^ /]*\).*/\1/p" | head -n 1; }
 MJDSTART=$(card MJDSTART); NV=$(card NVISITS); VDT=$(card VISITDT)
 [ -n "$MJDSTART" ] && [ -n "$NV" ] && [ -n "$VDT" ] || die "plan.fits: no MJDSTART, NVISITS or VISITDT"
-# shellcheck disable=SC2086
 eval "$(awk -v r="$RADIUS" -v m="$MJDSTART" -v n="$NV" -v dt="$VDT" -v b="$SN_BOOST" 'BEGIN {
     pi = 3.141592653589793; rr = r + 0.01
     printf "SN_AREA=%.8f SN_START=%.4f SN_DAYS=%.4f\n", pi * rr * rr, m - 200, (n - 1) * dt + 1 + 280
     printf "RATE1=\"%g 1.5 0 1\" RATE2=\"%g -0.5 1 3\"\n", 2.5e-5 * b, 9.7e-5 * b }')"
+# shellcheck disable=SC2086
 "$WFISIM" sn generate --area "$SN_AREA" --ra "$RA" --dec "$DEC" --start "$SN_START" --days "$SN_DAYS" \
     --seed "$SEED" --rate "$RATE1" --rate "$RATE2" $SYNTH $SETS --out sne.fits > sne.log 2>&1 ||
     { cat sne.log >&2; die "sn generate failed"; }
@@ -214,7 +214,7 @@ while read -r P PRA PDEC; do
         "$(awk '{ printf "%s%s", (NR > 1 ? "," : ""), "render/" $5 }' "coadd/$P.inputs")" >> coadd.list
 done < patches.txt
 : > diff.list
-while read -r P T STEM TRUTH; do
+while read -r P _ STEM TRUTH; do
     [ -f "diff/${P}_$STEM.fits" ] && echo "diff/${P}_$STEM.fits cat/${P}_$STEM.fits render/$TRUTH" >> diff.list
 done < diff/jobs.txt
 [ -s coadd.list ] || die "no deep coadd was made"
