@@ -5,7 +5,7 @@
 #
 #   scripts/paper.sh [--area RA,DEC,R] [--out DIR] [--threads N] [--visits N] [--seed S]
 #                    [--sn-boost K] [--singles N] [--patch ARCSEC] [--template-days D]
-#                    [--coadd-thresh S] [--diff-thresh S] [--size N] [--synthetic 'SETS']
+#                    [--coadd-thresh S] [--diff-thresh S] [--synthetic 'SETS']
 #                    [--set KEY=VALUE ...]   (--set: every wfisim command that renders or plans)
 #
 # WFISIM names the program (default bin/wfisim); the Roman and SALT data come from --data DIR
@@ -32,7 +32,6 @@ DIFF_THRESH=3.5
 # The synthetic field fainter than its defaults (H 26, V 27, 2.5 stars per arcmin^2): a coadd
 # of 146 epochs reaches ~2.7 mag deeper than one, and its 50% point needs objects beyond it.
 SYNTH="--set scene.synthetic.h_faint=29.5 --set scene.synthetic.star_density=40 --set scene.synthetic.star_v_faint=32"
-SIZE=                   # readout.ncols = nrows (tests: a corner of each SCA); empty: 4088
 DATA=${WFISIM_DATA:-}
 SETS=
 
@@ -51,7 +50,6 @@ while [ $# -gt 0 ]; do
     --template-days) TEMPLATE_DAYS=$2 ;;
     --coadd-thresh) COADD_THRESH=$2 ;;
     --diff-thresh) DIFF_THRESH=$2 ;;
-    --size) SIZE=$2 ;;
     --data) DATA=$2 ;;
     --synthetic) SYNTH=$2 ;;
     --set) SETS="$SETS --set $2" ;;
@@ -73,7 +71,6 @@ cd "$OUT"
 : > times.txt
 # plan and survey settings every rendering command shares
 PSETS="--set seed=$SEED $SYNTH $SETS"
-[ -n "$SIZE" ] && PSETS="$PSETS --set readout.ncols=$SIZE --set readout.nrows=$SIZE"
 
 now() { date +%s.%N; }
 T0=$(now)
