@@ -225,15 +225,16 @@ stage efficiency
 stage hosts
 
 # 9. the numbers: one JSON (temporary file, renamed), the plots beside it
-key() { # FILE KEY -> the value as the JSON has it (number or null)
-    sed -n "s/^ *\"$2\": *\([^,]*\),*\$/\1/p" "$1" | head -n 1
+key() { # FILE KEY -> the value as the JSON has it (number or null; null when absent)
+    v=$(sed -n "s/^ *\"$2\": *\([^,]*\),*\$/\1/p" "$1" | head -n 1)
+    echo "${v:-null}"
 }
 E=eff
 H=hosts/hosts_summary.json
 NCO=$(cat coadd/*.all.list | sort -u | wc -l)
 {
     printf '{\n'
-    printf '  "area": "%s",\n  "filter": "Y106",\n  "visits": %s,\n' "$AREA" "${VISITS:-146}"
+    printf '  "area": "%s",\n  "filter": "Y106",\n  "visits": %s,\n' "$AREA" "$NV"
     printf '  "products": %s,\n  "singles": %s,\n  "coadd_inputs": %s,\n  "diffs": %s,\n' \
         "$N" "$(wc -l < singles.txt)" "$NCO" "$(wc -l < diff.list)"
     printf '  "sne_generated": %s,\n' "$(sed -n 's/^wfisim sn: \([0-9]*\) supernovae.*/\1/p' sne.log)"
