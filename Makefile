@@ -169,3 +169,12 @@ fuzz fuzz-smoke:
 	+@$(MAKE) --no-print-directory FUZZ=1 fuzz-targets
 	@FUZZ_CC=$(FUZZ_CC) FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_JOBS=$(FUZZ_JOBS) fuzz/run.sh $(if $(filter fuzz-smoke,$@),--smoke) \
 	    $(patsubst fuzz/%.c,build/fuzz/bin/%,$(wildcard fuzz/fuzz_*.c))
+
+# The reduced reproduction of the paper's analysis (docs/ANALYSIS.md, "make paper"): survey,
+# coadds, differences, detection, efficiencies, hosts -> out/paper/summary.json and plots.
+# AREA=RA,DEC,R (deg) sets the circle; PAPER_ARGS passes further options to scripts/paper.sh.
+AREA       ?=
+PAPER_ARGS ?=
+.PHONY: paper
+paper: $(PROG)
+	WFISIM=$(PROG) scripts/paper.sh $(if $(AREA),--area $(AREA)) $(PAPER_ARGS)

@@ -34,6 +34,8 @@ void wf_coadd_opts_default(wf_coadd_opts *o)
     o->pixfrac = WF_COADD_PIXFRAC;
     o->tile_rows = 256;
     o->dq_mask = 0xffffffffu;
+    o->mjd_lo = -INFINITY;
+    o->mjd_hi = INFINITY;
 }
 
 wf_status wf_coadd_grid(const wf_coadd_opts *o, wf_wcs *out)
@@ -375,12 +377,19 @@ wf_status wf_coadd_run_grid(const char *const *paths, int n, const wf_coadd_opts
     wf_status st = WF_OK;
     input *in = calloc((size_t)n, sizeof *in);
     if (!in) return wf_error(WF_ERR_NOMEM, "coadd: cannot allocate %d inputs", n);
+    int kept = 0;
     for (int i = 0; i < n && !st; i++) {
-        st = read_input(paths[i], &in[i]);
-        if (!st && strcmp(in[i].filter, in[0].filter))
+        if ((st = read_input(paths[i], &in[kept]))) break;
+        if (!(in[kept].mjd >= o->mjd_lo && in[kept].mjd <= o->mjd_hi)) continue;
+        if (strcmp(in[kept].filter, in[0].filter))
             st = wf_error(WF_ERR_INPUT, "coadd: %s is filter %s but %s is %s: one filter per coadd", paths[i],
-                          in[i].filter, paths[0], in[0].filter);
+                          in[kept].filter, in[0].path, in[0].filter);
+        kept++;
     }
+    if (!st && kept == 0)
+        st = wf_error(WF_ERR_INPUT, "coadd: none of the %d inputs (%s, ...) has MJD-OBS within %.6f:%.6f", n,
+                      paths[0], o->mjd_lo, o->mjd_hi);
+    n = kept;
     int any = 0;
     if (!st) {
         qsort(in, (size_t)n, sizeof *in, cmp_input);
@@ -460,6 +469,8 @@ static const char *usage =
     "  --pixfrac F       drop size in input pixels, (0, 1] [0.7]\n"
     "  --dq-mask BITS    DQ bits that exclude a pixel [0xffffffff: any flag]\n"
     "  --tile-rows N     output rows per tile: memory only, never the result [256]\n"
+    "  --mjd A:B         only the inputs whose MJD-OBS lies in [A, B] (either side may be\n"
+    "                    empty: open); a template from the epochs before or after a date\n"
     "  --quiet           no progress\n"
     "  PRODUCT           a wfisim_e*_sca*.fits file or a quoted glob; @LIST a file of paths,\n"
     "                    one per line\n";
@@ -489,6 +500,22 @@ static int parse_num(const char *s, double *v)
     errno = 0;
     *v = strtod(s, &end);
     return end == s || *end || errno || !isfinite(*v) ? -1 : 0;
+}
+
+/* "A:B", "A:" or ":B" (an empty side is open), A <= B. */
+static int parse_range(const char *s, double *lo, double *hi)
+{
+    const char *colon = strchr(s, ':');
+    if (!colon) return -1;
+    char a[64];
+    size_t n = (size_t)(colon - s);
+    if (n >= sizeof a) return -1;
+    memcpy(a, s, n);
+    a[n] = '\0';
+    *lo = -INFINITY, *hi = INFINITY;
+    if (n && parse_num(a, lo)) return -1;
+    if (colon[1] && parse_num(colon + 1, hi)) return -1;
+    return *lo <= *hi ? 0 : -1;
 }
 
 typedef struct paths {
@@ -595,6 +622,8 @@ int wf_cmd_coadd(int argc, char **argv)
             unsigned long m = strtoul(v, &end, 0);
             if (end == v || *end || errno || m > 0xffffffffUL) rc = usage_error("--dq-mask '%s' is not a 32-bit number", v);
             o.dq_mask = (uint32_t)m;
+        } else if (!strcmp(k, "--mjd")) {
+            if (parse_range(v, &o.mjd_lo, &o.mjd_hi)) rc = usage_error("--mjd '%s' is not A:B (MJD, A <= B; a side may be empty)", v);
         } else if (!strcmp(k, "--out")) {
             out = v;
         } else {
@@ -611,7 +640,7 @@ int wf_cmd_coadd(int argc, char **argv)
             fprintf(stderr, "wfisim coadd: %s\n", wf_error_message());
             rc = st == WF_ERR_INPUT || st == WF_ERR_RANGE ? 2 : 1;
         } else if (!o.quiet) {
-            fprintf(stderr, "wfisim coadd: %d inputs -> %s\n", p.n, out);
+            fprintf(stderr, "wfisim coadd: %d inputs%s -> %s\n", p.n, isinf(o.mjd_lo) && isinf(o.mjd_hi) ? "" : " (those within --mjd drizzled)", out);
         }
     }
 end:

@@ -35,18 +35,21 @@ typedef struct wf_coadd_opts {
     double pixfrac;     /* (0, 1] */
     int tile_rows;      /* output rows per tile (memory only, never the result) */
     uint32_t dq_mask;   /* DQ bits that exclude a pixel */
+    double mjd_lo, mjd_hi; /* inputs whose MJD-OBS lies outside [lo, hi] are left out (a
+                              template of the epochs before or after a date); +-inf: all */
     int quiet;
 } wf_coadd_opts;
 
-/* The defaults above, tile_rows 256, dq_mask all bits; centre and size unset (0). */
+/* The defaults above, tile_rows 256, dq_mask all bits, every MJD; centre and size unset (0). */
 void wf_coadd_opts_default(wf_coadd_opts *o);
 
 /* The output grid: TAN, CRPIX at the centre ((n + 1) / 2, FITS), +y at position angle pa. */
 wf_status wf_coadd_grid(const wf_coadd_opts *o, wf_wcs *out);
 
 /* Drizzles the n products at paths into out. Bad input (no product, no WCS, no SCI/ERR/DQ,
- * mixed filters, the same exposure and SCA twice, nothing overlapping the grid) is
- * WF_ERR_INPUT naming the file, and no product is written. */
+ * mixed filters, the same exposure and SCA twice, nothing overlapping the grid, no input
+ * within the MJD range) is WF_ERR_INPUT naming the file, and no product is written. Inputs
+ * outside the MJD range are read for their header only, and leave no trace in the product. */
 wf_status wf_coadd_run(const char *const *paths, int n, const wf_coadd_opts *o, const char *out);
 
 /* The same onto a given grid of nx x ny pixels (o's centre, size, scale and PA unused): any

@@ -290,6 +290,11 @@ static wf_status measure(const char *path, planes *p, const wf_detect_options *o
     ima.segmap = seg, ima.sdtype = SEP_TINT;
     for (int i = 0; !st && i < cat->nobj; i++) {
         double x = cat->x[i], y = cat->y[i], a = cat->a[i], b = cat->b[i], th = cat->theta[i];
+        /* SEP's theta is a float: an axis along y comes back as +-1.57079637, past pi/2, which
+         * SEP's own ellipse sums refuse and the catalog's (-90, 90] excludes; the same axis
+         * half a turn round is inside both. */
+        if (th > M_PI / 2) th -= M_PI;
+        else if (th < -M_PI / 2) th += M_PI;
         short flag = cat->flag[i], f1 = 0, f2 = 0, f3 = 0;
         double s, se, area, ra, dec;
         c->id[i] = i + 1;

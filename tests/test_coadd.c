@@ -500,6 +500,44 @@ START_TEST(bad_input)
 }
 END_TEST
 
+/* --mjd keeps the inputs dated within [A, B]: the product is byte for byte the coadd of
+ * those inputs alone; a range holding none is refused with no product; the command reads
+ * open sides. */
+START_TEST(mjd_range)
+{
+    product p[3];
+    const char *in[3] = {tmp_path("m0.fits"), tmp_path("m1.fits"), tmp_path("m2.fits")};
+    for (int i = 0; i < 3; i++) {
+        product_init(&p[i], 40, 40, 0, 1);
+        noisy(&p[i], 30u + (unsigned)i);
+        p[i].exposure = 10 + i;
+        p[i].mjd = 61000 + 100 * i;
+        p[i].ra = RA0 + 0.2 * i / 3600;
+        write_product(&p[i], in[i]);
+    }
+    wf_coadd_opts o = opts(70, 70);
+    const char *all = tmp_path("m_all.fits"), *late = tmp_path("m_late.fits"), *two = tmp_path("m_two.fits");
+    const char *const every[3] = {in[0], in[1], in[2]}, *const last2[2] = {in[1], in[2]};
+    ck_assert_int_eq(wf_coadd_run(last2, 2, &o, two), WF_OK);
+    o.mjd_lo = 61050, o.mjd_hi = 61200;
+    ck_assert_int_eq(wf_coadd_run(every, 3, &o, late), WF_OK);
+    ck_assert_int_eq(wf_test_run("cmp -s '%s' '%s'", late, two), 0);
+    o.mjd_lo = 61201, o.mjd_hi = 61300;
+    expect_refused(every, 3, &o, all, "MJD-OBS within");
+    const char *prog = wf_test_program();
+    if (prog) {
+        const char *log = tmp_path("m.log"), *cmd_out = tmp_path("m_cmd.fits");
+        ck_assert_int_eq(wf_test_run("'%s' coadd --quiet --center %g,%g --size 70,70 --mjd 61050: --out '%s' '%s' '%s' '%s' 2>'%s'",
+                                     prog, RA0, DEC0, cmd_out, in[0], in[1], in[2], log), 0);
+        ck_assert_int_eq(wf_test_run("cmp -s '%s' '%s'", cmd_out, two), 0);
+        ck_assert_int_eq(wf_test_run("'%s' coadd --center %g,%g --size 70,70 --mjd 3:2 --out '%s' '%s' 2>'%s'",
+                                     prog, RA0, DEC0, cmd_out, in[0], log), 2);
+        ck_assert(wf_test_file_contains(log, "--mjd '3:2'"));
+    }
+    for (int i = 0; i < 3; i++) product_free(&p[i]);
+}
+END_TEST
+
 /* The command: exit 2 and a message naming the problem for bad usage and bad input, no file. */
 START_TEST(command)
 {
@@ -721,6 +759,7 @@ static Suite *suite(void)
     tcase_add_test(tc, tiles_and_order);
     tcase_add_test(tc, bad_input);
     tcase_add_test(tc, command);
+    tcase_add_test(tc, mjd_range);
     tcase_add_test(tc, stsci_drizzle);
     suite_add_tcase(s, tc);
     TCase *td = tcase_create("diff");

@@ -611,6 +611,54 @@ START_TEST(test_doc_matches_generated)
 }
 END_TEST
 
+/* scene.synthetic.*: at their defaults wf_config_synth gives wf_synth_defaults' field (the
+ * seed from the config); set, the field extends: more galaxies per arcmin^2 past H 26, 16x
+ * the stars over 12 <= V <= 27 and more beyond it (star_density counts only that range). */
+START_TEST(test_synthetic_keys)
+{
+    wf_config cfg;
+    wf_config_defaults(&cfg);
+    cfg.seed = 7;
+    wf_synth_config a, b;
+    ck_assert_int_eq(wf_synth_defaults(&a), WF_OK);
+    ck_assert_int_eq(wf_config_synth(&cfg, &b), WF_OK);
+    ck_assert(b.seed == 7);
+    ck_assert_double_eq(b.h_faint, a.h_faint);
+    ck_assert_double_eq(b.star_density, a.star_density);
+    ck_assert_double_eq(b.star_v_faint, a.star_v_faint);
+    ck_assert_int_eq(wf_config_set(&cfg, "scene.synthetic.h_faint=29.5", "test"), WF_OK);
+    ck_assert_int_eq(wf_config_set(&cfg, "scene.synthetic.star_density=40", "test"), WF_OK);
+    ck_assert_int_eq(wf_config_set(&cfg, "scene.synthetic.star_v_faint=32", "test"), WF_OK);
+    ck_assert_int_eq(wf_config_synth(&cfg, &b), WF_OK);
+    ck_assert_double_eq(b.h_faint, 29.5);
+    wf_synth *sa, *sb;
+    ck_assert_int_eq(wf_synth_create(&a, &sa), WF_OK);
+    ck_assert_int_eq(wf_synth_create(&b, &sb), WF_OK);
+    double ga, sta, gb, stb;
+    wf_synth_expected_density(sa, &ga, &sta);
+    wf_synth_expected_density(sb, &gb, &stb);
+    wf_synth_free(sa);
+    wf_synth_free(sb);
+    ck_assert_double_eq_tol(sta, 2.5, 1e-9);
+    /* the star counts' shape (sim/survey/synth.c: V 12, 16, 20, 24, 27 at 0.003, 0.03, 0.15,
+     * 0.35, 0.5 per mag, log-linear between, the last slope carried on), integrated here:
+     * 40 per arcmin^2 over 12-27, times (12-32) / (12-27) */
+    const double v[6] = {12, 16, 20, 24, 27, 32};
+    double n[6] = {0.003, 0.03, 0.15, 0.35, 0.5, 0};
+    n[5] = n[4] * pow(n[4] / n[3], 5.0 / 3.0);
+    double in27 = 0, in32 = 0;
+    for (int k = 0; k < 5; k++) {
+        double seg = (n[k + 1] - n[k]) * (v[k + 1] - v[k]) / log(n[k + 1] / n[k]);
+        in32 += seg;
+        if (k < 4) in27 += seg;
+    }
+    ck_assert_msg(fabs(stb / (40.0 * in32 / in27) - 1) < 1e-3, "stars %g per arcmin^2, expected %g", stb,
+                  40.0 * in32 / in27);
+    ck_assert_msg(gb > 1.5 * ga, "galaxies %g per arcmin^2 against %g", gb, ga);
+    ck_assert_int_eq(wf_config_set(&cfg, "scene.synthetic.h_faint=40", "test"), WF_ERR_RANGE);
+}
+END_TEST
+
 static Suite *config_suite(void)
 {
     Suite *s = suite_create("config");
@@ -630,6 +678,7 @@ static Suite *config_suite(void)
     tcase_add_test(tc, test_filter_alias_and_dirs);
     tcase_add_test(tc, test_ma_table_huge_read);
     tcase_add_test(tc, test_survey_keys);
+    tcase_add_test(tc, test_synthetic_keys);
     tcase_add_test(tc, test_doc_matches_generated);
     suite_add_tcase(s, tc);
     return s;

@@ -437,6 +437,67 @@ START_TEST(wcs_header_round_trip)
 }
 END_TEST
 
+/* SEP's THETA is a float: an object elongated along y gets +-pi/2 rounded to float,
+ * 1.57079637 > pi/2, which is 90.0000027 degrees. The catalog promises (-90, 90]. Sources
+ * drawn symmetric about a pixel centre along x and y have no cross moment, so their axis is
+ * exactly y. */
+START_TEST(theta_stays_in_range)
+{
+    const char *d = wf_test_tmpdir();
+    char img[4200], out[4200];
+    snprintf(img, sizeof img, "%s/vertical.fits", d);
+    snprintf(out, sizeof out, "%s/vertical_cat.fits", d);
+    enum { N = 96 };
+    static float sci[N * N], err[N * N];
+    for (int j = 0; j < N; j++)
+        for (int i = 0; i < N; i++) {
+            double v = 0;
+            for (int k = 0; k < 4; k++) { /* four sources, sigma 1 along x and 3 along y */
+                double dx = i - (20.0 + 18.0 * k), dy = j - (24.0 + 16.0 * k);
+                v += 50.0 * exp(-0.5 * (dx * dx + dy * dy / 9.0));
+            }
+            sci[j * N + i] = (float)v, err[j * N + i] = 1.0f;
+        }
+    wf_focal_plane fp;
+    wf_wcs_focal_plane_builtin(&fp);
+    wf_wcs w;
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, 71.0, -53.0, 30.0, 1, &w), WF_OK);
+    w.nx = w.ny = N, w.crpix[0] = w.crpix[1] = N / 2;
+    fitsfile *f = NULL;
+    int status = 0;
+    long naxes[2] = {N, N};
+    fits_create_file(&f, img, &status);
+    fits_create_img(f, BYTE_IMG, 0, NULL, &status);
+    fits_write_key_str(f, "FILTER", "Y106", NULL, &status);
+    const char *names[2] = {"SCI", "ERR"};
+    for (int k = 0; k < 2; k++) {
+        fits_create_img(f, FLOAT_IMG, 2, naxes, &status);
+        fits_write_key_str(f, "EXTNAME", (char *)names[k], NULL, &status);
+        ck_assert_int_eq(status, 0);
+        ck_assert_int_eq(wf_wcs_write_header(&w, f, img), WF_OK);
+        fits_write_img(f, TFLOAT, 1, N * N, k ? err : sci, &status);
+    }
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    wf_detect_options o;
+    wf_detect_defaults(&o);
+    wf_detect_summary sum;
+    ck_assert_msg(wf_detect_file(img, out, &o, &sum) == WF_OK, "%s", wf_error_message());
+    long n = 0;
+    double th[16];
+    fits_open_table(&f, out, READONLY, &status);
+    fits_get_num_rows(f, &n, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_int_eq(n, 4);
+    read_column(f, "THETA", n, th);
+    fits_close_file(f, &status);
+    for (int i = 0; i < n; i++) {
+        ck_assert_msg(th[i] > -90.0 && th[i] <= 90.0, "THETA %.9f outside (-90, 90]", th[i]);
+        ck_assert_double_lt(90.0 - fabs(th[i]), 1e-4); /* and it is the y axis */
+    }
+}
+END_TEST
+
 /* Bad options are refused before anything is read or written. */
 START_TEST(bad_options_are_refused)
 {
@@ -475,6 +536,7 @@ static Suite *suite(void)
     tcase_add_test(tc, no_wcs_is_refused);
     tcase_add_test(tc, wcs_header_round_trip);
     tcase_add_test(tc, bad_options_are_refused);
+    tcase_add_test(tc, theta_stays_in_range);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -298,6 +298,17 @@ static const key_desc keys[] = {
             "(when the knots' flux times the PSF's brightest pixel is within it), and the PSF wing placed "
             "without the object's own blur (psf.core_radius). 0: the same knobs for every object. Errors and "
             "costs: docs/ACCURACY.md."},
+    {.name = "scene.synthetic.h_faint", .type = KT_DOUBLE, .unit = "mag(AB)", .def = "26", ABOVE(15), MAX(32),
+     FIELD(synth.h_faint),
+     .doc = "Faintest H158 magnitude of the synthetic field's galaxies (26: ~152 per arcmin^2; beyond 25.5 the "
+            "counts rise 0.17 dex/mag). Deep coadds (make paper) need the field to go fainter than they reach."},
+    {.name = "scene.synthetic.star_density", .type = KT_DOUBLE, .unit = "1/arcmin^2", .def = "2.5", MIN(0),
+     MAX(1000), FIELD(synth.star_density),
+     .doc = "Stars per arcmin^2 with 12 <= V <= 27 in the synthetic field (the counts' shape is fixed; "
+            "scene.synthetic.star_v_faint extends it)."},
+    {.name = "scene.synthetic.star_v_faint", .type = KT_DOUBLE, .unit = "mag", .def = "27", ABOVE(12), MAX(32),
+     FIELD(synth.star_v_faint),
+     .doc = "Faintest V magnitude of the synthetic field's stars (the halo's ~0.1 dex/mag counts carried on)."},
     {.name = "psf.pupil_bin", .type = KT_ENUM, .unit = "", .def = "8", .choices = pupil_bins,
      FIELD(pupil_bin), .doc = "Pupil-plane binning, as GalSim's pupil_bin (8 fast, 4 or 2 for bright stars)."},
     {.name = "psf.nlambda", .type = KT_INT, .unit = "", .def = "1", MIN(1), MAX(64), FIELD(psf_nlambda),
@@ -828,6 +839,16 @@ static void default_from_env(char *dst, size_t n, const char *var)
     if (v && strlen(v) < n) memcpy(dst, v, strlen(v) + 1);
 }
 
+wf_status wf_config_synth(const wf_config *cfg, wf_synth_config *sc)
+{
+    wf_status st = wf_synth_defaults(sc);
+    sc->seed = cfg->seed;
+    sc->h_faint = cfg->synth.h_faint;
+    sc->star_density = cfg->synth.star_density;
+    sc->star_v_faint = cfg->synth.star_v_faint;
+    return st;
+}
+
 void wf_config_defaults(wf_config *cfg)
 {
     memset(cfg, 0, sizeof *cfg);
@@ -1208,6 +1229,8 @@ static const struct {
                          "switched-off effect is skipped, not computed as identity."},
     {"scene", "The built-in grid scene: a uniform sky plus a square grid of Gaussian point "
               "sources."},
+    {"scene.synthetic", "The synthetic field (scene.kind synthetic, and the hosts `wfisim sn generate` "
+                        "draws from it): its faint ends."},
     {"sn", "Supernova generation (`wfisim sn generate`; SPEC 5, docs/SUPERNOVAE.md). Command-line "
            "options of the same meaning override these."},
     {"sn.x1", "Stretch distribution."},

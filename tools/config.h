@@ -12,6 +12,7 @@
 #include "hal/clock.h"
 #include "hal/file.h"
 #include "sim/survey/survey.h"
+#include "sim/survey/synth.h"
 
 /* products.compress: `auto` is rice for `survey run`, none for every other command */
 enum { WF_COMPRESS_AUTO = 0, WF_COMPRESS_NONE = 1, WF_COMPRESS_RICE = 2 };
@@ -61,6 +62,11 @@ typedef struct wf_config {
     int sky_on;                    /* scene.sky [true] */
     double stray_light;            /* scene.stray_light [0.1] */
     double stamp_pool_mib;         /* scene.stamp_pool [32] */
+    struct {                       /* scene.synthetic.*: the synthetic field's faint ends */
+        double h_faint;            /* galaxies to this H158 [26] */
+        double star_density;       /* stars per arcmin^2 with 12 <= V <= star_v_faint... [2.5] */
+        double star_v_faint;       /* ...over 12 <= V <= 27, extended at the same counts [27] */
+    } synth;
     char data_dir[WF_PATH_MAX];    /* paths.data [$WFISIM_DATA or ""] */
     char reference_dir[WF_PATH_MAX]; /* paths.reference [$WFISIM_REFERENCE or ""] */
     wf_survey_params survey;       /* survey.* (sim/survey/survey.h keeps their table) */
@@ -79,6 +85,11 @@ typedef struct wf_config {
 
 /* Every key at its documented default (SPEC values). */
 void wf_config_defaults(wf_config *cfg);
+
+/* The synthetic field's settings for cfg (its seed and scene.synthetic.*), the one place the
+ * renderer, `sn generate`'s hosts and `wfisim catalog` take them from, so all three draw
+ * the same field. */
+wf_status wf_config_synth(const wf_config *cfg, wf_synth_config *sc);
 
 /* Applies a YAML file on top of cfg; on any error cfg is left as it was. */
 wf_status wf_config_load(wf_config *cfg, const char *path);

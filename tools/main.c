@@ -398,13 +398,12 @@ static int cmd_catalog(cli *c)
     wf_synth *syn = NULL;
     wf_catalog gal, stars;
     int have = 0;
-    wf_synth_defaults(&sc);
-    sc.seed = c->cfg.seed;
+    wf_status st0 = wf_config_synth(&c->cfg, &sc);
     char gpath[WF_PATH_MAX + 64], spath[WF_PATH_MAX + 64];
     snprintf(gpath, sizeof gpath, "%s/synthetic_galaxies.fits", c->cfg.out_dir);
     snprintf(spath, sizeof spath, "%s/synthetic_stars.fits", c->cfg.out_dir);
     char made[WF_PATH_MAX];
-    wf_status st = wf_file_make_dir_noting(c->cfg.out_dir, made);
+    wf_status st = st0 ? st0 : wf_file_make_dir_noting(c->cfg.out_dir, made);
     if (!st) st = wf_synth_create(&sc, &syn);
     if (!st && !(st = wf_synth_generate_all(syn, &gal, &stars))) have = 1;
     if (!st) st = wf_catalog_write_fits(gpath, &gal);

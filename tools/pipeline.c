@@ -102,9 +102,7 @@ wf_status wf_pipeline_load_catalogs_in(const wf_config *cfg, const wf_skyregion 
     if (cfg->scene_kind == 0) { /* synthetic: only the cells the SCA (and stamps reaching it) see */
         wf_synth_config sc;
         wf_synth *syn;
-        wf_synth_defaults(&sc);
-        sc.seed = cfg->seed;
-        if ((st = wf_synth_create(&sc, &syn))) return st;
+        if ((st = wf_config_synth(cfg, &sc)) || (st = wf_synth_create(&sc, &syn))) return st;
         st = wf_synth_select(syn, &reg, &in->gal, &in->stars);
         wf_synth_free(syn);
         if (!st) in->have_gal = in->have_stars = 1;

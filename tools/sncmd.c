@@ -428,7 +428,7 @@ static wf_status load_hosts(const opts *o, const footprint *fp, wf_catalog *gal)
     } else {
         wf_synth_config sc;
         wf_synth *syn;
-        wf_synth_defaults(&sc);
+        if ((st = wf_config_synth(&sn_cfg, &sc))) return st;
         sc.seed = o->seed;
         if ((st = wf_synth_create(&sc, &syn))) return st;
         wf_skyregion reg;
