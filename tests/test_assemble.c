@@ -255,16 +255,6 @@ static unsigned char *slurp(const char *path, size_t *len)
     return buf;
 }
 
-static void assert_same_file(const char *a, const char *b)
-{
-    size_t la, lb;
-    unsigned char *da = slurp(a, &la), *db = slurp(b, &lb);
-    ck_assert_uint_eq(la, lb);
-    ck_assert_msg(memcmp(da, db, la) == 0, "%s and %s differ", a, b);
-    free(da);
-    free(db);
-}
-
 static fitsfile *open_fits(const char *path)
 {
     fitsfile *f;
@@ -378,7 +368,7 @@ START_TEST(test_shuffled_is_identical)
         snprintf(name, sizeof name, "b%d.wfip", pass);
         ck_assert_msg(assemble_file(write_stream(&s, order, n, in, name), out2, fits2) == WF_OK, "%s",
                       wf_error_message());
-        assert_same_file(fits1, fits2);
+        wf_test_assert_same_file(fits1, fits2);
         n = identity(order, &s);
         ck_assert_int_eq(remove(fits2), 0);
     }
@@ -420,7 +410,7 @@ START_TEST(test_compressed_is_identical)
     n = identity(order, &packed);
     ck_assert_msg(assemble_file(write_stream(&packed, order, n, in, "z.wfip"), out2, fits2) == WF_OK,
                   "%s", wf_error_message());
-    assert_same_file(fits1, fits2);
+    wf_test_assert_same_file(fits1, fits2);
     free(plain.data);
     free(packed.data);
 }
@@ -829,7 +819,7 @@ START_TEST(test_product_modes)
         opt.out_dir = dir2;
         ck_assert_msg(assemble_with(write_stream(&s, order, n, in, "m2.wfip"), &opt, again) == WF_OK, "%s",
                       wf_error_message());
-        assert_same_file(fits, again);
+        wf_test_assert_same_file(fits, again);
         n = identity(order, &s);
     }
 

@@ -464,16 +464,6 @@ END_TEST
 #define SMALL "--set readout.ncols=128 --set readout.nrows=96 --set detector.cr_rate=0"
 #define NODATA "env -u WFISIM_DATA "
 
-static void assert_same_file(const char *a, const char *b)
-{
-    size_t la, lb;
-    char *x = wf_test_slurp(a, &la), *y = wf_test_slurp(b, &lb);
-    ck_assert_msg(x && y, "%s or %s missing", a, b);
-    ck_assert_msg(la == lb && !memcmp(x, y, la), "%s and %s differ", a, b);
-    free(x);
-    free(y);
-}
-
 /* An image HDU of a product (tile-compressed or not), as doubles. */
 static double *read_hdu(const char *path, const char *name, int type_ok)
 {
@@ -543,8 +533,8 @@ START_TEST(survey_history_any_split)
     snprintf(b, sizeof b, "%s/b/wfisim_e000005_sca03.fits", d);
     snprintf(c, sizeof c, "%s/c/wfisim_e000005_sca03.fits", d);
     snprintf(off, sizeof off, "%s/off/wfisim_e000005_sca03.fits", d);
-    assert_same_file(a, b);
-    assert_same_file(a, c);
+    wf_test_assert_same_file(a, b);
+    wf_test_assert_same_file(a, c);
     double *dq = read_hdu(a, "DQ", 0), *dq_off = read_hdu(off, "DQ", 0);
     double *sci = read_hdu(qa, "SCI", 0), *sci_off = read_hdu(qoff, "SCI", 0);
     int marked = 0, far = 0;

@@ -19,17 +19,6 @@
               "--set detector.cr_rate=500 --set scene.grid.spacing=20 --set scene.grid.flux=2e4"
 
 
-static void assert_same_file(const char *a, const char *b)
-{
-    size_t la, lb;
-    char *x = wf_test_slurp(a, &la), *y = wf_test_slurp(b, &lb);
-    ck_assert_msg(x != NULL, "%s missing", a);
-    ck_assert_msg(y != NULL, "%s missing", b);
-    ck_assert_msg(la == lb && !memcmp(x, y, la), "%s and %s differ", a, b);
-    free(x);
-    free(y);
-}
-
 static int exists(const char *path)
 {
     struct stat st;
@@ -51,8 +40,8 @@ START_TEST(pipe_equals_in_process)
     snprintf(a, sizeof a, "%s/a/" FITS, d);
     snprintf(b, sizeof b, "%s/b/" FITS, d);
     snprintf(c, sizeof c, "%s/c/" FITS, d);
-    assert_same_file(a, b);
-    assert_same_file(a, c);
+    wf_test_assert_same_file(a, b);
+    wf_test_assert_same_file(a, c);
 }
 END_TEST
 
@@ -73,7 +62,7 @@ START_TEST(tile_height_and_threads_do_not_matter)
                                      bin, modes[m], heights[i], t, d, m, heights[i], t), 0);
                 char p[4200];
                 snprintf(p, sizeof p, "%s/t%d_%d_%d/" FITS, d, m, heights[i], t);
-                assert_same_file(ref, p);
+                wf_test_assert_same_file(ref, p);
             }
     }
 }
@@ -228,8 +217,8 @@ START_TEST(object_scene_deterministic)
         snprintf(a, sizeof a, "%s/ref/%s", d, names[k]);
         snprintf(b, sizeof b, "%s/t7/%s", d, names[k]);
         snprintf(c, sizeof c, "%s/t64/%s", d, names[k]);
-        assert_same_file(a, b);
-        assert_same_file(a, c);
+        wf_test_assert_same_file(a, b);
+        wf_test_assert_same_file(a, c);
     }
     /* the WCS rides on the image HDUs */
     char path[4200], ctype[FLEN_VALUE] = "";
@@ -261,7 +250,7 @@ START_TEST(thin_subarray)
         char a[4200], b[4200];
         snprintf(a, sizeof a, "%s/thin/%s", d, names[k]);
         snprintf(b, sizeof b, "%s/thin5/%s", d, names[k]);
-        assert_same_file(a, b);
+        wf_test_assert_same_file(a, b);
     }
     char path[4200];
     snprintf(path, sizeof path, "%s/thin/" FITS, d);
@@ -605,7 +594,7 @@ START_TEST(stream_file_whole_or_absent)
     char a[4200], b[4200];
     snprintf(a, sizeof a, "%s/viafifo/" FITS, d);
     snprintf(b, sizeof b, "%s/viafile/" FITS, d);
-    assert_same_file(a, b);
+    wf_test_assert_same_file(a, b);
     free(good);
 }
 END_TEST
@@ -698,10 +687,10 @@ START_TEST(galsim_scene_recognised_by_its_columns)
     char a[4300], b[4300];
     snprintf(a, sizeof a, "%s/a/" FITS, d);
     snprintf(b, sizeof b, "%s/b/" FITS, d);
-    assert_same_file(a, b);
+    wf_test_assert_same_file(a, b);
     snprintf(a, sizeof a, "%s/a/wfisim_e000001_sca01_truth.fits", d);
     snprintf(b, sizeof b, "%s/b/wfisim_e000001_sca01_truth.fits", d);
-    assert_same_file(a, b);
+    wf_test_assert_same_file(a, b);
     ck_assert_int_eq(table_rows(a, "GALAXIES"), 3); /* what was drawn: the corner's galaxies */
     ck_assert_int_eq(table_rows(a, "STARS"), 1);
     ck_assert_int_eq(table_rows(a, "SNE"), 1);
@@ -720,10 +709,10 @@ START_TEST(galsim_scene_recognised_by_its_columns)
                                  corner, path, d), 0);
     snprintf(a, sizeof a, "%s/ra/" FITS, d);
     snprintf(b, sizeof b, "%s/rb/" FITS, d);
-    assert_same_file(a, b);
+    wf_test_assert_same_file(a, b);
     snprintf(a, sizeof a, "%s/ra/wfisim_e000001_sca01_truth.fits", d);
     snprintf(b, sizeof b, "%s/rb/wfisim_e000001_sca01_truth.fits", d);
-    assert_same_file(a, b);
+    wf_test_assert_same_file(a, b);
     long ng = table_rows(a, "GALAXIES");
     /* the corner is 1/16 of the SCA, which holds the scene's 8400 galaxies: ~525 */
     ck_assert_msg(ng > 400 && ng < 700, "%ld galaxies drawn on a 1024 x 1024 corner", ng);

@@ -17,16 +17,6 @@
 
 #define SMALL "--set readout.ncols=128 --set readout.nrows=96 --set detector.cr_rate=0"
 
-static void assert_same_file(const char *a, const char *b)
-{
-    size_t la, lb;
-    char *x = wf_test_slurp(a, &la), *y = wf_test_slurp(b, &lb);
-    ck_assert_msg(x && y, "%s or %s missing", a, b);
-    ck_assert_msg(la == lb && !memcmp(x, y, la), "%s and %s differ", a, b);
-    free(x);
-    free(y);
-}
-
 /* The plan row of an EXPID, read independently of the program's reader. */
 static void plan_row(const char *plan, int expid, double *ra, double *pa, double *mjd, double *exptime, char *filter)
 {
@@ -161,7 +151,7 @@ START_TEST(run_resume_and_independence)
     ck_assert_int_eq(wf_test_run("%s survey run --plan %s --exposures 15:16 --scas 3,7 " SMALL " --out %s/a 2>%s",
                          bin, plan, d, log), 0);
     ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones, 0 made from other inputs), 3 already done"), "damage not redone");
-    assert_same_file(img, keep);
+    wf_test_assert_same_file(img, keep);
     /* the second section's header of another image no longer parses: cfitsio then sees one
      * section whose checksums verify, but the file is not whole */
     snprintf(img, sizeof img, "%s/a/wfisim_e000015_sca03.fits", d);
@@ -188,7 +178,7 @@ START_TEST(run_resume_and_independence)
                          bin, plan, d, log), 0);
     ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones, 0 made from other inputs), 3 already done"),
                   "damaged header not redone");
-    assert_same_file(img, keep15);
+    wf_test_assert_same_file(img, keep15);
     /* the survey-level record names the plan, its checksum, the seed and the catalogs */
     char man[4200];
     snprintf(man, sizeof man, "%s/a/survey_run.txt", d);
@@ -199,7 +189,7 @@ START_TEST(run_resume_and_independence)
                          d), 0);
     char alone[4200];
     snprintf(alone, sizeof alone, "%s/b/wfisim_e000016_sca07.fits", d);
-    assert_same_file(alone, keep);
+    wf_test_assert_same_file(alone, keep);
     /* products.resultants drop, uncompressed: SCI, ERR, DQ, COSMICRAYS, the truth beside */
     ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s --exposures 16 --scas 7 " SMALL
                                  " --set products.compress=none --set products.resultants=drop --out %s/c",
@@ -316,7 +306,7 @@ START_TEST(index_and_area)
     ck_assert_int_eq(wf_test_run("cp %s/survey_index.csv %s && rm %s/survey_index.* && %s survey index %s >/dev/null",
                                  a, keep, a, bin, a), 0);
     snprintf(path, sizeof path, "%s/survey_index.csv", a);
-    assert_same_file(path, keep);
+    wf_test_assert_same_file(path, keep);
     /* --area: a 0.01 deg circle about the centre of exposure 15's SCA 3 (128 x 96 pixels, 0.0024 deg
      * from centre to corner) takes that SCA at that pointing, in both filters, and nothing else */
     double ra0, dec0;
@@ -335,7 +325,7 @@ START_TEST(index_and_area)
             int want = sky_distance(ra, dec, ra0, dec0) < 0.01 + 0.0024;
             product_path(keep, sizeof keep, c, six_ids[i], six_scas[k], 0);
             ck_assert_msg(exists(keep) == want, "%s: made %d, overlaps the area %d", keep, exists(keep), want);
-            if (want) assert_same_file(path, keep);
+            if (want) wf_test_assert_same_file(path, keep);
             outside += !want;
         }
     ck_assert_int_eq(outside, 4);
@@ -360,12 +350,12 @@ static void assert_same_six(const char *d, const char *a, const char *b)
                 product_path(name, sizeof name, ".", six_ids[i], six_scas[k], t);
                 snprintf(x, sizeof x, "%s/%s/%s", d, a, name + 2);
                 snprintf(y, sizeof y, "%s/%s/%s", d, b, name + 2);
-                assert_same_file(x, y);
+                wf_test_assert_same_file(x, y);
             }
     for (int k = 0; k < 3; k++) {
         snprintf(x, sizeof x, "%s/%s/%s", d, a, run_files[k]);
         snprintf(y, sizeof y, "%s/%s/%s", d, b, run_files[k]);
-        assert_same_file(x, y);
+        wf_test_assert_same_file(x, y);
     }
 }
 
@@ -419,11 +409,11 @@ START_TEST(mpi_matches_one_process)
             product_path(x, sizeof x, "a", six_ids[i], six_scas[k], 0);
             snprintf(ax, sizeof ax, "%s/%s", d, x);
             product_path(y, sizeof y, c, six_ids[i], six_scas[k], 0);
-            assert_same_file(ax, y);
+            wf_test_assert_same_file(ax, y);
         }
     snprintf(x, sizeof x, "%s/a/survey_index.csv", d);
     snprintf(y, sizeof y, "%s/c/survey_index.csv", d);
-    assert_same_file(x, y);
+    wf_test_assert_same_file(x, y);
     /* other inputs: rank 0's check refuses before any rank renders, naming the first product
      * in plan order as one process does (once: the other ranks stay silent), nothing written */
     snprintf(x, sizeof x, "%s/b/survey_run.txt", d);
@@ -468,13 +458,13 @@ static void assert_six_but(const char *d, const char *b, int skip_id, int skip_s
                 snprintf(y, sizeof y, "%s/%s/%s", d, b, name + 2);
                 if (six_ids[i] == skip_id && six_scas[k] == skip_sca)
                     ck_assert_msg(exists(y) == !absent, "%s: exists %d", y, exists(y));
-                else assert_same_file(x, y);
+                else wf_test_assert_same_file(x, y);
             }
     static const char *const files[] = {"survey_index.csv", "survey_index.fits"};
     for (int k = 0; k < 2; k++) {
         snprintf(x, sizeof x, "%s/a/%s", d, files[k]);
         snprintf(y, sizeof y, "%s/%s/%s", d, b, files[k]);
-        if (index) assert_same_file(x, y);
+        if (index) wf_test_assert_same_file(x, y);
         else ck_assert_msg(!exists(y), "%s written by a run that lost an item", y);
     }
 }
@@ -694,8 +684,8 @@ START_TEST(resume_same_inputs_only)
                   "same inputs redone");
     ck_assert_int_eq(RUN("--threads 2 --tile-rows 16 --set run.uncached_writes=false"), 0);
     ck_assert_msg(wf_test_file_contains(log, "2 already done"), "threads / tile rows forced a redo");
-    assert_same_file(img0, keep0);
-    assert_same_file(img1, keep1);
+    wf_test_assert_same_file(img0, keep0);
+    wf_test_assert_same_file(img1, keep1);
     ck_assert(mtime_ns(img0) == t0 && mtime_ns(truth0) == t1);
 
     /* another seed: refused, naming the seed, and nothing written (record included) */
@@ -705,7 +695,7 @@ START_TEST(resume_same_inputs_only)
     ck_assert_msg(wf_test_file_contains(log, "wfisim_e000000_sca01.fits was made with seed 1, this run has seed 2; "
                                              "use --on-change redo to remake it"), "refusal does not name the seed");
     ck_assert(mtime_ns(img0) == t0 && mtime_ns(truth0) == t1 && mtime_ns(man) == tm2);
-    assert_same_file(img0, keep0);
+    wf_test_assert_same_file(img0, keep0);
     ck_assert(tm2 >= tm);
     /* a changed --set key is named with both values; a key back to its default too */
     ck_assert_int_eq(RUN("--set detector.gain=1.5"), 2);
@@ -716,7 +706,7 @@ START_TEST(resume_same_inputs_only)
     ck_assert_msg(wf_test_file_contains(log, "detector.cr_rate = 0, this run has the default"), "key back to default not named");
     ck_assert_int_eq(RUN("--on-change sometimes"), 2);
     ck_assert(wf_test_file_contains(log, "--on-change 'sometimes'"));
-    assert_same_file(man, keepman);
+    wf_test_assert_same_file(man, keepman);
     ck_assert(mtime_ns(img0) == t0 && mtime_ns(man) == tm2);
 
     /* redo: remade from the new inputs, the products differ and carry the new digest */
@@ -766,7 +756,7 @@ START_TEST(resume_same_inputs_only)
     ck_assert_int_eq(RUN("--seed 2"), 0);
     ck_assert_msg(wf_test_file_contains(log, "1 products rendered (1 replacing damaged ones, 0 made from other inputs)"),
                   "damaged digest card not taken as damage");
-    assert_same_file(img0, keep2);
+    wf_test_assert_same_file(img0, keep2);
 
     /* a product of an older wfisim (no digest) counts as made from other inputs */
     fitsfile *f;
@@ -915,7 +905,7 @@ START_TEST(expose_digest)
     header_str(a, "WFDIGEST", va);
     header_str(b, "WFDIGEST", vb);
     ck_assert_str_eq(va, vb);
-    assert_same_file(a, b);
+    wf_test_assert_same_file(a, b);
     header_str(a, "WFDDATA", va); /* the grid scene reads no data */
     sha256sum_of(d, "data: not read (grid or replayed scene)\n", hex, 32);
     ck_assert_str_eq(va, hex);

@@ -153,3 +153,14 @@ void wf_test_plan_row0(const char *plan, double *ra, double *dec, double *pa, do
     fits_close_file(f, &status);
     ck_assert_int_eq(status, 0);
 }
+
+void wf_test_assert_same_file(const char *a, const char *b)
+{
+    size_t la, lb;
+    char *x = wf_test_slurp(a, &la), *y = wf_test_slurp(b, &lb);
+    ck_assert_msg(x != NULL, "%s missing", a);
+    ck_assert_msg(y != NULL, "%s missing", b);
+    ck_assert_msg(la == lb && !memcmp(x, y, la), "%s and %s differ", a, b);
+    free(x);
+    free(y);
+}

@@ -19,6 +19,9 @@ const char *wf_test_tmpdir(void);
 /* The whole file, NUL-terminated (len may be NULL); NULL when unreadable. Caller frees. */
 char *wf_test_slurp(const char *path, size_t *len);
 
+/* A Check assertion that files a and b both exist and hold the same bytes. */
+void wf_test_assert_same_file(const char *a, const char *b);
+
 /* Runs a shell command built like printf; its exit status (255 when it did not exit). */
 int wf_test_run(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 
