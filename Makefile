@@ -165,7 +165,9 @@ $(BUILD)/bin/fuzz_%: fuzz/fuzz_%.c $(BUILD)/fuzz/common.o $(LIB) $(HEADERS) $(FL
 fuzz-targets: $(FUZZBIN)
 
 fuzz fuzz-smoke:
-	@command -v $(FUZZ_CC) >/dev/null || $(INSTALL_DEPS) clang
+	@printf 'int LLVMFuzzerTestOneInput(const unsigned char *d, unsigned long n) { (void)d; (void)n; return 0; }\n' | \
+	    $(FUZZ_CC) -fsanitize=fuzzer,address,undefined -x c - -o /dev/null 2>/dev/null || \
+	    $(INSTALL_DEPS) clang libclang-rt-dev
 	+@$(MAKE) --no-print-directory FUZZ=1 fuzz-targets
 	@FUZZ_CC=$(FUZZ_CC) FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_JOBS=$(FUZZ_JOBS) fuzz/run.sh $(if $(filter fuzz-smoke,$@),--smoke) \
 	    $(patsubst fuzz/%.c,build/fuzz/bin/%,$(wildcard fuzz/fuzz_*.c))

@@ -1,7 +1,9 @@
 #!/bin/sh
 # Installs the Debian packages wfisim builds and tests with, when any is missing.
 # As root it runs apt-get; otherwise it prints the exact command and fails.
-# Arguments name extra packages one job needs (make fuzz and CI: clang).
+# Arguments name extra packages one job needs (make fuzz and CI: clang, and libclang-rt-dev:
+# its fuzzer and sanitizer runtimes, only recommended by clang and so left out by
+# --no-install-recommends).
 set -eu
 pkgs="build-essential pkg-config libcfitsio-dev libfftw3-dev zlib1g-dev libdeflate-dev check libyaml-dev python3-astropy python3-numpy python3-sncosmo libopenmpi-dev openmpi-bin libsep-dev source-extractor python3-drizzle $*"
 missing=""
