@@ -169,18 +169,9 @@ static void dark_config(wf_readout_config *cfg, wf_clock *clock)
 
 static void run(const wf_readout_config *cfg, const wf_clock *clock, int threads, stream *s)
 {
-    wf_link_memory mem;
-    wf_link link;
-    wf_link_memory_open(&mem, &link);
-    wf_scene_source sc = {NULL, dark_fill, NULL, NULL}, scenes[4] = {sc, sc, sc, sc};
-    wf_expose_job job = {0};
-    job.ro = *cfg;
-    job.clock = *clock;
-    job.noise = (wf_noise){WF_NOISE_PHILOX, cfg->seed, cfg->exposure, cfg->sca};
-    job.scenes = scenes;
-    job.threads = threads;
-    job.link = &link;
-    ck_assert_msg(wf_expose_run(&job) == WF_OK, "expose: %s", wf_error_message());
+    wf_scene_source sc = {NULL, dark_fill, NULL, NULL};
+    size_t len;
+    unsigned char *buf = wf_test_expose_stream(cfg, clock, &sc, WF_NOISE_PHILOX, threads, &len);
     memset(s, 0, sizeof *s);
     s->ncols = cfg->ncols;
     s->nrows = cfg->nrows;
@@ -189,7 +180,7 @@ static void run(const wf_readout_config *cfg, const wf_clock *clock, int threads
     s->res = calloc((size_t)s->nres * s->nrows * s->ncols, sizeof *s->res);
     s->rows = calloc((size_t)s->nres * 8 * s->width, 2);
     s->cols = calloc((size_t)s->nres * s->nrows * 8, 2);
-    FILE *f = fmemopen(mem.data, mem.len, "rb");
+    FILE *f = fmemopen(buf, len, "rb");
     wf_packet_reader rd;
     wf_packet_reader_open(&rd, f, "test stream");
     int eof = 0, kinds_after_meta = 0, meta_seen = 0;
@@ -219,7 +210,7 @@ static void run(const wf_readout_config *cfg, const wf_clock *clock, int threads
     }
     wf_packet_reader_close(&rd);
     fclose(f);
-    wf_link_memory_close(&mem);
+    free(buf);
 }
 
 static void stream_free(stream *s)

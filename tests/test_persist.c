@@ -113,25 +113,9 @@ static unsigned char *run_stream(const wf_readout_config *cfg, const wf_clock *c
                                  int threads, size_t *len)
 {
     wf_scene_grid g = {cfg->ncols, cfg->nrows, 0.0, 0.0, 1.0, 8}; /* a dark: no light */
-    wf_scene_source src[2];
-    ck_assert_int_eq(wf_scene_grid_source(&g, &src[0]), WF_OK);
-    src[1] = src[0];
-    wf_link_memory mem;
-    wf_link link;
-    wf_link_memory_open(&mem, &link);
-    wf_expose_job job = {0};
-    job.ro = *cfg;
-    job.clock = *clock;
-    job.noise = (wf_noise){nk, cfg->seed, cfg->exposure, cfg->sca};
-    job.scenes = src;
-    job.threads = threads;
-    job.link = &link;
-    ck_assert_msg(wf_expose_run(&job) == WF_OK, "expose: %s", wf_error_message());
-    unsigned char *out = malloc(mem.len);
-    memcpy(out, mem.data, mem.len);
-    *len = mem.len;
-    wf_link_memory_close(&mem);
-    return out;
+    wf_scene_source src;
+    ck_assert_int_eq(wf_scene_grid_source(&g, &src), WF_OK);
+    return wf_test_expose_stream(cfg, clock, &src, nk, threads, len);
 }
 
 static void decode(const unsigned char *buf, size_t len, decoded *d)

@@ -47,24 +47,7 @@ static void small_config(wf_readout_config *cfg, wf_clock *clock, int ncols, int
 static unsigned char *run_stream(const wf_readout_config *cfg, const wf_clock *clock,
                                  const wf_scene_source *scene, int threads, size_t *len)
 {
-    wf_link_memory mem;
-    wf_link link;
-    wf_link_memory_open(&mem, &link);
-    wf_scene_source scenes[4] = {*scene, *scene, *scene, *scene};
-    wf_expose_job job = {0};
-    job.ro = *cfg;
-    job.clock = *clock;
-    job.noise = (wf_noise){WF_NOISE_PHILOX, cfg->seed, cfg->exposure, cfg->sca};
-    job.scenes = scenes;
-    job.threads = threads;
-    job.link = &link;
-    wf_status st = wf_expose_run(&job);
-    ck_assert_msg(st == WF_OK, "expose: %s", wf_error_message());
-    unsigned char *out = malloc(mem.len);
-    memcpy(out, mem.data, mem.len);
-    *len = mem.len;
-    wf_link_memory_close(&mem);
-    return out;
+    return wf_test_expose_stream(cfg, clock, scene, WF_NOISE_PHILOX, threads, len);
 }
 
 static int by_id(const void *a, const void *b)

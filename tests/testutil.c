@@ -1,5 +1,8 @@
 #include "tests/testutil.h"
 
+#include "hal/link.h"
+#include "tools/expose.h"
+
 #include <fitsio.h>
 
 #include <stdarg.h>
@@ -163,4 +166,30 @@ void wf_test_assert_same_file(const char *a, const char *b)
     ck_assert_msg(la == lb && !memcmp(x, y, la), "%s and %s differ", a, b);
     free(x);
     free(y);
+}
+
+unsigned char *wf_test_expose_stream(const wf_readout_config *cfg, const wf_clock *clock,
+                                     const wf_scene_source *scene, int noise_kind, int threads, size_t *len)
+{
+    ck_assert_int_le(threads, 8);
+    wf_scene_source scenes[8];
+    for (int i = 0; i < 8; i++) scenes[i] = *scene;
+    wf_link_memory mem;
+    wf_link link;
+    wf_link_memory_open(&mem, &link);
+    wf_expose_job job = {0};
+    job.ro = *cfg;
+    job.clock = *clock;
+    job.noise = (wf_noise){(wf_noise_kind)noise_kind, cfg->seed, cfg->exposure, cfg->sca};
+    job.scenes = scenes;
+    job.threads = threads;
+    job.link = &link;
+    wf_status st = wf_expose_run(&job);
+    ck_assert_msg(st == WF_OK, "expose: %s", wf_error_message());
+    unsigned char *out = malloc(mem.len ? mem.len : 1);
+    ck_assert(out != NULL);
+    memcpy(out, mem.data, mem.len);
+    *len = mem.len;
+    wf_link_memory_close(&mem);
+    return out;
 }

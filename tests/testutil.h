@@ -19,6 +19,16 @@ const char *wf_test_tmpdir(void);
 /* The whole file, NUL-terminated (len may be NULL); NULL when unreadable. Caller frees. */
 char *wf_test_slurp(const char *path, size_t *len);
 
+/* The packet stream of one exposure of cfg through the whole readout (tools/expose.h) into
+ * memory: every thread draws from a copy of *scene, noise of kind nk keyed by cfg's seed,
+ * exposure and SCA. A Check assertion fails when the readout does; caller frees. */
+struct wf_readout_config;
+struct wf_clock;
+struct wf_scene_source;
+unsigned char *wf_test_expose_stream(const struct wf_readout_config *cfg, const struct wf_clock *clock,
+                                     const struct wf_scene_source *scene, int noise_kind, int threads,
+                                     size_t *len);
+
 /* A Check assertion that files a and b both exist and hold the same bytes. */
 void wf_test_assert_same_file(const char *a, const char *b);
 
