@@ -63,6 +63,11 @@ wf_status wf_corrnoise_init(wf_corrnoise *cn, const wf_detector *det, const wf_n
     cn->width = ncols + 2 * WF_CN_BORDER;
     cn->height = nrows + 2 * WF_CN_BORDER;
     cn->nchan = (cn->width + WF_CN_CHANNEL_COLS - 1) / WF_CN_CHANNEL_COLS;
+    /* the row buffers hold a full frame's channels, and the noise keys (Y x 4096 + X) a
+     * full frame's columns */
+    if (cn->width > WF_CN_FRAME_ROWS)
+        return wf_error(WF_ERR_RANGE, "correlated noise: %d columns with the border exceed a frame's %d",
+                        cn->width, WF_CN_FRAME_ROWS);
     while ((1 << cn->levels) < cn->height) cn->levels++;
     if (cn->levels > WF_CN_MAX_LEVELS)
         return wf_error(WF_ERR_RANGE, "correlated noise: %d rows exceed the bridge's %d", cn->height,

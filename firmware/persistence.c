@@ -14,30 +14,24 @@ void wf_persist_defaults(wf_persist_config *cfg)
                                     .gamma = 1.0, .half_well = 5.0e4};
 }
 
-/* GalSim's fermi_linear at t = 1000 s, where (t/1000)^-r is 1. */
+/* GalSim's Fermi form at t = 1000 s, where (t/1000)^-r is 1. */
+static double fermi(const wf_persist_model *m, double x)
+{
+    return m->A * pow(x / m->x0, m->alpha) / (exp(-(x - m->x0) / m->dx) + 1.0);
+}
+
+/* GalSim's fermi_linear: the Fermi form above the half well, linear to zero below it. */
 double wf_persist_level(const wf_persist_model *m, double x)
 {
     if (!(x > 0.0)) return 0.0;
-    if (x > m->half_well) return m->A * pow(x / m->x0, m->alpha) / (exp(-(x - m->x0) / m->dx) + 1.0);
-    double hw = m->A * pow(m->half_well / m->x0, m->alpha) / (exp(-(m->half_well - m->x0) / m->dx) + 1.0);
-    return hw * x / m->half_well;
+    if (x > m->half_well) return fermi(m, x);
+    return fermi(m, m->half_well) * x / m->half_well;
 }
 
 double wf_persist_time_integral(double gamma, double s1, double s2)
 {
     if (gamma == 1.0) return 1000.0 * log(s2 / s1);
     return 1000.0 * (pow(s2 / 1000.0, 1.0 - gamma) - pow(s1 / 1000.0, 1.0 - gamma)) / (1.0 - gamma);
-}
-
-double wf_persist_expected(const wf_persist_model *m, const wf_persist_source *src,
-                           const uint16_t *codes, double t1, double t2)
-{
-    double e = 0.0;
-    for (int j = 0; j < src->depth; j++)
-        if (codes[j])
-            e += wf_persist_level(m, codes[j] * WF_PERSIST_UNIT) *
-                 wf_persist_time_integral(m->gamma, src->dt[j] + t1, src->dt[j] + t2);
-    return e;
 }
 
 int wf_persist_active(const wf_persist_config *cfg)

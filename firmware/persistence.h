@@ -41,10 +41,6 @@ double wf_persist_level(const wf_persist_model *m, double x);
 /* Integral of (s / 1000)^-gamma ds over [s1, s2], s in seconds, 0 < s1 <= s2. */
 double wf_persist_time_integral(double gamma, double s1, double s2);
 
-/* Electrons the pixel's history releases over [t1, t2] after the reset (no noise). */
-double wf_persist_expected(const wf_persist_model *m, const wf_persist_source *src,
-                           const uint16_t *codes, double t1, double t2);
-
 /* 1 when the configuration releases anything (on and a history). */
 int wf_persist_active(const wf_persist_config *cfg);
 
