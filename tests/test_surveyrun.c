@@ -229,6 +229,17 @@ static int exists(const char *path)
     return stat(path, &sb) == 0;
 }
 
+/* CI runs as root; leak checking (SAN=1) stops at Open MPI's own allocations */
+#define MPIRUN "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 ASAN_OPTIONS=detect_leaks=0 " \
+               "mpirun --oversubscribe -np 3"
+
+/* bin/wfisim-mpi ($WFISIM_MPI_BIN) when it and mpirun are installed, else NULL. */
+static const char *mpi_program(void)
+{
+    const char *mpi = getenv("WFISIM_MPI_BIN");
+    return mpi && exists(mpi) && !wf_test_run("command -v mpirun >/dev/null 2>&1") ? mpi : NULL;
+}
+
 /* The sky position of FITS pixel (x, y) of an image's SCI section through its header's linear
  * TAN part (CRVAL, CRPIX, CD; the SIP terms move positions by < 0.015 pixel): the test's own
  * inverse gnomonic projection. */
@@ -364,12 +375,8 @@ START_TEST(mpi_matches_one_process)
 {
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
-    const char *mpi = getenv("WFISIM_MPI_BIN");
-    if (!mpi || !exists(mpi) || wf_test_run("command -v mpirun >/dev/null 2>&1"))
-        WF_SKIP("Open MPI (mpirun) and bin/wfisim-mpi ($WFISIM_MPI_BIN, make MPI=1) not installed");
-    /* CI runs as root; leak checking (SAN=1) stops at Open MPI's own allocations */
-#define MPIRUN "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 ASAN_OPTIONS=detect_leaks=0 " \
-               "mpirun --oversubscribe -np 3"
+    const char *mpi = mpi_program();
+    if (!mpi) WF_SKIP("Open MPI (mpirun) and bin/wfisim-mpi ($WFISIM_MPI_BIN, make MPI=1) not installed");
     const char *d = wf_test_tmpdir();
     char plan[4200], log[4200];
     snprintf(plan, sizeof plan, "%s/plan.fits", d);
@@ -441,7 +448,6 @@ START_TEST(mpi_matches_one_process)
                   "MPI redo did not remake the six");
     assert_same_six(d, "a", "b");
     ck_assert(wf_test_file_contains(x, "seed = 2\n") && wf_test_file_contains(x, "status = complete\n"));
-#undef MPIRUN
 }
 END_TEST
 
@@ -529,11 +535,8 @@ START_TEST(mpi_crashed_item_lost_alone)
 {
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
-    const char *mpi = getenv("WFISIM_MPI_BIN");
-    if (!mpi || !exists(mpi) || wf_test_run("command -v mpirun >/dev/null 2>&1"))
-        WF_SKIP("Open MPI (mpirun) and bin/wfisim-mpi ($WFISIM_MPI_BIN, make MPI=1) not installed");
-#define MPIRUN "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 ASAN_OPTIONS=detect_leaks=0 " \
-               "mpirun --oversubscribe -np 3"
+    const char *mpi = mpi_program();
+    if (!mpi) WF_SKIP("Open MPI (mpirun) and bin/wfisim-mpi ($WFISIM_MPI_BIN, make MPI=1) not installed");
     const char *d = wf_test_tmpdir();
     char plan[4200], log[4200];
     snprintf(plan, sizeof plan, "%s/plan.fits", d);
@@ -550,7 +553,6 @@ START_TEST(mpi_crashed_item_lost_alone)
     assert_six_but(d, "b", 0, 0, 0, 1);
     snprintf(log, sizeof log, "%s/b/wfisim_e000016_sca07.fits.tmp", d);
     ck_assert(!exists(log));
-#undef MPIRUN
 }
 END_TEST
 

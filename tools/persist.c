@@ -205,7 +205,7 @@ static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg
 {
     out->e = NULL;
     out->n = 0;
-    double t = cfg->ro.mode == WF_MODE_SINGLE ? cfg->ro.exptime : wf_clock_exposure_time(clock);
+    double t = wf_pipeline_exptime(cfg, clock);
     if (cfg->scene_kind == 2) { /* the grid: the same pixels every time */
         wf_scene_grid g;
         wf_scene_source src;

@@ -280,6 +280,11 @@ static void *load_inputs(void *arg)
     return NULL;
 }
 
+double wf_pipeline_exptime(const wf_config *cfg, const wf_clock *clock)
+{
+    return cfg->ro.mode == WF_MODE_SINGLE ? cfg->ro.exptime : wf_clock_exposure_time(clock);
+}
+
 void wf_pipeline_scene_setup(const wf_config *cfg, const wf_clock *clock, int threads, wf_scene_setup *ss)
 {
     wf_scene_setup_default(ss);
@@ -302,7 +307,7 @@ void wf_pipeline_scene_setup(const wf_config *cfg, const wf_clock *clock, int th
     ss->core_radius = cfg->psf_core_radius;
     ss->core_levels = cfg->psf_core_levels;
     ss->noise_tolerance = cfg->noise_tolerance;
-    ss->exptime = cfg->ro.mode == WF_MODE_SINGLE ? cfg->ro.exptime : wf_clock_exposure_time(clock);
+    ss->exptime = wf_pipeline_exptime(cfg, clock);
     ss->sky_on = cfg->sky_on;
     ss->stray_light = cfg->stray_light;
     ss->pool_bytes = (size_t)(cfg->stamp_pool_mib * 1048576.0);

@@ -59,6 +59,10 @@ wf_status wf_pipeline_expose(wf_pipeline_job *job);
 void wf_pipeline_paths(const char *dir, unsigned exposure, unsigned sca, char *image, char *truth,
                        size_t cap);
 
+/* The seconds of light an exposure collects: the single frame's exptime, else the ramp's
+ * span from the reset to its last read. */
+double wf_pipeline_exptime(const wf_config *cfg, const wf_clock *clock);
+
 /* The scene setup of cfg's exposure (pointing, filter, PSF and drawing knobs) for `threads`
  * renderers. */
 void wf_pipeline_scene_setup(const wf_config *cfg, const wf_clock *clock, int threads, wf_scene_setup *ss);

@@ -595,11 +595,7 @@ static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, c
         wf_clock clock;
         if (!(st = configure(ctx->base, ctx->opt, r, ctx->items[i].sca, ctx->scratch, &clock)))
             st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache);
-        if (st) {
-            char msg[1024];
-            snprintf(msg, sizeof msg, "%s", wf_error_message());
-            st = wf_error(st, "persistence history from exposure %d: %s", r->expid, msg);
-        }
+        if (st) st = wf_error(st, "persistence history from exposure %d: %s", r->expid, wf_error_message());
     }
     if (st) { wf_persist_history_free(ph); return st; }
     wf_persist_history_source(ph, src);
