@@ -21,6 +21,7 @@ void wf_detect_defaults(wf_detect_options *o)
 {
     memset(o, 0, sizeof *o);
     o->thresh = 1.5;
+    o->noise_scale = 1.0;
     o->minarea = 5;
     o->back_size = 64;
     o->back_filter = 3;
@@ -36,6 +37,8 @@ void wf_detect_defaults(wf_detect_options *o)
 static wf_status check_options(const wf_detect_options *o)
 {
     if (!(o->thresh > 0) || !isfinite(o->thresh)) return wf_error(WF_ERR_INPUT, "--thresh %g: must be > 0", o->thresh);
+    if (!(o->noise_scale >= 0) || !isfinite(o->noise_scale))
+        return wf_error(WF_ERR_INPUT, "--noise-scale %g: must be > 0 or auto", o->noise_scale);
     if (o->minarea < 1) return wf_error(WF_ERR_INPUT, "--minarea %d: must be >= 1", o->minarea);
     if (o->back_size < 1) return wf_error(WF_ERR_INPUT, "--back-size %d: must be >= 1", o->back_size);
     if (o->back_filter < 1) return wf_error(WF_ERR_INPUT, "--back-filter %d: must be >= 1", o->back_filter);
@@ -264,11 +267,17 @@ static wf_status measure(const char *path, planes *p, const wf_detect_options *o
      * with a MAP_RMS weight). At the isophote a source adds ~1.5 sigma to a sky-dominated pixel,
      * so thresholds there are the background's. */
     im.noise = p->err, im.ndtype = SEP_TFLOAT, im.noise_type = SEP_NOISE_STDDEV, im.gain = 0.0;
+    sum->noise_scale = o->noise_scale;
+    if (o->noise_scale == 0.0) {
+        long used;
+        wf_status st = wf_detect_noise_ratio(p->sci, p->err, p->mask, p->nx, p->ny, o->filter, &sum->noise_scale, &used);
+        if (st) return wf_error(st, "%s: %s", path, wf_error_message());
+    }
     static const float pyramid[9] = {1, 2, 1, 2, 4, 2, 1, 2, 1};
     size_t stack = n / 8 > 300000 ? n / 8 : 300000; /* pixels of objects being followed at once */
     sep_set_extract_pixstack(stack);
     sep_catalog *cat = NULL;
-    rc = sep_extract(&im, (float)o->thresh, SEP_THRESH_REL, o->minarea, o->filter ? pyramid : NULL, 3, 3,
+    rc = sep_extract(&im, (float)(o->thresh * sum->noise_scale), SEP_THRESH_REL, o->minarea, o->filter ? pyramid : NULL, 3, 3,
                      SEP_FILTER_CONV, o->deblend_nthresh, o->deblend_cont, 1, 1.0, &cat);
     if (rc) return sep_fail(rc, path, "extraction");
     memset(c, 0, sizeof *c);
@@ -361,6 +370,8 @@ static wf_status write_catalog(const char *out_path, const char *image_path, con
     fits_write_key_log(f, "HAVEDQ", p->have_dq, "T: DQ DO_NOT_USE pixels masked", &status);
     fits_write_key_lng(f, "NMASKED", sum->masked, "pixels masked", &status);
     key_dbl(f, "DETTHR", o->thresh, "[sigma] detection threshold (DETECT_THRESH)", &status);
+    key_dbl(f, "NOISESCL", sum->noise_scale, "sigma = ERR x this (measured when AUTONOIS)", &status);
+    fits_write_key_log(f, "AUTONOIS", o->noise_scale == 0.0, "T: NOISESCL measured on the image", &status);
     fits_write_key_lng(f, "MINAREA", o->minarea, "[pixel] DETECT_MINAREA", &status);
     fits_write_key_log(f, "FILTERED", o->filter, "T: 3x3 pyramid filter before thresholding", &status);
     fits_write_key_lng(f, "BACKSIZE", o->back_size, "[pixel] background mesh (BACK_SIZE)", &status);

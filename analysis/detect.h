@@ -17,6 +17,8 @@
 
 typedef struct wf_detect_options {
     double thresh;          /* detection threshold in units of ERR (sigma) [1.5] */
+    double noise_scale;     /* ERR's sigma times this is the threshold's unit [1, SExtractor's];
+                             * 0: measured (auto, wf_detect_noise_ratio) */
     int minarea;            /* minimum pixels above threshold [5] */
     int back_size;          /* background mesh cell, pixels [64] */
     int back_filter;        /* median filter of the mesh, cells [3] */
@@ -35,6 +37,7 @@ typedef struct wf_detect_summary {
     int nx, ny;             /* image size */
     double back, back_rms;  /* SEP's global background and its RMS, e-/s */
     long masked;            /* pixels masked (DQ DO_NOT_USE, non-finite SCI or ERR, ERR <= 0) */
+    double noise_scale;     /* the unit of the threshold in ERR's sigma (given or measured) */
 } wf_detect_summary;
 
 /* SExtractor's defaults (above). */
@@ -45,6 +48,13 @@ void wf_detect_defaults(wf_detect_options *o);
  * option is WF_ERR_INPUT naming the file and what is wrong, and nothing is written. */
 wf_status wf_detect_file(const char *image_path, const char *out_path, const wf_detect_options *o,
                          wf_detect_summary *sum);
+
+/* The measured noise of the (filtered, when filter) background-subtracted image sci over
+ * what err predicts for it were pixels independent: 1 for independent noise, above 1 where
+ * resampling correlated them. Masked pixels (and neighbours touching them) are left out;
+ * nsamples counts the pixels used. WF_ERR_INPUT when too few are left. */
+wf_status wf_detect_noise_ratio(const float *sci, const float *err, const unsigned char *mask, int nx, int ny,
+                                int filter, double *ratio, long *nsamples);
 
 /* `wfisim detect IMAGE --out CAT.fits [options]`: argv holds what follows "detect". Returns
  * the exit status: 0 done, 1 failure (I/O, memory), 2 bad usage or input. */

@@ -11,6 +11,8 @@ static const char *detect_usage =
     "  IMAGE: a wfisim product or coadd (SCI in e-/s with a TAN or TAN-SIP WCS; ERR as the noise\n"
     "  and DQ as a mask when present). Defaults are SExtractor's.\n"
     "  --thresh S            detection threshold, in sigma of ERR [1.5]\n"
+    "  --noise-scale S|auto  sigma = ERR x S; auto: S measured on the (filtered) image, for\n"
+    "                        resampled images whose ERR leaves out pixel covariance [1]\n"
     "  --minarea N           minimum pixels above the threshold [5]\n"
     "  --back-size N         background mesh cell, pixels [64]\n"
     "  --back-filter N       median filter of the background mesh, cells [3]\n"
@@ -74,7 +76,11 @@ int wf_cmd_detect(int argc, char **argv)
         else if (!strcmp(a, "--no-filter")) o.filter = 0;
         else if (!strcmp(a, "--out")) { if (!v) return bad(a, v, "needs a file"); out = v; i++; }
         else if (!strcmp(a, "--thresh")) rc = number(a, v, &o.thresh), i++;
-        else if (!strcmp(a, "--minarea")) rc = integer(a, v, &o.minarea), i++;
+        else if (!strcmp(a, "--noise-scale")) {
+            if (v && !strcmp(v, "auto")) o.noise_scale = 0.0, i++;
+            else if (!(rc = number(a, v, &o.noise_scale)) && !(o.noise_scale > 0)) rc = bad(a, v, "must be > 0 or auto");
+            else i++;
+        } else if (!strcmp(a, "--minarea")) rc = integer(a, v, &o.minarea), i++;
         else if (!strcmp(a, "--back-size")) rc = integer(a, v, &o.back_size), i++;
         else if (!strcmp(a, "--back-filter")) rc = integer(a, v, &o.back_filter), i++;
         else if (!strcmp(a, "--aperture-radius")) rc = radius(v, &o), i++;
@@ -103,6 +109,6 @@ int wf_cmd_detect(int argc, char **argv)
     }
     if (!quiet)
         fprintf(stderr, "wfisim detect: %ld objects in %s (%d x %d, background %.4g +- %.3g e-/s, %ld pixels "
-                "masked) -> %s\n", s.nobj, image, s.nx, s.ny, s.back, s.back_rms, s.masked, out);
+                "masked, noise x %.3f) -> %s\n", s.nobj, image, s.nx, s.ny, s.back, s.back_rms, s.masked, s.noise_scale, out);
     return 0;
 }

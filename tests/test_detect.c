@@ -498,6 +498,102 @@ START_TEST(theta_stays_in_range)
 }
 END_TEST
 
+static uint64_t splitmix(uint64_t *s)
+{
+    uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+}
+
+static double gauss(uint64_t *s)
+{
+    double u = ((double)(splitmix(s) >> 11) + 0.5) / 9007199254740992.0;
+    double v = (double)(splitmix(s) >> 11) / 9007199254740992.0;
+    return sqrt(-2.0 * log(u)) * cos(2.0 * M_PI * v);
+}
+
+enum { NN = 1024 };
+
+/* Independent noise: the measured ratio is 1, with and without the filter, also with
+ * positive sources on the sky and masked pixels of any value. */
+START_TEST(noise_ratio_independent)
+{
+    float *sci = malloc(sizeof *sci * NN * NN), *err = malloc(sizeof *err * NN * NN);
+    unsigned char *mask = calloc(NN * NN, 1);
+    ck_assert(sci && err && mask);
+    uint64_t seed = 11;
+    for (int i = 0; i < NN * NN; i++) sci[i] = (float)(3.0 * gauss(&seed)), err[i] = 3.0f;
+    double r;
+    long used;
+    for (int f = 0; f < 2; f++) {
+        ck_assert_int_eq(wf_detect_noise_ratio(sci, err, mask, NN, NN, f, &r, &used), WF_OK);
+        ck_assert_msg(fabs(r - 1.0) < 0.01, "filter %d: ratio %.4f, 1 expected", f, r);
+        ck_assert_int_gt(used, (long)(NN - 2) * (NN - 2) * 9 / 10);
+    }
+    /* 400 Gaussian sources of peak 5..100 sigma, sigma 1.5 px, and a masked block of garbage */
+    for (int k = 0; k < 400; k++) {
+        double cx = 10 + (NN - 20) * (splitmix(&seed) >> 11) / 9007199254740992.0;
+        double cy = 10 + (NN - 20) * (splitmix(&seed) >> 11) / 9007199254740992.0;
+        double peak = 3.0 * (5 + 95 * (k % 20) / 19.0);
+        for (int y = (int)cy - 8; y <= (int)cy + 8; y++)
+            for (int x = (int)cx - 8; x <= (int)cx + 8; x++)
+                sci[(size_t)y * NN + x] += (float)(peak * exp(-((x - cx) * (x - cx) + (y - cy) * (y - cy)) / 4.5));
+    }
+    for (int y = 100; y < 200; y++)
+        for (int x = 100; x < 300; x++) sci[(size_t)y * NN + x] = -1e6f, mask[(size_t)y * NN + x] = 1;
+    for (int f = 0; f < 2; f++) {
+        ck_assert_int_eq(wf_detect_noise_ratio(sci, err, mask, NN, NN, f, &r, &used), WF_OK);
+        ck_assert_msg(fabs(r - 1.0) < 0.02, "filter %d, with sources: ratio %.4f, 1 expected", f, r);
+    }
+    free(sci), free(err), free(mask);
+}
+END_TEST
+
+/* Noise correlated by a 2x2 box sum of independent unit normals: ERR (2, each pixel's sigma)
+ * is right pixel by pixel, so the unfiltered ratio is 1; through the pyramid k the filtered
+ * sum is sum((k * b) g) over the 4x4 kernel k * b, so the ratio is
+ * sqrt(sum (k * b)^2) / (2 sqrt(sum k^2)), computed here by convolving the two kernels. */
+START_TEST(noise_ratio_correlated_closed_form)
+{
+    float *sci = malloc(sizeof *sci * NN * NN), *err = malloc(sizeof *err * NN * NN);
+    double *g = malloc(sizeof *g * (NN + 1) * (NN + 1));
+    unsigned char *mask = calloc(NN * NN, 1);
+    ck_assert(sci && err && g && mask);
+    uint64_t seed = 5;
+    for (int i = 0; i < (NN + 1) * (NN + 1); i++) g[i] = gauss(&seed);
+    for (int y = 0; y < NN; y++)
+        for (int x = 0; x < NN; x++) {
+            const double *a = g + (size_t)y * (NN + 1) + x;
+            sci[(size_t)y * NN + x] = (float)(a[0] + a[1] + a[NN + 1] + a[NN + 2]);
+            err[(size_t)y * NN + x] = 2.0f;
+        }
+    const double k[3][3] = {{1, 2, 1}, {2, 4, 2}, {1, 2, 1}};
+    double kb[4][4] = {{0}}, skb2 = 0, sk2 = 0;
+    for (int j = 0; j < 3; j++)
+        for (int i = 0; i < 3; i++) {
+            sk2 += k[j][i] * k[j][i];
+            for (int bj = 0; bj < 2; bj++)
+                for (int bi = 0; bi < 2; bi++) kb[j + bj][i + bi] += k[j][i];
+        }
+    for (int j = 0; j < 4; j++)
+        for (int i = 0; i < 4; i++) skb2 += kb[j][i] * kb[j][i];
+    double expect = sqrt(skb2) / (2.0 * sqrt(sk2)), r;
+    ck_assert_double_eq_tol(expect, 5.0 / 3.0, 1e-12); /* (1+9+9+1) / (2 (1+4+1)) */
+    long used;
+    ck_assert_int_eq(wf_detect_noise_ratio(sci, err, mask, NN, NN, 1, &r, &used), WF_OK);
+    ck_assert_msg(fabs(r / expect - 1.0) < 0.01, "filtered: ratio %.4f, %.4f expected", r, expect);
+    ck_assert_int_eq(wf_detect_noise_ratio(sci, err, mask, NN, NN, 0, &r, &used), WF_OK);
+    ck_assert_msg(fabs(r - 1.0) < 0.01, "unfiltered: ratio %.4f, 1 expected", r);
+    /* nearly all masked: too few sky pixels is an error, not a guess */
+    memset(mask, 1, NN * NN);
+    mask[0] = mask[1] = 0;
+    ck_assert_int_eq(wf_detect_noise_ratio(sci, err, mask, NN, NN, 0, &r, &used), WF_ERR_INPUT);
+    ck_assert(isnan(r));
+    free(sci), free(err), free(g), free(mask);
+}
+END_TEST
+
 /* Bad options are refused before anything is read or written. */
 START_TEST(bad_options_are_refused)
 {
@@ -515,6 +611,12 @@ START_TEST(bad_options_are_refused)
     ck_assert_int_eq(wf_detect_file("/nonexistent.fits", out, &o, &sum), WF_ERR_INPUT);
     ck_assert_ptr_nonnull(strstr(wf_error_message(), "--back-size"));
     wf_detect_defaults(&o);
+    o.noise_scale = -1;
+    ck_assert_int_eq(wf_detect_file("/nonexistent.fits", out, &o, &sum), WF_ERR_INPUT);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "--noise-scale"));
+    o.noise_scale = NAN;
+    ck_assert_int_eq(wf_detect_file("/nonexistent.fits", out, &o, &sum), WF_ERR_INPUT);
+    wf_detect_defaults(&o);
     ck_assert_int_eq(wf_detect_file("/nonexistent.fits", out, &o, &sum), WF_ERR_IO);
     ck_assert_ptr_nonnull(strstr(wf_error_message(), "/nonexistent.fits"));
     ck_assert_int_ne(access(out, F_OK), 0);
@@ -522,6 +624,8 @@ START_TEST(bad_options_are_refused)
     if (bin) {
         ck_assert_int_eq(wf_test_run("%s detect x.fits --out %s --aperture-radius 3furlongs 2>/dev/null", bin, out), 2);
         ck_assert_int_eq(wf_test_run("%s detect x.fits --out %s --minarea 2.5 2>/dev/null", bin, out), 2);
+        ck_assert_int_eq(wf_test_run("%s detect x.fits --out %s --noise-scale 0 2>/dev/null", bin, out), 2);
+        ck_assert_int_eq(wf_test_run("%s detect x.fits --out %s --noise-scale automatic 2>/dev/null", bin, out), 2);
     }
 }
 END_TEST
@@ -537,6 +641,8 @@ static Suite *suite(void)
     tcase_add_test(tc, wcs_header_round_trip);
     tcase_add_test(tc, bad_options_are_refused);
     tcase_add_test(tc, theta_stays_in_range);
+    tcase_add_test(tc, noise_ratio_independent);
+    tcase_add_test(tc, noise_ratio_correlated_closed_form);
     suite_add_tcase(s, tc);
     return s;
 }
