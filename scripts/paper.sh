@@ -23,12 +23,12 @@ SN_BOOST=100            # the SN rate law times this (a small area holds ~2 SNe 
 SINGLES=12              # single exposures detected for the single-epoch efficiency
 PATCH=100               # side of a coadd/difference patch (arcsec): bounds memory
 TEMPLATE_DAYS=100       # a template: the epochs of the first (last) this many days
-# Detection thresholds (units of ERR). Drizzling correlates neighbouring output pixels, which
-# ERR leaves out; Fruchter & Hook's noise ratio R = r / (1 - 1/(3r)), r = pixfrac / scale
-# (scale 0.0575/0.11), is 1.78 for the coadds (pixfrac 0.7) and 2.31 for an epoch resampled
-# with pixfrac 1: 1.5 x R is the single exposures' 1.5 sigma on the filtered image.
-COADD_THRESH=2.7
-DIFF_THRESH=3.5
+# Detection thresholds, in sigma: SExtractor's 1.5 everywhere. Drizzling correlates
+# neighbouring output pixels, which ERR leaves out, so on the coadds and difference images the
+# sigma is measured (`detect --noise-scale auto`: the filtered sky's width over what ERR
+# predicts; docs/ANALYSIS.md, "Detection thresholds"); the single exposures keep ERR's.
+COADD_THRESH=1.5
+DIFF_THRESH=1.5
 # The synthetic field fainter than its defaults (H 26, V 27, 2.5 stars per arcmin^2): a coadd
 # of 146 epochs reaches ~2.7 mag deeper than one, and its 50% point needs objects beyond it.
 SYNTH="--set scene.synthetic.h_faint=29.5 --set scene.synthetic.star_density=40 --set scene.synthetic.star_v_faint=32"
@@ -192,12 +192,12 @@ N=$(wc -l < products.txt)
 awk -v n="$N" -v k="$SINGLES" 'BEGIN { last = -1 }
     { b = int((NR - 1) * k / n); if (b != last) { print; last = b } }' products.txt > singles.txt
 : > cat/jobs.txt
-awk '{ print "render/" $4, "cat/" $4, 1.5 }' singles.txt >> cat/jobs.txt
-for f in coadd/*.all.fits; do [ -f "$f" ] && echo "$f cat/${f#coadd/} $COADD_THRESH" >> cat/jobs.txt; done
-for f in diff/*.fits; do [ -f "$f" ] && echo "$f cat/${f#diff/} $DIFF_THRESH" >> cat/jobs.txt; done
+awk '{ print "render/" $4, "cat/" $4, 1.5, 1 }' singles.txt >> cat/jobs.txt
+for f in coadd/*.all.fits; do [ -f "$f" ] && echo "$f cat/${f#coadd/} $COADD_THRESH auto" >> cat/jobs.txt; done
+for f in diff/*.fits; do [ -f "$f" ] && echo "$f cat/${f#diff/} $DIFF_THRESH auto" >> cat/jobs.txt; done
 : > cat/errors.txt
 # shellcheck disable=SC2016
-xargs -P "$THREADS" -L 1 sh -c '"$WFISIM" detect "$0" --out "$1" --thresh "$2" --data "$WFISIM_DATA" > "$1.log" 2>&1 ||
+xargs -P "$THREADS" -L 1 sh -c '"$WFISIM" detect "$0" --out "$1" --thresh "$2" --noise-scale "$3" --data "$WFISIM_DATA" > "$1.log" 2>&1 ||
     cat "$1.log" >> cat/errors.txt' < cat/jobs.txt
 fail_if cat/errors.txt "a detection failed"
 stage detect
@@ -232,6 +232,10 @@ key() { # FILE KEY -> the value as the JSON has it (number or null; null when ab
 E=eff
 H=hosts/hosts_summary.json
 NCO=$(cat coadd/*.all.list | sort -u | wc -l)
+noise() { # LOGS... -> the median of the measured noise scales ("noise x S" in detect's logs)
+    sed -n 's/.*noise x \([0-9.]*\)).*/\1/p' "$@" | sort -n |
+        awk '{ v[NR] = $1 } END { if (NR) print (NR % 2 ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2); else print "null" }'
+}
 {
     printf '{\n'
     printf '  "area": "%s",\n  "filter": "Y106",\n  "visits": %s,\n' "$AREA" "$NV"
@@ -248,6 +252,10 @@ NCO=$(cat coadd/*.all.list | sort -u | wc -l)
                 "$k" "$s" "$(key $E/${s}_summary.json n_found_$k)"
         done
     done
+    printf '  "single_n_false": %s,\n  "coadd_n_false": %s,\n' "$(key $E/single_summary.json n_false)" \
+        "$(key $E/coadd_summary.json n_false)"
+    printf '  "coadd_noise_scale": %s,\n  "diff_noise_scale": %s,\n' \
+        "$(noise cat/*.all.fits.log)" "$(noise $(awk '{ print $2 ".log" }' diff.list))"
     printf '  "sn_m50_diff": %s,\n  "sn_m50_diff_err": %s,\n' "$(key $E/diff_summary.json m50_sn)" \
         "$(key $E/diff_summary.json m50_err_sn)"
     printf '  "sn_n_true_diff": %s,\n  "sn_n_found_diff": %s,\n  "diff_n_false": %s,\n' \
