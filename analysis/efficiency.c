@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "sim/fits/fitscheck.h"
+#include "sim/sn/sncat.h"
 #include "sim/survey/wcs.h"
 #include "analysis/plot.h"
 #include "hal/dq.h"
@@ -26,6 +27,8 @@ void wf_eff_defaults(wf_eff_options *o)
     o->radius_arcsec = 0.3;
     o->bin = 0.25;
     o->types = (1 << WF_EFF_NTYPE) - 1;
+    o->iso_factor = 1.5;
+    o->iso_host_mag = 22.0;
 }
 
 wf_status wf_eff_parse_types(const char *s, int *types)
@@ -500,11 +503,87 @@ static wf_status pool_add(pool *p, double mag, int found, int filter)
 
 #define MAX_FILTERS 16
 
+/* An SN of the --isolated sample: its host and its distance from it. */
+typedef struct iso_entry {
+    long long id, host;
+    double off, a;
+} iso_entry;
+
 typedef struct run {
     pool pool[WF_EFF_NTYPE];
     char filters[MAX_FILTERS][FLEN_VALUE];
     int nfilters;
+    iso_entry *iso; /* sorted by id; NULL without --isolated */
+    size_t niso;
 } run;
+
+static int cmp_iso(const void *a, const void *b)
+{
+    long long p = ((const iso_entry *)a)->id, q = ((const iso_entry *)b)->id;
+    return (p > q) - (p < q);
+}
+
+static wf_status read_isolation(const char *path, run *r)
+{
+    wf_sn_sample s;
+    wf_status st = wf_sn_sample_read(path, &s);
+    if (st) return wf_error(st, "--isolated: %s", wf_error_message());
+    r->iso = malloc((s.n ? s.n : 1) * sizeof *r->iso);
+    if (!r->iso) {
+        wf_sn_sample_free(&s);
+        return wf_error(WF_ERR_NOMEM, "--isolated %s: out of memory", path);
+    }
+    for (size_t i = 0; i < s.n; i++) r->iso[i] = (iso_entry){s.id[i], s.host_id[i], s.host_offset[i], s.host_a[i]};
+    r->niso = s.n;
+    wf_sn_sample_free(&s);
+    qsort(r->iso, r->niso, sizeof *r->iso, cmp_iso);
+    return WF_OK;
+}
+
+typedef struct gal_mag {
+    long long id;
+    double mag;
+} gal_mag;
+
+static int cmp_gal_mag(const void *a, const void *b)
+{
+    long long p = ((const gal_mag *)a)->id, q = ((const gal_mag *)b)->id;
+    return (p > q) - (p < q);
+}
+
+/* crowded[i] = 1 for the line's SNe that are not isolated: within iso_factor x HOSTA of their
+ * host, or with a host brighter than iso_host_mag in this image's truth (a host absent from
+ * the truth is not drawn on the image and leaves no residual). */
+static wf_status mark_crowded(const char *list_path, const line *ln, const wf_eff_options *o, const run *r,
+                              const truth *t, unsigned char *crowded)
+{
+    long ng = 0;
+    for (long i = 0; i < t->n; i++) ng += t->type[i] == WF_EFF_GALAXY;
+    gal_mag *g = malloc((size_t)(ng ? ng : 1) * sizeof *g);
+    if (!g) return wf_error(WF_ERR_NOMEM, "efficiency: out of memory");
+    ng = 0;
+    for (long i = 0; i < t->n; i++)
+        if (t->type[i] == WF_EFF_GALAXY) g[ng++] = (gal_mag){t->id[i], t->mag[i]};
+    qsort(g, (size_t)ng, sizeof *g, cmp_gal_mag);
+    wf_status st = WF_OK;
+    for (long i = 0; i < t->n && !st; i++) {
+        crowded[i] = 0;
+        if (t->type[i] != WF_EFF_SN) continue;
+        iso_entry key = {.id = t->id[i]};
+        const iso_entry *e = bsearch(&key, r->iso, r->niso, sizeof *r->iso, cmp_iso);
+        if (!e) {
+            st = wf_error(WF_ERR_INPUT, "%s:%d: SN %lld of the truth is not in the --isolated sample %s", list_path,
+                          ln->lineno, t->id[i], o->isolated);
+            break;
+        }
+        if (e->host < 0) continue; /* hostless */
+        gal_mag gk = {.id = e->host};
+        const gal_mag *h = bsearch(&gk, g, (size_t)ng, sizeof *g, cmp_gal_mag);
+        crowded[i] = !(e->off > o->iso_factor * e->a) || (h && !(h->mag > o->iso_host_mag));
+    }
+    free(g);
+    return st;
+}
 
 static int filter_index(run *r, const char *name)
 {
@@ -532,24 +611,28 @@ static wf_status score_line(const char *list_path, const line *ln, const wf_eff_
         free(im.bad), free(det.ra), free(det.dec);
         return st;
     }
+    unsigned char *crowded = calloc((size_t)(t.n > 0 ? t.n : 1), 1);
+    if (!crowded) st = wf_error(WF_ERR_NOMEM, "efficiency: out of memory");
+    if (!st && r->iso) st = mark_crowded(list_path, ln, o, r, &t, crowded);
     int fi = 0;
-    if (!im.filter[0] && (o->types & (1 << WF_EFF_SN)))
+    if (!st && !im.filter[0] && (o->types & (1 << WF_EFF_SN)))
         st = wf_error(WF_ERR_INPUT, "%s:%d: %s: no FILTER keyword (the SNANA map is per filter)", list_path,
                       ln->lineno, ln->image);
-    else if (im.filter[0] && (fi = filter_index(r, im.filter)) < 0)
+    else if (!st && im.filter[0] && (fi = filter_index(r, im.filter)) < 0)
         st = wf_error(WF_ERR_INPUT, "%s:%d: %s: more than %d filters in one list", list_path, ln->lineno, ln->image,
                       MAX_FILTERS);
     /* the truth objects of the scored types, whether the image sees them or not: an unseen
      * object still owns the detection its light makes at the edge or around a masked pixel;
      * one without light (MAG 99: an SN before explosion) owns none and is not scored */
     long ns = 0;
-    for (long i = 0; i < t.n; i++) {
+    for (long i = 0; !st && i < t.n; i++) {
         if (!(o->types & (1 << t.type[i]))) continue;
         if (!(isfinite(t.mag[i]) && t.mag[i] < 99.0)) {
             sum->n_unseen[t.type[i]]++;
             continue;
         }
         t.id[ns] = t.id[i], t.ra[ns] = t.ra[i], t.dec[ns] = t.dec[i], t.mag[ns] = t.mag[i], t.type[ns] = t.type[i];
+        crowded[ns] = crowded[i];
         ns++;
     }
     long *t2d = malloc((size_t)(ns > 0 ? ns : 1) * sizeof *t2d);
@@ -566,6 +649,10 @@ static wf_status score_line(const char *list_path, const line *ln, const wf_eff_
             sum->n_unseen[t.type[i]]++;
             continue;
         }
+        if (crowded[i]) { /* it keeps its detection (not false), but is not scored */
+            sum->n_not_isolated++;
+            continue;
+        }
         st = pool_add(&r->pool[t.type[i]], t.mag[i], t2d[i] >= 0, fi);
     }
     fits_clear_errmsg();
@@ -574,7 +661,7 @@ static wf_status score_line(const char *list_path, const line *ln, const wf_eff_
         sum->n_det += det.n;
         for (long j = 0; j < det.n; j++) sum->n_false += d2t[j] < 0;
     }
-    free(t2d), free(d2t);
+    free(t2d), free(d2t), free(crowded);
     free(im.bad), free(det.ra), free(det.dec);
     truth_free(&t);
     return st;
@@ -702,6 +789,11 @@ static wf_status write_json(const char *tmp, const wf_eff_options *o, const run 
         else
             fprintf(f, "  \"n_true_%s\": null,\n  \"n_found_%s\": null,\n  \"n_unseen_%s\": null,\n", t, t, t);
     }
+    if (o->isolated)
+        fprintf(f, "  \"isolated\": true,\n  \"iso_factor\": %.6g,\n  \"iso_host_mag\": %.6g,\n  \"n_not_isolated_sn\": %ld,\n",
+                o->iso_factor, o->iso_host_mag, s->n_not_isolated);
+    else
+        fprintf(f, "  \"isolated\": false,\n");
     fprintf(f, "  \"n_images\": %ld,\n  \"n_det\": %ld,\n  \"n_false\": %ld\n}\n", s->n_images, s->n_det, s->n_false);
     return close_text(f, tmp);
 }
@@ -829,6 +921,9 @@ static wf_status check_options(const wf_eff_options *o)
         return wf_error(WF_ERR_INPUT, "--bin %g: must be in [0.001, 10] mag", o->bin);
     if (!(o->types & ((1 << WF_EFF_NTYPE) - 1)) || (o->types & ~((1 << WF_EFF_NTYPE) - 1)))
         return wf_error(WF_ERR_INPUT, "--types: no type scored");
+    if (o->isolated && !(o->iso_factor >= 0 && isfinite(o->iso_factor)))
+        return wf_error(WF_ERR_INPUT, "--iso-factor %g: must be >= 0", o->iso_factor);
+    if (o->isolated && isnan(o->iso_host_mag)) return wf_error(WF_ERR_INPUT, "--iso-host-mag: not a number");
     return WF_OK;
 }
 
@@ -880,6 +975,7 @@ wf_status wf_eff_run(const char *list_path, const wf_eff_options *o, wf_eff_summ
     bins b[WF_EFF_NTYPE];
     memset(b, 0, sizeof b);
     if (!r) st = wf_error(WF_ERR_NOMEM, "efficiency: out of memory");
+    if (!st && o->isolated) st = read_isolation(o->isolated, r);
     for (int i = 0; i < l.n && !st; i++) st = score_line(list_path, &l.v[i], o, r, sum);
     for (int ty = 0; ty < WF_EFF_NTYPE && !st; ty++) {
         if (!(o->types & (1 << ty))) continue;
@@ -894,6 +990,7 @@ wf_status wf_eff_run(const char *list_path, const wf_eff_options *o, wf_eff_summ
         bins_free(&b[ty]);
         if (r) free(r->pool[ty].mag), free(r->pool[ty].found), free(r->pool[ty].filter);
     }
+    if (r) free(r->iso);
     free(r);
     list_free(&l);
     return st;
@@ -902,7 +999,8 @@ wf_status wf_eff_run(const char *list_path, const wf_eff_options *o, wf_eff_summ
 /* ---- the command ---- */
 
 static const char *usage =
-    "usage: wfisim efficiency --label NAME --out DIR [--radius 0.3] [--bin 0.25] [--types galaxy,star,sn] LIST\n"
+    "usage: wfisim efficiency --label NAME --out DIR [--radius 0.3] [--bin 0.25] [--types galaxy,star,sn]\n"
+    "       [--isolated SNE.fits [--iso-factor 1.5] [--iso-host-mag 22]] LIST\n"
     "  LIST: one image a line, 'IMAGE DETCAT TRUTH[,TRUTH...]' ('#' comments): the image detected\n"
     "  (product, coadd or difference image), its wfisim detect catalog, its truth tables.\n"
     "  Writes DIR/NAME_efficiency.csv, DIR/NAME_efficiency.png, DIR/NAME_summary.json and, when\n"
@@ -910,6 +1008,9 @@ static const char *usage =
     "  --radius R   match radius, arcsec [0.3]\n"
     "  --bin B      magnitude bin [0.25]\n"
     "  --types T    types scored: galaxy, star, sn, comma-separated [all]\n"
+    "  --isolated SNE.fits  score only the SNe isolated from their hosts (SPEC 8): farther than\n"
+    "               --iso-factor [1.5] x the host's semi-major axis HOSTA, host fainter than\n"
+    "               --iso-host-mag [22]; the others keep their detections, unscored\n"
     "  --quiet      no summary line\n";
 
 static int usage_error(const char *fmt, const char *a, const char *b)
@@ -949,6 +1050,9 @@ int wf_cmd_efficiency(int argc, char **argv)
         else if (!strcmp(a, "--out")) o.out_dir = v;
         else if (!strcmp(a, "--radius")) rc = number(a, v, &o.radius_arcsec);
         else if (!strcmp(a, "--bin")) rc = number(a, v, &o.bin);
+        else if (!strcmp(a, "--isolated")) o.isolated = v;
+        else if (!strcmp(a, "--iso-factor")) rc = number(a, v, &o.iso_factor);
+        else if (!strcmp(a, "--iso-host-mag")) rc = number(a, v, &o.iso_host_mag);
         else if (!strcmp(a, "--types")) {
             if (wf_eff_parse_types(v, &o.types)) return usage_error("%s%s", wf_error_message(), "");
         } else return usage_error("unknown option '%s'%s", a, "");
@@ -970,6 +1074,7 @@ int wf_cmd_efficiency(int argc, char **argv)
             fprintf(stderr, "; %s %ld/%ld found", type_name[ty], s.n_found[ty], s.n_true[ty]);
             if (s.fit[ty].ok) fprintf(stderr, ", m50 %.3f +- %.3f", s.fit[ty].m50, s.fit[ty].m50_err);
         }
+        if (o.isolated) fprintf(stderr, "; %ld SNe not isolated, unscored", s.n_not_isolated);
         fprintf(stderr, " -> %s/%s_*\n", o.out_dir, o.label);
     }
     return 0;

@@ -29,6 +29,10 @@ typedef struct wf_eff_options {
     double radius_arcsec;   /* match radius [0.3] */
     double bin;             /* magnitude bin [0.25] */
     int types;              /* bit (1 << WF_EFF_*) per type scored [all three] */
+    const char *isolated;   /* a `wfisim sn generate` sample: score only SNe isolated from their
+                             * hosts (SPEC §8), the others keep their detections unscored [NULL] */
+    double iso_factor;      /* isolated: HOSTOFF > this x HOSTA [1.5] */
+    double iso_host_mag;    /* ... and the host (its truth MAG in the image) fainter than this [22] */
     int quiet;
 } wf_eff_options;
 
@@ -36,6 +40,7 @@ typedef struct wf_eff_summary {
     long n_images, n_det, n_false;
     long n_true[WF_EFF_NTYPE], n_found[WF_EFF_NTYPE]; /* visible truth objects, and found */
     long n_unseen[WF_EFF_NTYPE];  /* truth objects outside SCI, on masked pixels or without flux */
+    long n_not_isolated;          /* SNe seen but not scored: near or on a bright host (isolated) */
     wf_eff_fit fit[WF_EFF_NTYPE]; /* ok = 0: not scored or too few to fit */
 } wf_eff_summary;
 
@@ -50,7 +55,8 @@ wf_status wf_eff_parse_types(const char *s, int *types);
  * nothing is written. */
 wf_status wf_eff_run(const char *list_path, const wf_eff_options *o, wf_eff_summary *sum);
 
-/* `wfisim efficiency --label NAME --out DIR [--radius 0.3] [--bin 0.25] [--types ...] LIST`:
+/* `wfisim efficiency --label NAME --out DIR [--radius 0.3] [--bin 0.25] [--types ...]
+ * [--isolated SNE.fits [--iso-factor 1.5] [--iso-host-mag 22]] LIST`:
  * argv holds what follows "efficiency". Returns 0 done, 1 failure, 2 bad usage or input. */
 int wf_cmd_efficiency(int argc, char **argv);
 

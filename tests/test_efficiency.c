@@ -13,6 +13,7 @@
 
 #include "analysis/detect.h"
 #include "analysis/efficiency.h"
+#include "sim/sn/sncat.h"
 #include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 
@@ -422,6 +423,86 @@ START_TEST(counts_on_synthetic_files)
 }
 END_TEST
 
+/* --isolated (SPEC §8): six SNe, all detected, each with a known host and distance from it.
+ * Scored: a far SN on a faint host (HOSTOFF 2 > 1.5 x HOSTA 1, host 23), a hostless one, and
+ * one whose host is not on this image; not scored: one at 1.4 HOSTA, one exactly at 1.5 (not
+ * beyond it) and one far from a host of 21.5 (brighter than 22). The unscored keep their
+ * detections: none becomes false. */
+START_TEST(isolated_supernovae)
+{
+    const char *d = wf_test_tmpdir();
+    char img[4200], cat[4200], tr[4200], lst[4200], out[4200], sne[4200], bad[4200];
+    snprintf(img, sizeof img, "%s/img.fits", d);
+    snprintf(cat, sizeof cat, "%s/cat.fits", d);
+    snprintf(tr, sizeof tr, "%s/truth.fits", d);
+    snprintf(lst, sizeof lst, "%s/list.txt", d);
+    snprintf(out, sizeof out, "%s/out", d);
+    snprintf(sne, sizeof sne, "%s/sne.fits", d);
+    snprintf(bad, sizeof bad, "%s/sne_short.fits", d);
+    write_image(img, 1, 0, "Y106");
+    obj gal[3] = {{100, 20, 20, 23.0}, {101, 60, 20, 21.5}, {102, 100, 20, 24.0}};
+    obj sn[6];
+    const long long host[6] = {100, -1, 999, 100, 102, 101};
+    const double off[6] = {2.0, 0.0, 5.0, 1.4, 1.5, 3.0}, a[6] = {1.0, 0.0, 0.5, 1.0, 1.0, 1.0};
+    double dra[6], ddec[6];
+    for (int i = 0; i < 6; i++) {
+        sn[i] = (obj){7000 + i, 20.0 + 20.0 * i, 100.0, 23.0 + 0.1 * i};
+        pixel_sky(sn[i].x + 0.3, sn[i].y, &dra[i], &ddec[i]);
+    }
+    write_catalog(cat, dra, ddec, 6, 1);
+    const obj *tabs[3] = {gal, sn, sn};
+    const long n[3] = {3, 0, 6};
+    write_truth(tr, tabs, n);
+    wf_sn_sample smp;
+    memset(&smp, 0, sizeof smp);
+    for (int i = 0; i < 6; i++) {
+        size_t r;
+        ck_assert_int_eq(wf_sn_sample_push(&smp, &r), WF_OK);
+        smp.id[r] = sn[i].id, smp.host_id[r] = host[i], smp.host_offset[r] = off[i], smp.host_a[r] = a[i];
+        smp.z[r] = 0.5, smp.x0[r] = 1e-5, smp.host_comp[r] = host[i] < 0 ? -1 : 0;
+        pixel_sky(sn[i].x, sn[i].y, &smp.ra[r], &smp.dec[r]);
+        if (i == 4) ck_assert_int_eq(wf_sn_sample_write(&smp, bad), WF_OK); /* the first five */
+    }
+    ck_assert_int_eq(wf_sn_sample_write(&smp, sne), WF_OK);
+    wf_sn_sample_free(&smp);
+    char text[20000];
+    snprintf(text, sizeof text, "%s %s %s\n", img, cat, tr);
+    write_text(lst, text);
+    wf_eff_options o;
+    wf_eff_defaults(&o);
+    o.label = "all", o.out_dir = out, o.types = 1 << WF_EFF_SN;
+    wf_eff_summary s;
+    ck_assert_msg(wf_eff_run(lst, &o, &s) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(s.n_true[WF_EFF_SN], 6);
+    ck_assert_int_eq(s.n_not_isolated, 0);
+    o.label = "iso", o.isolated = sne;
+    ck_assert_msg(wf_eff_run(lst, &o, &s) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(s.n_true[WF_EFF_SN], 3);
+    ck_assert_int_eq(s.n_found[WF_EFF_SN], 3);
+    ck_assert_int_eq(s.n_not_isolated, 3);
+    ck_assert_int_eq(s.n_false, 0);
+    char path[4400];
+    snprintf(path, sizeof path, "%s/iso_summary.json", out);
+    ck_assert_double_eq(json_value(path, "n_not_isolated_sn"), 3);
+    ck_assert_double_eq(json_value(path, "iso_factor"), 1.5);
+    /* a looser rule (beyond 1.2 HOSTA, hosts brighter than 21 excluded): the SNe at 1.4 and
+     * 1.5 HOSTA are beyond 1.2 and the 21.5 host is fainter than 21, so all six are scored */
+    o.label = "loose", o.iso_factor = 1.2, o.iso_host_mag = 21.0;
+    ck_assert_msg(wf_eff_run(lst, &o, &s) == WF_OK, "%s", wf_error_message());
+    ck_assert_int_eq(s.n_true[WF_EFF_SN], 6);
+    ck_assert_int_eq(s.n_not_isolated, 0);
+    /* an SN of the truth missing from the sample: refused, naming it */
+    o.label = "short", o.isolated = bad, o.iso_factor = 1.5, o.iso_host_mag = 22.0;
+    ck_assert_int_eq(wf_eff_run(lst, &o, &s), WF_ERR_INPUT);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "SN 7005"));
+    snprintf(path, sizeof path, "%s/short_summary.json", out);
+    ck_assert_int_ne(access(path, F_OK), 0);
+    o.isolated = sne, o.iso_factor = -1;
+    ck_assert_int_eq(wf_eff_run(lst, &o, &s), WF_ERR_INPUT);
+    ck_assert_ptr_nonnull(strstr(wf_error_message(), "--iso-factor"));
+}
+END_TEST
+
 /* The SNANA map on supernovae found with a known curve: rows in increasing magnitude, values
  * the fitted curve (through 1/2 at the fitted m50, within the statistical error of the truth),
  * falling below 0.001 on the last row. Pooling two image lines doubles the counts. */
@@ -740,6 +821,7 @@ static Suite *suite(void)
     tcase_add_test(tc, match_closest_pairs_first);
     tcase_add_test(tc, counts_on_synthetic_files);
     tcase_add_test(tc, snana_map_of_known_curve);
+    tcase_add_test(tc, isolated_supernovae);
     tcase_add_test(tc, bad_input_is_refused);
     tcase_add_test(tc, end_to_end_star_field);
     suite_add_tcase(s, tc);

@@ -101,6 +101,7 @@ START_TEST(generate_with_hostlib)
     for (size_t i = 0; i < s.n; i++) {
         if (s.host_id[i] < 0) {
             ck_assert(s.flags[i] & WF_SN_FLAG_HOSTLESS);
+            ck_assert_double_eq(s.host_a[i], 0.0);
             continue;
         }
         hosted++;
@@ -114,6 +115,10 @@ START_TEST(generate_with_hostlib)
         double r99 = s.host_comp[i] ? 18.9437 * gal.hlr_bulge[h] : 3.9553 * gal.hlr_disk[h];
         ck_assert_msg(s.host_offset[i] <= r99 / sqrt(q) * (1 + 1e-6) + 1e-9, "SN %zu: offset %.4f\" beyond %.4f\"", i,
                       s.host_offset[i], r99 / sqrt(q));
+        /* HOSTA: the brighter component's half-light radius stretched the same way */
+        double re = gal.bulge_frac[h] > 0.5 ? gal.hlr_bulge[h] : gal.hlr_disk[h];
+        ck_assert_msg(fabs(s.host_a[i] / (re / sqrt(q)) - 1) < 1e-9, "SN %zu: HOSTA %.6f, expected %.6f", i,
+                      s.host_a[i], re / sqrt(q));
     }
     ck_assert(hosted > 0);
     wf_sn_sample_free(&s);

@@ -577,6 +577,34 @@ START_TEST(test_missing_columns)
 }
 END_TEST
 
+/* HOSTA: the half-light ellipse's semi-major axis of the brighter component, checked two ways:
+ * the closed form from e (g = e / (1 + sqrt(1 - e^2)), a = r_e sqrt((1 + g) / (1 - g))) and the
+ * largest offset of the placements at the half-light fraction over every angle. */
+START_TEST(test_semimajor)
+{
+    galrow g[2] = {{70.5, -52.5, 1.0, 10.0, 0.0, 0.8, 0.3, 0.2, 0.3, -0.4, 25.0},
+                   {70.5, -52.5, 1.0, 10.0, 0.0, 0.8, 0.3, 0.7, 0.3, -0.4, 25.0}};
+    wf_catalog cat;
+    make_catalog(&cat, g, 2, ALL_FLAGS);
+    for (int k = 0; k < 2; k++) {
+        double a, ee = hypot(cat.e1[k], cat.e2[k]), gg = ee / (1.0 + sqrt(1.0 - ee * ee));
+        double re = k ? cat.hlr_bulge[k] : cat.hlr_disk[k];
+        ck_assert_int_eq(wf_snhost_semimajor(&cat, (size_t)k, &a), WF_OK);
+        ck_assert_double_eq_tol(a, re * sqrt((1.0 + gg) / (1.0 - gg)), 1e-12);
+        double far = 0.0;
+        for (int j = 0; j < 7200; j++) {
+            wf_snhost_position pos;
+            ck_assert_int_eq(wf_snhost_place_at(&cat, (size_t)k, k, 0.5, j * (M_PI / 3600.0), &pos), WF_OK);
+            far = fmax(far, pos.offset);
+        }
+        ck_assert_msg(fabs(far / a - 1.0) < 1e-6, "row %d: largest half-light offset %.9f, HOSTA %.9f", k, far, a);
+    }
+    double a;
+    ck_assert_int_eq(wf_snhost_semimajor(&cat, 2, &a), WF_ERR_RANGE);
+    wf_catalog_free(&cat);
+}
+END_TEST
+
 static Suite *snhost_suite(void)
 {
     Suite *s = suite_create("snhost");
@@ -591,6 +619,7 @@ static Suite *snhost_suite(void)
     tcase_add_test(tc, test_positions_ks_bulge);
     tcase_add_test(tc, test_positions_elongated);
     tcase_add_test(tc, test_missing_columns);
+    tcase_add_test(tc, test_semimajor);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -545,6 +545,7 @@ static int cmd_generate(int argc, char **argv)
             out.ra[r] = pos.ra, out.dec[r] = pos.dec;
             out.host_offset[r] = pos.offset;
             out.host_comp[r] = pos.component;
+            if ((st = wf_snhost_semimajor(&hosts, (size_t)row, &out.host_a[r]))) break;
         } else {
             footprint_draw(&fp, &rng, &out.ra[r], &out.dec[r]);
             out.host_id[r] = -1;

@@ -9,13 +9,13 @@
 #include "sim/fits/fitscheck.h"
 #include "sim/fits/fitsout.h"
 
-enum { C_ID, C_Z, C_T0, C_X0, C_X1, C_C, C_DELTA, C_MU, C_HOSTID, C_RA, C_DEC, C_HOSTOFF, C_HOSTCOMP, C_FLAGS, NCOL };
+enum { C_ID, C_Z, C_T0, C_X0, C_X1, C_C, C_DELTA, C_MU, C_HOSTID, C_RA, C_DEC, C_HOSTOFF, C_HOSTCOMP, C_FLAGS, C_HOSTA, NCOL };
 static const char *col_name[NCOL] = {"ID", "Z", "T0", "X0", "X1", "C", "DELTA", "MU", "HOSTID",
-                                     "RA", "DEC", "HOSTOFF", "HOSTCOMP", "FLAGS"};
+                                     "RA", "DEC", "HOSTOFF", "HOSTCOMP", "FLAGS", "HOSTA"};
 static const char *col_form[NCOL] = {"1K", "1D", "1D", "1D", "1D", "1D", "1D", "1D", "1K",
-                                     "1D", "1D", "1D", "1J", "1J"};
+                                     "1D", "1D", "1D", "1J", "1J", "1D"};
 static const char *col_unit[NCOL] = {"", "", "d", "", "", "", "mag", "mag", "", "deg", "deg",
-                                     "arcsec", "", ""};
+                                     "arcsec", "", "", "arcsec"};
 
 static double **dcol(wf_sn_sample *s, int c)
 {
@@ -30,6 +30,7 @@ static double **dcol(wf_sn_sample *s, int c)
     case C_RA: return &s->ra;
     case C_DEC: return &s->dec;
     case C_HOSTOFF: return &s->host_offset;
+    case C_HOSTA: return &s->host_a;
     default: return NULL;
     }
 }
@@ -181,8 +182,9 @@ wf_status wf_sn_sample_read(const char *path, wf_sn_sample *out)
             }
         }
         if (st) break;
-        if (!(out->z[i] > 0) || !(out->x0[i] > 0) || out->dec[i] < -90 || out->dec[i] > 90)
-            st = wf_error(WF_ERR_RANGE, "%s: SNE row %zu: Z and X0 must be > 0 and DEC in [-90, 90]", path, i + 1);
+        if (!(out->z[i] > 0) || !(out->x0[i] > 0) || out->dec[i] < -90 || out->dec[i] > 90 || out->host_a[i] < 0)
+            st = wf_error(WF_ERR_RANGE, "%s: SNE row %zu: Z and X0 must be > 0, DEC in [-90, 90] and HOSTA >= 0", path,
+                          i + 1);
     }
 done:
     {

@@ -3,7 +3,8 @@
  *   ID (int64), Z, T0 (MJD of rest-frame B peak), X0, X1, C, DELTA (coherent intrinsic
  *   scatter, mag, already inside X0), MU (distance modulus), HOSTID (int64, -1 hostless),
  *   RA, DEC (deg), HOSTOFF (arcsec from the host centre), HOSTCOMP (0 disk, 1 bulge, -1 none),
- *   FLAGS (WF_SN_FLAG_*)
+ *   FLAGS (WF_SN_FLAG_*), HOSTA (the host's semi-major axis for isolation, wf_snhost_semimajor,
+ *   arcsec; 0 hostless)
  * and the generation's settings as primary-header keywords (docs/SUPERNOVAE.md). Written
  * through a temporary file; the reader checks every value and names file, row and column. */
 #ifndef WF_SNCAT_H
@@ -21,7 +22,7 @@ enum {
 typedef struct wf_sn_sample {
     size_t n, cap;
     int64_t *id, *host_id;
-    double *z, *t0, *x0, *x1, *c, *delta, *mu, *ra, *dec, *host_offset;
+    double *z, *t0, *x0, *x1, *c, *delta, *mu, *ra, *dec, *host_offset, *host_a;
     int32_t *host_comp, *flags;
     char model[256];   /* the SALT model directory the amplitudes are for */
     char cards[4096];  /* "KEY = value / comment" lines for the primary header */

@@ -297,6 +297,21 @@ wf_status wf_snhost_sersic_radius(double n, double frac, double *x)
 
 /* ------------------------------------------------------------------ placement */
 
+wf_status wf_snhost_semimajor(const wf_catalog *gal, size_t row, double *a)
+{
+    *a = NAN;
+    if (gal->kind != WF_CATALOG_GALAXY)
+        return wf_error(WF_ERR_INPUT, "snhost: catalog '%s' holds stars, not galaxies", gal->source);
+    if (row >= gal->n)
+        return wf_error(WF_ERR_RANGE, "snhost: host row %zu beyond the %zu rows of '%s'", row, gal->n, gal->source);
+    double re = gal->bulge_frac[row] > 0.5 ? gal->hlr_bulge[row] : gal->hlr_disk[row], g1, g2;
+    wf_status st = wf_profile_shear_from_distortion(gal->e1[row], gal->e2[row], &g1, &g2);
+    if (st) return st;
+    double g = hypot(g1, g2);
+    *a = re * sqrt((1.0 + g) / (1.0 - g));
+    return WF_OK;
+}
+
 wf_status wf_snhost_place_at(const wf_catalog *gal, size_t row, int component, double frac,
                              double phi, wf_snhost_position *out)
 {

@@ -91,6 +91,12 @@ wf_status wf_snhost_place(const wf_catalog *gal, size_t row, wf_rng *rng,
 wf_status wf_snhost_place_at(const wf_catalog *gal, size_t row, int component, double frac,
                              double phi, wf_snhost_position *out);
 
+/* The host's semi-major axis for SN isolation (SPEC §8: an SN counts as isolated beyond 1.5x
+ * it): the half-light ellipse's semi-major axis, r_e sqrt((1 + |g|) / (1 - |g|)) under the
+ * area-preserving shear g of the placement above, of the component holding most of the light
+ * (the bulge when bulge_frac > 1/2, else the disk), arcsec. */
+wf_status wf_snhost_semimajor(const wf_catalog *gal, size_t row, double *a);
+
 /* Sérsic helpers for whole-number n in [1, 20] (the host model's n = 1 and 4), on the
  * profile code's P(2n, x) and b_n (sim/draw/profile.h); the radius inverts P by bracketed Newton
  * (tests/test_snhost.c: 1e-12 against bisection). */
