@@ -297,6 +297,67 @@ START_TEST(test_row_noise)
 }
 END_TEST
 
+/* The row noise is the same number as a sort's: 0.6052697 x the ((m - 1) / 2)-th smallest of
+ * the m finite |2 x_i - x_(i-2) - x_(i+2)| (qsort here). Rows of Gaussian noise at many
+ * scales and lengths, negative rows, heavy ties (integer and few-valued rows), zeros, NaN and
+ * infinities (left out of the median) and denormals. */
+static int by_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+static double row_noise_by_sort(const float *row, long n)
+{
+    float *d = malloc((size_t)(n > 0 ? n : 1) * sizeof *d);
+    long m = 0;
+    for (long i = 2; i + 2 < n; i++) {
+        float v = fabsf(2.0f * row[i] - row[i - 2] - row[i + 2]);
+        if (isfinite(v)) d[m++] = v;
+    }
+    double r = 0;
+    if (m > 0) {
+        qsort(d, (size_t)m, sizeof *d, by_float);
+        r = 0.6052697 * d[(m - 1) / 2];
+    }
+    free(d);
+    return r;
+}
+
+START_TEST(test_row_noise_exact)
+{
+    enum { N = 4088 };
+    static float row[N], scratch[N];
+    uint64_t s = 7;
+    const long lens[] = {5, 6, 7, 8, 33, 100, 1001, N};
+    for (int trial = 0; trial < 400; trial++) {
+        const long n = lens[trial % 8];
+        const int kind = trial / 8 % 10;
+        const double scale = pow(10.0, (trial % 13) - 6.0), base = (trial % 3 - 1) * 1e3 * scale;
+        for (long i = 0; i < n; i++) {
+            double v = base + scale * gauss(&s);
+            switch (kind) {
+            case 1: v = -fabs(v); break;                          /* all negative */
+            case 2: v = floor(v / scale); break;                  /* integers: ties */
+            case 3: v = (double)((int)(4 * fabs(gauss(&s))) % 3); break; /* three values */
+            case 4: if (i % 7 == 0) v = NAN; break;
+            case 5: if (i % 11 == 0) v = i % 2 ? INFINITY : -INFINITY; break;
+            case 6: v = 1e-42 * gauss(&s); break;                 /* denormals */
+            case 7: if (i % 3) v = 0.0; break;                    /* mostly zeros */
+            case 8: v = i % 2 ? NAN : v; break;                   /* half NaN */
+            default: break;
+            }
+            row[i] = (float)v;
+        }
+        const double got = wf_fits_row_noise(row, n, scratch), want = row_noise_by_sort(row, n);
+        ck_assert_msg(got == want || (isnan(got) && isnan(want)), "trial %d (n %ld, kind %d): %.9g, sort %.9g",
+                      trial, n, kind, got, want);
+    }
+    for (long i = 0; i < N; i++) row[i] = NAN; /* nothing finite: 0 */
+    ck_assert(wf_fits_row_noise(row, N, scratch) == 0 && row_noise_by_sort(row, N) == 0);
+}
+END_TEST
+
 START_TEST(test_dither_seed)
 {
     int seen[10001] = {0}, distinct = 0;
@@ -354,6 +415,7 @@ static Suite *fitscomp_suite(void)
     tcase_add_test(tc, test_quantization_error);
     tcase_add_test(tc, test_same_bytes_any_order);
     tcase_add_test(tc, test_row_noise);
+    tcase_add_test(tc, test_row_noise_exact);
     tcase_add_test(tc, test_dither_seed);
     tcase_add_test(tc, test_damage_detected);
     suite_add_tcase(s, tc);

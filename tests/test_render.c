@@ -374,6 +374,53 @@ START_TEST(pool_kept_near_live_stamps)
 }
 END_TEST
 
+/* A stamp's rows the tiles have passed leave the pool: a chain of tall stamps, each starting
+ * 60 rows below the previous one, in a pool that holds one whole stamp plus the next one's
+ * double-precision draw only once the first has lost its passed rows (100 x 50 floats are
+ * 20,000 bytes, the next draw 40,000, the pool 56,000: room for 80 rows of the first, which
+ * a tile of up to 40 rows that reaches row 60 has passed). Kept whole, every stamp after the
+ * first was drawn in pieces, one per tile; now each is drawn once, whole, and the rates are
+ * those of a pool large enough for all of them, whatever the tile height. */
+START_TEST(passed_rows_leave_the_pool)
+{
+    enum { N = 12, W = 70, H = 60 * N + 60, NY = 100, NX = 50 };
+    static gauss g[N];
+    static wf_render_object o[N];
+    for (int i = 0; i < N; i++) {
+        g[i] = (gauss){12.0 + 0.5 * NX + 0.37 * i, 60.0 * i + 0.5 * NY + 0.21 * i, 9.0 + 0.3 * i, 1000.0 + i, 0, 0};
+        o[i] = (wf_render_object){(uint64_t)i, 12 + (i % 3), 60 * i, NX, NY, &g[i], 0.0, 0, 0, 0, 0, 0};
+    }
+    wf_renderer_config big = {W, H, 0.1, NULL, NULL, 1u << 22, 0, NULL};
+    counter c = {0, 0};
+    float *ref = render_all(&big, o, N, 10, &c);
+    wf_renderer_config cfg = big;
+    cfg.pool_bytes = 56000;
+    const int tiles[] = {10, 1, 7, 33, 40};
+    for (int t = 0; t < 5; t++) {
+        wf_renderer *r;
+        c = (counter){0, 0};
+        ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
+        wf_scene_source src;
+        wf_renderer_source(r, &src);
+        float *img = malloc((size_t)W * H * sizeof *img);
+        for (int y0 = 0; y0 < H; y0 += tiles[t]) {
+            int y1 = y0 + tiles[t] < H ? y0 + tiles[t] : H;
+            ck_assert_int_eq(wf_scene_fill(&src, y0, y1, W, img + (size_t)y0 * W), WF_OK);
+        }
+        wf_renderer_stats st;
+        wf_renderer_get_stats(r, &st);
+        wf_renderer_destroy(r);
+        ck_assert_msg(st.pieces_drawn == 0 && st.stamps_drawn == N && c.calls == N,
+                      "tile height %d: %ld stamps whole, %ld pieces, %ld draws for %d objects", tiles[t],
+                      st.stamps_drawn, st.pieces_drawn, c.calls, N);
+        ck_assert_uint_le(st.pool_high_water, cfg.pool_bytes);
+        ck_assert_msg(!memcmp(ref, img, sizeof(float) * W * H), "tile height %d changes the rates", tiles[t]);
+        free(img);
+    }
+    free(ref);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("render");
@@ -384,6 +431,7 @@ static Suite *suite(void)
     tcase_add_test(tc, crowded_tile_and_empty_scene);
     tcase_add_test(tc, each_stamp_drawn_once);
     tcase_add_test(tc, pool_kept_near_live_stamps);
+    tcase_add_test(tc, passed_rows_leave_the_pool);
     tcase_add_test(tc, halo_objects);
     tcase_add_test(tc, halo_clipped);
     tcase_add_test(tc, negatives_clipped_in_the_sum);

@@ -13,7 +13,8 @@ struct wf_renderer {
     size_t n;
     wf_draw_fn draw;
     void *draw_ctx;
-    size_t *stamp_off;      /* per object: offset of its whole stamp in the pool, or NO_STAMP */
+    size_t *stamp_off;      /* per object: offset in the pool of its first kept row, or NO_STAMP */
+    int *stamp_row0;        /* per object: its first kept row (the rows above it were passed) */
     size_t *active;         /* objects admitted and not yet passed, in sorted order */
     size_t nactive;
     size_t next;            /* first object not yet admitted */
@@ -35,11 +36,13 @@ static int by_row(const void *a, const void *b)
 }
 
 /* Stamps are drawn in double and kept as float (7 significant digits, far below any noise;
- * half the memory): pool bytes of a kept stamp, rounded up so that the next stamp can be
- * drawn in double at an aligned address. */
-static size_t stamp_bytes(const wf_render_object *o)
+ * half the memory). Pool bytes of a kept stamp from row y0 on, rounded up so that the next
+ * stamp can be drawn in double at an aligned address: its passed rows leave the pool at the
+ * next compaction, so that a tall stamp the tiles are halfway through holds only its lower
+ * half (kept whole, such stamps filled the pool and the next large one was drawn in pieces). */
+static size_t kept_bytes(const wf_render_object *o, int y0)
 {
-    return ((size_t)o->bnx * (size_t)o->bny * sizeof(float) + 7u) & ~(size_t)7u;
+    return ((size_t)(o->by0 + o->bny - y0) * (size_t)o->bnx * sizeof(float) + 7u) & ~(size_t)7u;
 }
 
 static size_t draw_bytes(const wf_render_object *o)
@@ -75,11 +78,12 @@ wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_obje
     r->last_start = INT_MIN;
     r->objs = malloc((n ? n : 1) * sizeof *r->objs);
     r->stamp_off = malloc((n ? n : 1) * sizeof *r->stamp_off);
+    r->stamp_row0 = malloc((n ? n : 1) * sizeof *r->stamp_row0);
     r->active = malloc((n ? n : 1) * sizeof *r->active);
     r->order = malloc((n ? n : 1) * sizeof *r->order);
     r->pool = cfg->pool_bytes ? wf_arena_host_alloc(cfg->pool_bytes) : NULL;
     r->skyrow = malloc((size_t)cfg->ncols * sizeof *r->skyrow);
-    if (!r->objs || !r->stamp_off || !r->active || !r->order || (cfg->pool_bytes && !r->pool) || !r->skyrow) {
+    if (!r->objs || !r->stamp_off || !r->stamp_row0 || !r->active || !r->order || (cfg->pool_bytes && !r->pool) || !r->skyrow) {
         wf_renderer_destroy(r);
         return wf_error(WF_ERR_NOMEM, "renderer: cannot reserve %zu objects and a %zu-byte pool", n,
                         cfg->pool_bytes);
@@ -123,6 +127,7 @@ void wf_renderer_destroy(wf_renderer *r)
     if (!r) return;
     free(r->objs);
     free(r->stamp_off);
+    free(r->stamp_row0);
     free(r->active);
     free(r->order);
     free(r->pool);
@@ -146,8 +151,8 @@ static wf_status grow(double **buf, size_t *cap, size_t count, const char *what)
     return WF_OK;
 }
 
-/* Moves the live stamps to the front of the pool (they are plain arrays: offsets change,
- * contents do not). Live stamps belong to active objects only. */
+/* Moves the live stamps' kept rows to the front of the pool (they are plain arrays: offsets
+ * change, contents do not). Live stamps belong to active objects only. */
 static void compact(wf_renderer *r)
 {
     size_t n = 0;
@@ -165,10 +170,13 @@ static void compact(wf_renderer *r)
     }
     size_t used = 0;
     for (size_t k = 0; k < n; k++) {
-        size_t obj = r->order[k], bytes = stamp_bytes(&r->objs[obj]), off = r->stamp_off[obj];
-        if (off != used) memmove(r->pool + used, r->pool + off, bytes);
+        size_t obj = r->order[k], off = r->stamp_off[obj];
+        const wf_render_object *o = &r->objs[obj];
+        /* the rows exactly: a kept part may start mid-way through a stamp's rounding */
+        size_t rows = (size_t)(o->by0 + o->bny - r->stamp_row0[obj]) * (size_t)o->bnx * sizeof(float);
+        if (off != used) memmove(r->pool + used, r->pool + off, rows);
         r->stamp_off[obj] = used;
-        used += bytes;
+        used += kept_bytes(o, r->stamp_row0[obj]);
     }
     r->pool_used = used;
 }
@@ -178,7 +186,7 @@ static void compact(wf_renderer *r)
 static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const float **rows)
 {
     const wf_render_object *o = &r->objs[i];
-    size_t bytes = stamp_bytes(o), dbytes = draw_bytes(o);
+    size_t bytes = kept_bytes(o, o->by0), dbytes = draw_bytes(o);
     if (r->stamp_off[i] == NO_STAMP && dbytes <= r->cfg.pool_bytes) {
         /* compact only when that makes room: a futile compaction per request would cost
          * O(active) each time on a crowded tile. The pool is used up to twice what is live
@@ -195,6 +203,7 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
             if (st) return st;
             to_float_in_place(dst, (size_t)o->bnx * (size_t)o->bny);
             r->stamp_off[i] = r->pool_used;
+            r->stamp_row0[i] = o->by0;
             r->pool_used += bytes;
             r->live_bytes += bytes;
             if (r->pool_used > r->stats.pool_high_water) r->stats.pool_high_water = r->pool_used;
@@ -203,7 +212,7 @@ static wf_status stamp_rows(wf_renderer *r, size_t i, int ya, int yb, const floa
         }
     }
     if (r->stamp_off[i] != NO_STAMP) {
-        *rows = (const float *)(const void *)(r->pool + r->stamp_off[i]) + (size_t)(ya - o->by0) * o->bnx;
+        *rows = (const float *)(const void *)(r->pool + r->stamp_off[i]) + (size_t)(ya - r->stamp_row0[i]) * o->bnx;
         return WF_OK;
     }
     size_t need = (size_t)(yb - ya) * (size_t)o->bnx;
@@ -255,15 +264,23 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
     }
     r->last_start = y0;
     /* release the boxes the request has passed (a halo object's box ends before its
-     * footprint, whose halo is still needed), retire the objects whose footprint it has
+     * footprint, whose halo is still needed) and the passed rows of the others (they stay
+     * where they are until a compaction), retire the objects whose footprint it has
      * passed, then admit those that start before its end */
     size_t keep = 0;
     for (size_t a = 0; a < r->nactive; a++) {
         size_t i = r->active[a];
         const wf_render_object *o = &r->objs[i];
-        if (o->by0 + o->bny <= y0 && r->stamp_off[i] != NO_STAMP) {
-            r->live_bytes -= stamp_bytes(o);
-            r->stamp_off[i] = NO_STAMP;
+        if (r->stamp_off[i] != NO_STAMP && r->stamp_row0[i] < y0) {
+            size_t had = kept_bytes(o, r->stamp_row0[i]);
+            if (o->by0 + o->bny <= y0) {
+                r->live_bytes -= had;
+                r->stamp_off[i] = NO_STAMP;
+            } else {
+                r->live_bytes -= had - kept_bytes(o, y0);
+                r->stamp_off[i] += (size_t)(y0 - r->stamp_row0[i]) * (size_t)o->bnx * sizeof(float);
+                r->stamp_row0[i] = y0;
+            }
         }
         if (o->y0 + o->ny > y0) r->active[keep++] = i;
     }

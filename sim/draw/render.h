@@ -2,7 +2,8 @@
  * of objects. Objects are sorted by their first row; an object's stamp is drawn once, when
  * the first tile that touches it asks, its rows are added to every tile it overlaps, and it
  * is dropped once the tiles have passed it. Stamps live in a pool of fixed size, compacted
- * once it holds twice the live stamps (so that only about that much of it is ever resident);
+ * once it holds twice the live stamps (so that only about that much of it is ever resident),
+ * keeping only the rows the tiles have not yet passed;
  * an object whose stamp does not fit is drawn in pieces (the rows a tile needs), never dropped.
  * Objects entirely off the SCA are never drawn. Stamps are drawn in double and kept in the
  * pool as float. An object may keep only a box of its footprint in the pool and have the

@@ -140,31 +140,48 @@ wf_status wf_fits_part_append(fitsfile *dst, const char *dst_path, fitsfile *par
     return st;
 }
 
-/* The k-th smallest of v[0..n-1] (v is reordered): Hoare's selection, median-of-three
- * pivot. The value is the k-th order statistic whatever the partitioning, so it is exact
- * and deterministic. */
+/* The k-th smallest of v[0..n-1], all finite and >= +0 (v is overwritten): a radix select on
+ * the bit patterns, whose order as unsigned integers is the floats' order for such values.
+ * Three digits (bits 31-20, 19-10, 9-0), each a histogram of the values that share the
+ * digits found so far: exact, and branch-light where a quickselect's comparisons with the
+ * pivot are a coin toss on noise (the assembler's rows). */
 static float select_kth(float *v, long n, long k)
 {
-    long lo = 0, hi = n - 1;
-    while (hi > lo) {
-        long mid = lo + (hi - lo) / 2;
-        float a = v[lo], b = v[mid], c = v[hi];
-        float p = a < b ? (b < c ? b : (a < c ? c : a)) : (a < c ? a : (b < c ? c : b));
-        long i = lo, j = hi;
-        while (i <= j) {
-            while (v[i] < p) i++;
-            while (v[j] > p) j--;
-            if (i <= j) {
-                float t = v[i];
-                v[i++] = v[j];
-                v[j--] = t;
-            }
-        }
-        if (k <= j) hi = j;
-        else if (k >= i) lo = i;
-        else return v[k];
+    enum { B1 = 12, B2 = 10, B3 = 10 };
+    uint32_t h[1u << B1], h2[1u << B2], h3[1u << B3];
+    memset(h, 0, sizeof h);
+    memset(h2, 0, sizeof h2);
+    memset(h3, 0, sizeof h3);
+    for (long i = 0; i < n; i++) {
+        uint32_t u;
+        memcpy(&u, &v[i], sizeof u);
+        h[u >> (B2 + B3)]++;
     }
-    return v[k];
+    uint32_t d1 = 0, left = (uint32_t)k;
+    while (left >= h[d1]) left -= h[d1++];
+    /* the values in that bin, moved to the front of v */
+    long m = 0;
+    for (long i = 0; i < n; i++) {
+        uint32_t u;
+        memcpy(&u, &v[i], sizeof u);
+        if (u >> (B2 + B3) != d1) continue;
+        h2[(u >> B3) & ((1u << B2) - 1)]++;
+        v[m++] = v[i];
+    }
+    uint32_t d2 = 0;
+    while (left >= h2[d2]) left -= h2[d2++];
+    uint32_t high = d1 << B2 | d2;
+    for (long i = 0; i < m; i++) {
+        uint32_t u;
+        memcpy(&u, &v[i], sizeof u);
+        if (u >> B3 == high) h3[u & ((1u << B3) - 1)]++;
+    }
+    uint32_t d3 = 0;
+    while (left >= h3[d3]) left -= h3[d3++];
+    uint32_t u = high << B3 | d3;
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
 }
 
 double wf_fits_row_noise(const float *row, long n, float *scratch)
@@ -176,7 +193,7 @@ double wf_fits_row_noise(const float *row, long n, float *scratch)
     long m = 0;
     for (long i = 2; i + 2 < n; i++) {
         float d = fabsf(2.0f * row[i] - row[i - 2] - row[i + 2]);
-        if (isfinite(d)) scratch[m++] = d;
+        if (isfinite(d)) scratch[m++] = d; /* >= +0: select_kth's domain */
     }
     if (m < 1) return 0;
     return 0.6052697 * select_kth(scratch, m, (m - 1) / 2);

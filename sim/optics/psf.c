@@ -1,5 +1,6 @@
 #include "sim/optics/psf.h"
 #include "sim/numeric/trig.h"
+#include "sim/numeric/czt.h"
 #include "sim/numeric/parallel.h"
 #include "sim/numeric/fftw_lock.h"
 #include "hal/arena.h"
@@ -357,6 +358,8 @@ static wf_status check_draw(const wf_psf_draw_opts *d)
     if ((d->pixel || d->diffusion > 0.0) && (!(d->det_scale > 0.0) || !isfinite(d->det_scale)))
         return wf_error(WF_ERR_RANGE, "psf draw: detector pixel %g arcsec is not positive",
                         d->det_scale);
+    if (d->czt != 0 && d->czt != 1)
+        return wf_error(WF_ERR_RANGE, "psf draw: czt %d is not 0 (direct sum) or 1 (chirp-z)", d->czt);
     if (d->galsim != 0 && d->galsim != 1)
         return wf_error(WF_ERR_RANGE, "psf draw: galsim %d is not 0 (exact) or 1 (GalSim's "
                         "rendering)", d->galsim);
@@ -412,6 +415,17 @@ static void phasor_row(int k0, int n, double c, double scale, int delta, double 
             re[a + k] = gain * cs[k];
             im[a + k] = -(gain * sn[k]);
         }
+    }
+}
+
+/* The discrete pupil makes the PSF periodic; only the central period is the PSF. */
+static void zero_outside_period(const wf_psf *psf, const wf_psf_draw_opts *d, int ja, int jend, double *out)
+{
+    double half = 0.5 * psf->info.period_arcsec;
+    for (int j = ja; j < jend; j++) {
+        double ty = fabs((j - d->cy) * d->scale);
+        for (int i = 0; i < d->nx; i++)
+            if (ty > half || fabs((i - d->cx) * d->scale) > half) out[(size_t)j * d->nx + i] = 0.0;
     }
 }
 
@@ -487,14 +501,99 @@ static wf_status draw_rows(void *ctx, int task, int slot)
         }
     }
     free(buf);
-    /* The discrete pupil makes the PSF periodic; only the central period is the PSF. */
-    double half = 0.5 * psf->info.period_arcsec;
-    for (int j = ja; j < jend; j++) {
-        double ty = fabs((j - d->cy) * d->scale);
-        for (int i = 0; i < nx; i++)
-            if (ty > half || fabs((i - d->cx) * d->scale) > half) out[(size_t)j * nx + i] = 0.0;
-    }
+    zero_outside_period(psf, d, ja, jend, out);
     return WF_OK;
+}
+
+/* x[m] *= e^{2πi t0 m} (t0 in turns): moves a transform's origin to the centre. */
+static void shift_phase(double *x, int n, double t0, double *tmp)
+{
+    double *u = tmp, *c = tmp + n, *s = tmp + 2 * n;
+    for (int m = 0; m < n; m++) u[m] = t0 * m;
+    wf_trig_sincos_turns(u, n, c, s);
+    for (int m = 0; m < n; m++) {
+        double xr = x[2 * m], xi = x[2 * m + 1];
+        x[2 * m] = xr * c[m] - xi * s[m];
+        x[2 * m + 1] = xr * s[m] + xi * c[m];
+    }
+}
+
+/* The draw_rows sum by chirp-z transforms, per wavelength: first over Δy for each Δx (B of
+ * draw_rows, every output row at once), then over Δx for each output row. Sample k of an axis
+ * sits at θ = (k - c) scale, so with α = scale / T the phase of lag Δ = m + d0 is
+ * -α (k - c)(m + d0) turns: the input takes e^{2πi α c m}, the output e^{-2πi α (k - c) d0}. */
+static wf_status draw_czt(const wf_psf *psf, const wf_psf_draw_opts *d, double *out)
+{
+    int nx = d->nx, ny = d->ny, kx = psf->kx, ky = psf->ky, nyc = 2 * ky - 1;
+    int gn = d->galsim ? psf->info.galsim_n : 0;
+    int nmax = nx > ny ? nx : ny;
+    if (nyc > nmax) nmax = nyc;
+    if (kx > nmax) nmax = kx;
+    size_t nb = (size_t)kx * ny * 2;
+    double *b = malloc(nb * sizeof *b), *x = malloc((size_t)nmax * 2 * sizeof *x);
+    double *y = malloc((size_t)nmax * 2 * sizeof *y), *tmp = malloc((size_t)nmax * 3 * sizeof *tmp);
+    double *gy = malloc((size_t)nyc * sizeof *gy), *gx = malloc((size_t)kx * sizeof *gx);
+    double *post = malloc((size_t)ny * 2 * sizeof *post);
+    wf_czt *zy = NULL, *zx = NULL;
+    wf_status st = WF_OK;
+    if (!b || !x || !y || !tmp || !gy || !gx || !post) {
+        st = wf_error(WF_ERR_NOMEM, "psf draw: cannot allocate %zu MB for the chirp-z sums", (nb * sizeof *b) >> 20);
+        goto done;
+    }
+    memset(out, 0, (size_t)nx * ny * sizeof *out);
+    for (int k = 0; k < psf->nlambda && !st; k++) {
+        const mono *m = &psf->m[k];
+        double T = m->period, alpha = d->scale / T;
+        wf_czt_free(zy);
+        wf_czt_free(zx);
+        zy = zx = NULL;
+        if ((st = wf_czt_create(nyc, ny, alpha, &zy)) || (st = wf_czt_create(kx, nx, alpha, &zx))) break;
+        for (int t = 0; t < nyc; t++) gy[t] = axis_gain(d, T, t - (ky - 1), gn);
+        for (int a = 0; a < kx; a++) gx[a] = axis_gain(d, T, a, gn) * m->weight * (a ? 2.0 : 1.0);
+        /* B[Δx][row] = Σ_Δy c[Δx][Δy] gain(Δy) e^{-2πi θ_row Δy / T} */
+        const int d0 = -(ky - 1);
+        for (int j = 0; j < ny; j++) y[j] = -alpha * (j - d->cy) * d0;
+        wf_trig_sincos_turns(y, ny, post, post + ny); /* e^{-2πi α (j - cy) d0}: cos, sin */
+        for (int a = 0; a < kx; a++) {
+            const double *cr = m->cre + (size_t)a * nyc, *ci = m->cim + (size_t)a * nyc;
+            for (int t = 0; t < nyc; t++) x[2 * t] = x[2 * t + 1] = 0.0;
+            for (int t = m->lo[a]; t <= m->hi[a]; t++) {
+                x[2 * t] = cr[t] * gy[t];
+                x[2 * t + 1] = ci[t] * gy[t];
+            }
+            shift_phase(x, nyc, alpha * d->cy, tmp);
+            double *ba = b + (size_t)a * ny * 2;
+            wf_czt_run(zy, x, ba);
+            for (int j = 0; j < ny; j++) {
+                double br = ba[2 * j], bi = ba[2 * j + 1], c = post[j], s = post[ny + j];
+                ba[2 * j] = br * c - bi * s;
+                ba[2 * j + 1] = br * s + bi * c;
+            }
+        }
+        /* out[row][i] += Re Σ_Δx gain(Δx) B[Δx][row] e^{-2πi θ_i Δx / T} */
+        for (int j = 0; j < ny; j++) {
+            for (int a = 0; a < kx; a++) {
+                x[2 * a] = gx[a] * b[((size_t)a * ny + j) * 2];
+                x[2 * a + 1] = gx[a] * b[((size_t)a * ny + j) * 2 + 1];
+            }
+            shift_phase(x, kx, alpha * d->cx, tmp);
+            wf_czt_run(zx, x, y);
+            double *o = out + (size_t)j * nx;
+            for (int i = 0; i < nx; i++) o[i] += y[2 * i];
+        }
+    }
+    if (!st) zero_outside_period(psf, d, 0, ny, out);
+done:
+    wf_czt_free(zy);
+    wf_czt_free(zx);
+    free(b);
+    free(x);
+    free(y);
+    free(tmp);
+    free(gy);
+    free(gx);
+    free(post);
+    return st;
 }
 
 wf_status wf_psf_draw(const wf_psf *psf, const wf_psf_draw_opts *d, double *out)
@@ -502,6 +601,7 @@ wf_status wf_psf_draw(const wf_psf *psf, const wf_psf_draw_opts *d, double *out)
     if (!psf) return wf_error(WF_ERR_INPUT, "psf draw: no PSF");
     wf_status st = check_draw(d);
     if (st) return st;
+    if (d->czt) return draw_czt(psf, d, out);
     /* no more shares than ROW_BLOCK-row blocks: with thinner ones the column phasors each
      * share makes would dominate */
     int T = d->threads > 1 ? d->threads : 1, most = (d->ny + ROW_BLOCK - 1) / ROW_BLOCK;
@@ -580,7 +680,7 @@ static int same_draw(const wf_psf_draw_opts *p, const wf_psf_draw_opts *q)
     return p->nx == q->nx && p->ny == q->ny && p->scale == q->scale && p->cx == q->cx &&
            p->cy == q->cy && p->pixel == q->pixel && p->det_scale == q->det_scale &&
            p->jitter == q->jitter && p->diffusion == q->diffusion && p->mtf == q->mtf &&
-           p->mtf_ctx == q->mtf_ctx && p->galsim == q->galsim;
+           p->mtf_ctx == q->mtf_ctx && p->galsim == q->galsim && p->czt == q->czt;
 }
 
 static void drop_models(wf_psf_cache *c, size_t need, const wf_psf *keep)

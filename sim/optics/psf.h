@@ -81,6 +81,10 @@ typedef struct wf_psf_draw_opts {
      * 0 (exact) otherwise. GalSim's no_pixel draws interpolate in real space instead. */
     int galsim;
     int threads;      /* rows shared among this many threads (same image for any count) [1] */
+    /* 1: the same sum by chirp-z transforms (sim/numeric/czt.h), O(n log n) a row instead of
+     * O(n k): for large images (the scene's wide PSF); agrees with the direct sum to ~1e-13
+     * of the peak, not bit for bit. One thread. [0] */
+    int czt;
 } wf_psf_draw_opts;
 
 typedef struct wf_psf_info {
