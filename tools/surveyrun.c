@@ -479,7 +479,10 @@ wf_status wf_survey_begin(const wf_config *base, const wf_survey_run_options *op
         return st;
     }
     ctx->scratch = malloc(sizeof *ctx->scratch);
-    if (!ctx->scratch || wf_persist_cache_new(&ctx->pcache)) {
+    /* test hook: every history drawn whole (the products must not change) */
+    const char *hook = getenv("WFISIM_TEST_PERSIST_CACHE");
+    int cache_on = !(hook && !strcmp(hook, "off"));
+    if (!ctx->scratch || (cache_on && wf_persist_cache_new(&ctx->pcache))) {
         wf_survey_free(ctx);
         return wf_error(WF_ERR_NOMEM, "out of memory");
     }
@@ -588,19 +591,23 @@ const char *wf_survey_item_note(const wf_survey_item_result *res)
     return res->changed ? " (made from other inputs: redone)" : res->redone ? " (damaged product redone)" : "";
 }
 
-/* The item's history, each earlier exposure drawn as its own product would be (tools/persist.h). */
+/* The item's history, each earlier exposure drawn as its own product would be (tools/persist.h),
+ * or taken from the process's cache; *drawn: how many were drawn. */
 static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, const wf_config *cfg,
-                               wf_persist_history **out, wf_persist_source *src)
+                               wf_persist_history **out, wf_persist_source *src, int *drawn)
 {
     wf_persist_history *ph;
+    *drawn = 0;
     wf_status st = wf_persist_history_new(cfg->ro.ncols, cfg->ro.nrows, cfg->persist.min_stimulus,
                                           cfg->ro.det.on.saturation ? cfg->ro.det.full_well : INFINITY, &ph);
     for (int j = 0; j < h->n && !st; j++) {
         const wf_survey_row *r = &ctx->plan[h->row[j]];
         wf_clock clock;
+        int d = 1;
         if (!(st = configure(ctx->base, ctx->opt, r, ctx->items[i].sca, ctx->scratch, &clock)))
-            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache);
+            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache, &d);
         if (st) st = wf_error(st, "persistence history from exposure %d: %s", r->expid, wf_error_message());
+        *drawn += d;
     }
     if (st) { wf_persist_history_free(ph); return st; }
     wf_persist_history_source(ph, src);
@@ -634,7 +641,11 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         p->cfg.quiet = 1;
         wf_persist_history *ph = NULL;
         wf_persist_source src;
-        if (h->n && (st = build_history(ctx, i, h, &p->cfg, &ph, &src))) return wf_error(st, "%s: %s", name, wf_error_message());
+        int drawn = 0;
+        if (h->n && (st = build_history(ctx, i, h, &p->cfg, &ph, &src, &drawn)))
+            return wf_error(st, "%s: %s", name, wf_error_message());
+        res->hist_used = h->n;
+        res->hist_drawn = drawn;
         if (ph) job->persist = &src;
         st = wf_pipeline_expose(job);
         wf_persist_history_free(ph);
@@ -684,6 +695,8 @@ static void tally(const wf_survey_ctx *ctx, const wf_survey_item_result *res, wf
         stats->redone += res[i].redone;
         stats->changed += res[i].changed;
         stats->sne_drawn += (long)res[i].sne;
+        stats->hist_used += res[i].hist_used;
+        stats->hist_drawn += res[i].hist_drawn;
     }
 }
 

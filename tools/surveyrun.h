@@ -61,6 +61,7 @@ typedef struct wf_survey_run_stats {
     long changed;                   /* products made from other inputs, remade (--on-change redo) */
     long sne_drawn;                 /* SN entries in the truth of the products rendered */
     long outside;                   /* items outside --area, not made */
+    long hist_used, hist_drawn;     /* earlier exposures in the persistence histories, and drawn */
     int silent;                     /* 1: another process reports this run (MPI ranks > 0) */
 } wf_survey_run_stats;
 
@@ -91,6 +92,8 @@ typedef struct wf_survey_item_result {
     int32_t redone;        /* 1: a damaged product was replaced */
     int32_t changed;       /* 1: a product from other inputs was replaced */
     int64_t sne;           /* SNe drawn */
+    int32_t hist_used;     /* earlier exposures in its persistence history */
+    int32_t hist_drawn;    /* of them drawn for it (the others were in the process's cache) */
     wf_survey_index_row row;
 } wf_survey_item_result;
 
