@@ -1002,7 +1002,8 @@ static void assert_same_history_products(const char *d, const char *a, const cha
 
 /* The cache of drawn histories changes no byte, only what is drawn: with it off
  * (WFISIM_TEST_PERSIST_CACHE=off) every earlier exposure of every history is drawn (D = U);
- * with it on each (EXPID, SCA) is drawn once (D = the distinct ones of the headers, < U). */
+ * with it on each (EXPID, SCA) is drawn once (D = the distinct ones of the headers, < U), in
+ * one process and with each item in a process of its own (--isolate). */
 START_TEST(history_cache_any_process)
 {
     const char *bin = wf_test_program();
@@ -1032,6 +1033,13 @@ START_TEST(history_cache_any_process)
     ck_assert_int_eq(lu, u);
     ck_assert_int_eq(ld, dist);
     assert_same_history_products(d, "off", "on");
+    /* each item in a child: what the children drew comes back to the parent's cache */
+    ck_assert_int_eq(wf_test_run("%s survey run --isolate --plan %s " HIST " --set scene.stars=%s --out %s/iso 2>%s",
+                                 bin, plan, stars, d, log), 0);
+    logged_counts(log, &lu, &ld);
+    ck_assert_int_eq(lu, u);
+    ck_assert_int_eq(ld, dist);
+    assert_same_history_products(d, "off", "iso");
 }
 END_TEST
 

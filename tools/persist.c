@@ -37,7 +37,8 @@ struct wf_persist_history {
 typedef struct cache_entry {
     long long expid;
     slot_list list;
-    unsigned long used; /* 0: empty */
+    unsigned long used;  /* 0: empty */
+    unsigned long added; /* the tick it came in at (wf_persist_cache_export's mark) */
 } cache_entry;
 
 struct wf_persist_cache {
@@ -76,7 +77,71 @@ static void cache_put(wf_persist_cache *c, cache_entry *e, long long expid, slot
     free(e->list.e);
     e->list = list;
     e->expid = expid;
-    e->used = ++c->tick;
+    e->used = e->added = ++c->tick;
+}
+
+unsigned long wf_persist_cache_mark(const wf_persist_cache *c)
+{
+    return c ? c->tick : 0;
+}
+
+/* The export: per entry int64 expid, int32 sca, uint32 n, n uint32 pixels, n uint16 codes. */
+wf_status wf_persist_cache_export(const wf_persist_cache *c, unsigned long mark, void **buf, size_t *size)
+{
+    *buf = NULL;
+    *size = 0;
+    if (!c) return WF_OK;
+    size_t total = 0;
+    for (int k = 0; k < CACHE_SCAS; k++)
+        for (int i = 0; i < CACHE_DEPTH; i++)
+            if (c->s[k][i].used && c->s[k][i].added > mark) total += 16 + c->s[k][i].list.n * 6;
+    if (!total) return WF_OK;
+    unsigned char *p = malloc(total);
+    if (!p) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence histories drawn");
+    *buf = p;
+    *size = total;
+    for (int k = 0; k < CACHE_SCAS; k++)
+        for (int i = 0; i < CACHE_DEPTH; i++) {
+            const cache_entry *e = &c->s[k][i];
+            if (!e->used || e->added <= mark) continue;
+            int64_t expid = e->expid;
+            int32_t sca = k;
+            uint32_t n = (uint32_t)e->list.n;
+            memcpy(p, &expid, 8);
+            memcpy(p + 8, &sca, 4);
+            memcpy(p + 12, &n, 4);
+            p += 16;
+            for (uint32_t j = 0; j < n; j++, p += 4) memcpy(p, &e->list.e[j].pixel, 4);
+            for (uint32_t j = 0; j < n; j++, p += 2) memcpy(p, &e->list.e[j].code, 2);
+        }
+    return WF_OK;
+}
+
+wf_status wf_persist_cache_import(wf_persist_cache *c, const void *buf, size_t size)
+{
+    const unsigned char *p = buf, *end = p + size;
+    while (c && p < end) {
+        int64_t expid;
+        int32_t sca;
+        uint32_t n;
+        if (end - p < 16) return wf_error(WF_ERR_INPUT, "persistence histories: a record cut short");
+        memcpy(&expid, p, 8);
+        memcpy(&sca, p + 8, 4);
+        memcpy(&n, p + 12, 4);
+        p += 16;
+        if (sca < 0 || sca >= CACHE_SCAS || (size_t)(end - p) / 6 < n)
+            return wf_error(WF_ERR_INPUT, "persistence histories: a record of SCA %d with %u pixels does not fit",
+                            (int)sca, (unsigned)n);
+        cache_entry *slot;
+        if (cache_find(c, expid, sca, &slot)) { p += (size_t)n * 6; continue; } /* the same bytes */
+        slot_list list = {malloc((n ? n : 1) * sizeof(entry)), n};
+        if (!list.e) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence histories");
+        for (uint32_t j = 0; j < n; j++) memcpy(&list.e[j].pixel, p + 4 * (size_t)j, 4);
+        for (uint32_t j = 0; j < n; j++) memcpy(&list.e[j].code, p + 4 * (size_t)n + 2 * (size_t)j, 2);
+        p += (size_t)n * 6;
+        cache_put(c, slot, expid, list);
+    }
+    return WF_OK;
 }
 
 wf_status wf_persist_history_new(int ncols, int nrows, double min_stimulus, double full_well,

@@ -34,6 +34,13 @@ typedef struct wf_persist_cache wf_persist_cache;
 wf_status wf_persist_cache_new(wf_persist_cache **out);
 void wf_persist_cache_free(wf_persist_cache *c);
 
+/* Where the cache stands now; wf_persist_cache_export(c, mark) gives the exposures added since
+ * (a child process's drawing, for its parent), as bytes for wf_persist_cache_import (*buf
+ * malloc'd, NULL when none). Import keeps the entries it already holds. */
+unsigned long wf_persist_cache_mark(const wf_persist_cache *c);
+wf_status wf_persist_cache_export(const wf_persist_cache *c, unsigned long mark, void **buf, size_t *size);
+wf_status wf_persist_cache_import(wf_persist_cache *c, const void *buf, size_t size);
+
 /* The next slot from the exposure cfg describes (its scene as `wfisim expose` would draw it,
  * bright objects only; the grid scene whole), clock its read pattern; through cache when not
  * NULL (which must outlive h). *drawn: 1 when it was drawn, 0 when the cache held it. */

@@ -581,6 +581,21 @@ wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i)
     return prepare(ctx, i, ctx->cache, ctx->p);
 }
 
+unsigned long wf_survey_history_mark(const wf_survey_ctx *ctx)
+{
+    return wf_persist_cache_mark(ctx->pcache);
+}
+
+wf_status wf_survey_history_export(const wf_survey_ctx *ctx, unsigned long mark, void **buf, size_t *size)
+{
+    return wf_persist_cache_export(ctx->pcache, mark, buf, size);
+}
+
+wf_status wf_survey_history_import(wf_survey_ctx *ctx, const void *buf, size_t size)
+{
+    return wf_persist_cache_import(ctx->pcache, buf, size);
+}
+
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap)
 {
     snprintf(buf, cap, "exposure %d SCA %d", ctx->rows[ctx->items[i].row].expid, ctx->items[i].sca);

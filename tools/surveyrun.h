@@ -114,6 +114,12 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
 /* Computes item i's input digest in this process, so that its files' digests stay in the
  * run's cache (a child process that then makes the item finds them there). */
 wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i);
+/* The persistence histories this process's cache took in since mark (wf_survey_history_mark),
+ * as bytes for another process's wf_survey_history_import (*buf malloc'd, NULL when none):
+ * how an item's child gives what it drew back to the process that makes the next items. */
+unsigned long wf_survey_history_mark(const wf_survey_ctx *ctx);
+wf_status wf_survey_history_export(const wf_survey_ctx *ctx, unsigned long mark, void **buf, size_t *size);
+wf_status wf_survey_history_import(wf_survey_ctx *ctx, const void *buf, size_t size);
 /* "exposure E SCA S" of item i, for messages. */
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap);
 /* How item i's result reads in a progress line: "", " (damaged product redone)", ... */
