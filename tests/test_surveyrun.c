@@ -1003,7 +1003,7 @@ static void assert_same_history_products(const char *d, const char *a, const cha
 /* The cache of drawn histories changes no byte, only what is drawn: with it off
  * (WFISIM_TEST_PERSIST_CACHE=off) every earlier exposure of every history is drawn (D = U);
  * with it on each (EXPID, SCA) is drawn once (D = the distinct ones of the headers, < U), in
- * one process and with each item in a process of its own (--isolate). */
+ * one process and with each item in a process of its own (--isolate); under MPI between. */
 START_TEST(history_cache_any_process)
 {
     const char *bin = wf_test_program();
@@ -1040,6 +1040,77 @@ START_TEST(history_cache_any_process)
     ck_assert_int_eq(lu, u);
     ck_assert_int_eq(ld, dist);
     assert_same_history_products(d, "off", "iso");
+    /* under MPI, ranks make walks of an SCA's items: the same bytes, and ranks draw less
+     * than every history whole (each walk draws its first item's history, then one a step) */
+    const char *mpi = mpi_program();
+    if (!mpi) return; /* CI has it */
+    ck_assert_int_eq(wf_test_run(MPIRUN " %s survey run --plan %s " HIST " --set scene.stars=%s --out %s/mpi 2>%s", mpi,
+                                 plan, stars, d, log), 0);
+    logged_counts(log, &lu, &ld);
+    ck_assert_int_eq(lu, u);
+    ck_assert_int_ge(ld, dist);
+    ck_assert_int_lt(ld, u);
+    assert_same_history_products(d, "off", "mpi");
+}
+END_TEST
+
+/* The MPI program's walks: every item once, each walk one SCA's items in plan order, at most
+ * ceil(items / (2 workers)) of them, and walks listed by their first item. */
+START_TEST(walks_cover_items)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    wf_config cfg;
+    wf_config_defaults(&cfg);
+    wf_survey_run_options opt;
+    memset(&opt, 0, sizeof opt);
+    opt.plan_path = plan;
+    opt.first = 3;
+    opt.last = 12;
+    opt.nscas = 3;
+    opt.scas[0] = 7;
+    opt.scas[1] = 3;
+    opt.scas[2] = 12;
+    wf_survey_ctx *ctx;
+    size_t n;
+    ck_assert_int_eq(wf_survey_begin(&cfg, &opt, &ctx, &n), WF_OK);
+    ck_assert_uint_eq(n, 30);
+    size_t workers[] = {1, 2, 4, 100};
+    for (int q = 0; q < 4; q++) {
+        size_t *order, *start, nwalks, len = (n + 2 * workers[q] - 1) / (2 * workers[q]);
+        ck_assert_int_eq(wf_survey_walks(ctx, workers[q], &order, &start, &nwalks), WF_OK);
+        ck_assert_uint_eq(start[0], 0);
+        ck_assert_uint_eq(start[nwalks], n);
+        ck_assert_uint_eq(nwalks, 3 * ((10 + len - 1) / len)); /* each SCA's 10 items cut by len */
+        int seen[30] = {0};
+        for (size_t w = 0; w < nwalks; w++) {
+            ck_assert_uint_gt(start[w + 1], start[w]);
+            ck_assert_uint_le(start[w + 1] - start[w], len);
+            if (w) ck_assert_uint_gt(order[start[w]], order[start[w - 1]]);
+            int e0 = -1, s0 = -1;
+            for (size_t k = start[w]; k < start[w + 1]; k++) {
+                char name[64];
+                int e, sca;
+                seen[order[k]]++;
+                wf_survey_item_name(ctx, order[k], name, sizeof name);
+                ck_assert_int_eq(sscanf(name, "exposure %d SCA %d", &e, &sca), 2);
+                if (k > start[w]) {
+                    ck_assert_int_eq(sca, s0);
+                    ck_assert_int_eq(e, e0 + 1); /* the next exposure: consecutive in the plan */
+                }
+                e0 = e;
+                s0 = sca;
+            }
+        }
+        for (int i = 0; i < 30; i++) ck_assert_int_eq(seen[i], 1);
+        free(order);
+        free(start);
+    }
+    wf_survey_free(ctx);
 }
 END_TEST
 
@@ -1060,6 +1131,7 @@ static Suite *suite(void)
     tcase_add_test(tc, isolate_crashed_item_lost_alone);
     tcase_add_test(tc, mpi_crashed_item_lost_alone);
     tcase_add_test(tc, history_cache_any_process);
+    tcase_add_test(tc, walks_cover_items);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -596,6 +596,39 @@ wf_status wf_survey_history_import(wf_survey_ctx *ctx, const void *buf, size_t s
     return wf_persist_cache_import(ctx->pcache, buf, size);
 }
 
+wf_status wf_survey_walks(const wf_survey_ctx *ctx, size_t nworkers, size_t **order, size_t **start, size_t *nwalks)
+{
+    size_t n = ctx->nitems, two = 2 * (nworkers ? nworkers : 1), len = (n + two - 1) / two, w = 0;
+    if (len < 1) len = 1;
+    size_t *walk = malloc((n ? n : 1) * sizeof *walk), *cursor = malloc((n + 1) * sizeof *cursor);
+    *order = malloc((n ? n : 1) * sizeof **order);
+    *start = calloc(n + 1, sizeof **start);
+    if (!walk || !cursor || !*order || !*start) {
+        free(walk);
+        free(cursor);
+        free(*order);
+        free(*start);
+        *order = *start = NULL;
+        return wf_error(WF_ERR_NOMEM, "out of memory for the walks");
+    }
+    /* the items are in plan order: each goes on its SCA's open walk, or opens one (numbered
+     * in order of their first item) when that holds len */
+    size_t open[WF_NSCA + 1] = {0}, count[WF_NSCA + 1] = {0};
+    for (size_t i = 0; i < n; i++) {
+        int sca = ctx->items[i].sca;
+        if (count[sca]++ % len == 0) open[sca] = w++;
+        walk[i] = open[sca];
+    }
+    for (size_t i = 0; i < n; i++) (*start)[walk[i] + 1]++;
+    for (size_t q = 0; q < w; q++) (*start)[q + 1] += (*start)[q];
+    memcpy(cursor, *start, (w + 1) * sizeof *cursor);
+    for (size_t i = 0; i < n; i++) (*order)[cursor[walk[i]]++] = i; /* plan order within a walk */
+    free(walk);
+    free(cursor);
+    *nwalks = w;
+    return WF_OK;
+}
+
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap)
 {
     snprintf(buf, cap, "exposure %d SCA %d", ctx->rows[ctx->items[i].row].expid, ctx->items[i].sca);

@@ -120,6 +120,13 @@ wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i);
 unsigned long wf_survey_history_mark(const wf_survey_ctx *ctx);
 wf_status wf_survey_history_export(const wf_survey_ctx *ctx, unsigned long mark, void **buf, size_t *size);
 wf_status wf_survey_history_import(wf_survey_ctx *ctx, const void *buf, size_t size);
+/* The items as walks for a run on nworkers processes: a walk is consecutive items of one SCA
+ * in plan (exposure) order, so that the process that makes it finds in its cache all the
+ * earlier exposures of each history but the newest (tools/persist.h); walks are cut to
+ * ceil(items / (2 nworkers)) items, so that every worker has some, and listed by their first
+ * item. (*order)[k] for k in [(*start)[w], (*start)[w + 1]) are walk w's items; both
+ * malloc'd. */
+wf_status wf_survey_walks(const wf_survey_ctx *ctx, size_t nworkers, size_t **order, size_t **start, size_t *nwalks);
 /* "exposure E SCA S" of item i, for messages. */
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap);
 /* How item i's result reads in a progress line: "", " (damaged product redone)", ... */
