@@ -280,6 +280,70 @@ START_TEST(dies_with_parent)
 }
 END_TEST
 
+/* A tail of 3 MiB (many pipe buffers) whose bytes follow a pattern, asked for by size. */
+static wf_status big_tail(void *arg, void **tail, size_t *size)
+{
+    size_t n = *(size_t *)arg;
+    unsigned char *t = malloc(n ? n : 1);
+    if (!t) return WF_ERR_NOMEM;
+    for (size_t k = 0; k < n; k++) t[k] = (unsigned char)(k * 2654435761u >> 13);
+    *tail = n ? t : NULL;
+    *size = n;
+    if (!n) free(t);
+    return WF_OK;
+}
+
+static wf_status tail_sum_fn(void *arg, void *out)
+{
+    int n = 10;
+    (void)arg;
+    return sum_fn(&n, out);
+}
+
+static wf_status tail_fail_fn(void *arg, void *out)
+{
+    int row = 3;
+    (void)arg;
+    return fail_fn(&row, out);
+}
+
+/* The child's tail arrives whole after its result, byte for byte, however large; none when
+ * the child gives none or the work failed. */
+START_TEST(tail_whole)
+{
+    size_t n = 3u << 20;
+    answer a = {0, 0};
+    void *tail = NULL;
+    size_t size = 0;
+    int crashed = -1;
+    ck_assert_int_eq(wf_isolate_run_tail("tail", tail_sum_fn, big_tail, &n, &a, sizeof a, &tail, &size, &crashed),
+                     WF_OK);
+    ck_assert_int_eq(crashed, 0);
+    ck_assert_int_eq(a.sum, 385); /* 1 + 4 + ... + 100 */
+    ck_assert_ptr_nonnull(tail);
+    ck_assert_uint_eq(size, n);
+    const unsigned char *t = tail;
+    size_t bad = 0;
+    for (size_t k = 0; k < n; k++) bad += t[k] != (unsigned char)(k * 2654435761u >> 13);
+    ck_assert_uint_eq(bad, 0);
+    free(tail);
+    n = 0;
+    ck_assert_int_eq(wf_isolate_run_tail("tail", tail_sum_fn, big_tail, &n, &a, sizeof a, &tail, &size, &crashed),
+                     WF_OK);
+    ck_assert_ptr_null(tail);
+    ck_assert_uint_eq(size, 0);
+    n = 3u << 20;
+    ck_assert_int_eq(wf_isolate_run_tail("tail", tail_fail_fn, big_tail, &n, &a, sizeof a, &tail, &size, &crashed),
+                     WF_ERR_INPUT);
+    ck_assert_int_eq(crashed, 0);
+    ck_assert_ptr_null(tail);
+    ck_assert_str_eq(wf_error_message(), "row 3: no such filter");
+    /* a tail the caller does not take is read and dropped: the child is not left blocked */
+    ck_assert_int_eq(wf_isolate_run_tail("tail", tail_sum_fn, big_tail, &n, &a, sizeof a, NULL, NULL, &crashed), WF_OK);
+    ck_assert_int_eq(crashed, 0);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("isolate");
@@ -293,6 +357,7 @@ static Suite *suite(void)
     tcase_add_test(tc, large_result);
     tcase_add_test(tc, locks_held_elsewhere);
     tcase_add_test(tc, dies_with_parent);
+    tcase_add_test(tc, tail_whole);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -12,6 +12,8 @@
 
 #include "sim/fits/fitsout.h"
 #include "sim/sn/sncat.h"
+#include "sim/survey/survey.h"
+#include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 #include "tools/surveyrun.h"
 
@@ -915,6 +917,203 @@ START_TEST(expose_digest)
 }
 END_TEST
 
+/* ---- persistence histories through the run's cache ---------------------------------- */
+
+#define HIST "--exposures 0:5 --scas 3,7 --mode single " SMALL " --set scene.kind=catalog"
+
+/* A plan and a star catalog with a saturating star (AB 16) on SCA 3 in each of exposures 0..5,
+ * so that the histories hold pixels. */
+static void history_inputs(const char *bin, const char *d, char *plan, char *stars, size_t cap)
+{
+    snprintf(plan, cap, "%s/plan.fits", d);
+    snprintf(stars, cap, "%s/stars.csv", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    wf_survey_row *rows;
+    size_t nrows;
+    ck_assert_int_eq(wf_survey_read_plan(plan, &rows, &nrows), WF_OK);
+    wf_focal_plane fp;
+    ck_assert_int_eq(wf_wcs_focal_plane(NULL, &fp), WF_OK);
+    FILE *f = fopen(stars, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "id,ra,dec,mag_Y106,mag_J129,mag_H158,mag_F184\n");
+    for (int e = 0; e <= 5; e++) {
+        wf_wcs w;
+        double ra, dec;
+        ck_assert_int_eq(rows[e].expid, e);
+        ck_assert_int_eq(wf_wcs_for_sca(&fp, rows[e].ra, rows[e].dec, rows[e].pa, 3, &w), WF_OK);
+        ck_assert_int_eq(wf_wcs_pix2world(&w, 20 + 15 * e, 48, &ra, &dec), WF_OK);
+        fprintf(f, "%d,%.10f,%.10f,16,16,16,16\n", e, ra, dec);
+    }
+    fclose(f);
+    free(rows);
+}
+
+/* From the products' headers alone: U, the earlier exposures of every history (PERSISTN
+ * summed), and the distinct (EXPID, SCA) among them, what a cache that never loses one of a
+ * run in plan order draws. */
+static void history_counts(const char *dir, long *used, long *distinct)
+{
+    long seen[64];
+    int nseen = 0;
+    *used = 0;
+    for (int e = 0; e <= 5; e++)
+        for (int k = 0; k < 2; k++) {
+            int sca = k ? 7 : 3;
+            char path[4400], v[FLEN_VALUE], key[32];
+            snprintf(path, sizeof path, "%s/wfisim_e%06d_sca%02d.fits", dir, e, sca);
+            header(path, "PERSISTN", v);
+            int n = atoi(v);
+            *used += n;
+            for (int j = 1; j <= n; j++) {
+                snprintf(key, sizeof key, "PERSEX%d", j);
+                header(path, key, v);
+                long id = atol(v) * 100 + sca;
+                int old = 0;
+                for (int q = 0; q < nseen; q++) old |= seen[q] == id;
+                if (!old && nseen < 64) seen[nseen++] = id;
+            }
+        }
+    *distinct = nseen;
+}
+
+/* "persistence histories: U earlier exposures, D of them drawn" from a run's log. */
+static void logged_counts(const char *log, long *used, long *drawn)
+{
+    size_t len;
+    char *text = wf_test_slurp(log, &len);
+    ck_assert_ptr_nonnull(text);
+    const char *at = strstr(text, "persistence histories: ");
+    ck_assert_msg(at != NULL, "%s: no line on the persistence histories", log);
+    ck_assert_int_eq(sscanf(at, "persistence histories: %ld earlier exposures, %ld of them drawn", used, drawn), 2);
+    free(text);
+}
+
+static void assert_same_history_products(const char *d, const char *a, const char *b)
+{
+    for (int e = 0; e <= 5; e++)
+        for (int k = 0; k < 2; k++)
+            for (int t = 0; t < 2; t++) {
+                char x[4300], y[4300];
+                snprintf(x, sizeof x, "%s/%s/wfisim_e%06d_sca%02d%s.fits", d, a, e, k ? 7 : 3, t ? "_truth" : "");
+                snprintf(y, sizeof y, "%s/%s/wfisim_e%06d_sca%02d%s.fits", d, b, e, k ? 7 : 3, t ? "_truth" : "");
+                wf_test_assert_same_file(x, y);
+            }
+}
+
+/* The cache of drawn histories changes no byte, only what is drawn: with it off
+ * (WFISIM_TEST_PERSIST_CACHE=off) every earlier exposure of every history is drawn (D = U);
+ * with it on each (EXPID, SCA) is drawn once (D = the distinct ones of the headers, < U), in
+ * one process and with each item in a process of its own (--isolate); under MPI between. */
+START_TEST(history_cache_any_process)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], stars[4200], log[4200];
+    history_inputs(bin, d, plan, stars, sizeof plan);
+    snprintf(log, sizeof log, "%s/log", d);
+    long u, dist, lu, ld;
+    ck_assert_int_eq(wf_test_run("WFISIM_TEST_PERSIST_CACHE=off %s survey run --plan %s " HIST " --set scene.stars=%s "
+                                 "--out %s/off 2>%s", bin, plan, stars, d, log), 0);
+    logged_counts(log, &lu, &ld);
+    char dir[4300];
+    snprintf(dir, sizeof dir, "%s/off", d);
+    history_counts(dir, &u, &dist);
+    ck_assert_int_gt(u, 0);
+    ck_assert_int_lt(dist, u);
+    ck_assert_int_eq(lu, u);
+    ck_assert_int_eq(ld, u);
+    char x[4300], v[FLEN_VALUE];
+    snprintf(x, sizeof x, "%s/off/wfisim_e000005_sca03.fits", d);
+    header(x, "PERSISTN", v); /* exposure 5 of SCA 3 holds earlier exposures' stars */
+    ck_assert_int_ge(atoi(v), 2);
+    ck_assert_int_eq(wf_test_run("%s survey run --plan %s " HIST " --set scene.stars=%s --out %s/on 2>%s", bin, plan,
+                                 stars, d, log), 0);
+    logged_counts(log, &lu, &ld);
+    ck_assert_int_eq(lu, u);
+    ck_assert_int_eq(ld, dist);
+    assert_same_history_products(d, "off", "on");
+    /* each item in a child: what the children drew comes back to the parent's cache */
+    ck_assert_int_eq(wf_test_run("%s survey run --isolate --plan %s " HIST " --set scene.stars=%s --out %s/iso 2>%s",
+                                 bin, plan, stars, d, log), 0);
+    logged_counts(log, &lu, &ld);
+    ck_assert_int_eq(lu, u);
+    ck_assert_int_eq(ld, dist);
+    assert_same_history_products(d, "off", "iso");
+    /* under MPI, ranks make walks of an SCA's items: the same bytes, and ranks draw less
+     * than every history whole (each walk draws its first item's history, then one a step) */
+    const char *mpi = mpi_program();
+    if (!mpi) return; /* CI has it */
+    ck_assert_int_eq(wf_test_run(MPIRUN " %s survey run --plan %s " HIST " --set scene.stars=%s --out %s/mpi 2>%s", mpi,
+                                 plan, stars, d, log), 0);
+    logged_counts(log, &lu, &ld);
+    ck_assert_int_eq(lu, u);
+    ck_assert_int_ge(ld, dist);
+    ck_assert_int_lt(ld, u);
+    assert_same_history_products(d, "off", "mpi");
+}
+END_TEST
+
+/* The MPI program's walks: every item once, each walk one SCA's items in plan order, at most
+ * ceil(items / (2 workers)) of them, and walks listed by their first item. */
+START_TEST(walks_cover_items)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    wf_config cfg;
+    wf_config_defaults(&cfg);
+    wf_survey_run_options opt;
+    memset(&opt, 0, sizeof opt);
+    opt.plan_path = plan;
+    opt.first = 3;
+    opt.last = 12;
+    opt.nscas = 3;
+    opt.scas[0] = 7;
+    opt.scas[1] = 3;
+    opt.scas[2] = 12;
+    wf_survey_ctx *ctx;
+    size_t n;
+    ck_assert_int_eq(wf_survey_begin(&cfg, &opt, &ctx, &n), WF_OK);
+    ck_assert_uint_eq(n, 30);
+    size_t workers[] = {1, 2, 4, 100};
+    for (int q = 0; q < 4; q++) {
+        size_t *order, *start, nwalks, len = (n + 2 * workers[q] - 1) / (2 * workers[q]);
+        ck_assert_int_eq(wf_survey_walks(ctx, workers[q], &order, &start, &nwalks), WF_OK);
+        ck_assert_uint_eq(start[0], 0);
+        ck_assert_uint_eq(start[nwalks], n);
+        ck_assert_uint_eq(nwalks, 3 * ((10 + len - 1) / len)); /* each SCA's 10 items cut by len */
+        int seen[30] = {0};
+        for (size_t w = 0; w < nwalks; w++) {
+            ck_assert_uint_gt(start[w + 1], start[w]);
+            ck_assert_uint_le(start[w + 1] - start[w], len);
+            if (w) ck_assert_uint_gt(order[start[w]], order[start[w - 1]]);
+            int e0 = -1, s0 = -1;
+            for (size_t k = start[w]; k < start[w + 1]; k++) {
+                char name[64];
+                int e, sca;
+                seen[order[k]]++;
+                wf_survey_item_name(ctx, order[k], name, sizeof name);
+                ck_assert_int_eq(sscanf(name, "exposure %d SCA %d", &e, &sca), 2);
+                if (k > start[w]) {
+                    ck_assert_int_eq(sca, s0);
+                    ck_assert_int_eq(e, e0 + 1); /* the next exposure: consecutive in the plan */
+                }
+                e0 = e;
+                s0 = sca;
+            }
+        }
+        for (int i = 0; i < 30; i++) ck_assert_int_eq(seen[i], 1);
+        free(order);
+        free(start);
+    }
+    wf_survey_free(ctx);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("surveyrun");
@@ -931,6 +1130,8 @@ static Suite *suite(void)
     tcase_add_test(tc, mpi_matches_one_process);
     tcase_add_test(tc, isolate_crashed_item_lost_alone);
     tcase_add_test(tc, mpi_crashed_item_lost_alone);
+    tcase_add_test(tc, history_cache_any_process);
+    tcase_add_test(tc, walks_cover_items);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -16,10 +16,12 @@
 
 #include "sim/numeric/fftw_lock.h"
 
-/* What the child sends back: this header, the message, then the result. */
+/* What the child sends back: this header, the message, then (when it succeeded) the result
+ * and the tail. */
 typedef struct reply {
     int32_t status;
     uint32_t msglen;
+    uint64_t taillen;
 } reply;
 
 static int write_all(int fd, const void *buf, size_t n)
@@ -63,7 +65,8 @@ static void prefer_for_oom(void)
     close(fd);
 }
 
-static void child(int fd, pid_t parent, wf_isolate_fn fn, void *arg, void *out, size_t out_size)
+static void child(int fd, pid_t parent, wf_isolate_fn fn, wf_isolate_tail_fn tail_fn, void *arg, void *out,
+                  size_t out_size)
 {
 #ifdef __linux__
     /* a parent killed (mpirun ending the job) takes its child along, rather than leave it
@@ -75,10 +78,18 @@ static void child(int fd, pid_t parent, wf_isolate_fn fn, void *arg, void *out, 
 #endif
     prefer_for_oom();
     wf_status st = fn(arg, out);
+    void *tail = NULL;
+    size_t tail_size = 0;
+    /* a tail that cannot be made (out of memory) is left out: the work itself is done */
+    if (!st && tail_fn && tail_fn(arg, &tail, &tail_size)) {
+        free(tail);
+        tail = NULL;
+        tail_size = 0;
+    }
     const char *msg = st ? wf_error_message() : "";
-    reply r = {(int32_t)st, (uint32_t)strlen(msg)};
+    reply r = {(int32_t)st, (uint32_t)strlen(msg), (uint64_t)tail_size};
     int bad = write_all(fd, &r, sizeof r) || write_all(fd, msg, r.msglen) ||
-              (!st && write_all(fd, out, out_size));
+              (!st && (write_all(fd, out, out_size) || write_all(fd, tail, tail_size)));
     _exit(bad ? 125 : 0);
 }
 
@@ -99,7 +110,15 @@ static const char *signal_note(int sig)
 
 wf_status wf_isolate_run(const char *what, wf_isolate_fn fn, void *arg, void *out, size_t out_size, int *crashed)
 {
+    return wf_isolate_run_tail(what, fn, NULL, arg, out, out_size, NULL, NULL, crashed);
+}
+
+wf_status wf_isolate_run_tail(const char *what, wf_isolate_fn fn, wf_isolate_tail_fn tail_fn, void *arg, void *out,
+                              size_t out_size, void **tail, size_t *tail_size, int *crashed)
+{
     *crashed = 0;
+    if (tail) *tail = NULL;
+    if (tail_size) *tail_size = 0;
     int fds[2];
     if (pipe2(fds, O_CLOEXEC) != 0) return wf_error(WF_ERR_IO, "%s: no pipe for its process: %s", what, strerror(errno));
     /* the locks another thread of ours may hold, held by this one across the fork: the
@@ -117,15 +136,17 @@ wf_status wf_isolate_run(const char *what, wf_isolate_fn fn, void *arg, void *ou
     wf_fftw_unlock();
     if (pid == 0) {
         close(fds[0]);
-        child(fds[1], parent, fn, arg, out, out_size);
+        child(fds[1], parent, fn, tail_fn, arg, out, out_size);
     }
     close(fds[1]);
     if (pid < 0) {
         close(fds[0]);
         return wf_error(WF_ERR_NOMEM, "%s: cannot start its process (fork: %s)", what, strerror(fork_errno));
     }
-    reply r = {0, 0};
+    reply r = {0, 0, 0};
     char msg[1024] = "";
+    void *got = NULL; /* the tail, the caller's once the child is known to have ended well */
+    size_t got_size = 0;
     int whole = read_all(fds[0], &r, sizeof r) == sizeof r;
     if (whole) {
         size_t keep = r.msglen < sizeof msg - 1 ? r.msglen : sizeof msg - 1;
@@ -138,13 +159,27 @@ wf_status wf_isolate_run(const char *what, wf_isolate_fn fn, void *arg, void *ou
             skip -= k;
         }
         if (whole && !r.status) whole = read_all(fds[0], out, out_size) == out_size;
+        /* the tail: as long as the child says, up to the end of its stream */
+        void *t = whole && !r.status && r.taillen && tail ? malloc((size_t)r.taillen) : NULL;
+        if (t && read_all(fds[0], t, (size_t)r.taillen) == r.taillen) {
+            got = t;
+            got_size = (size_t)r.taillen;
+        } else {
+            free(t);
+            if (whole && !r.status && r.taillen) { /* unread: the child must not block on a full pipe */
+                char sink[4096];
+                while (read_all(fds[0], sink, sizeof sink) == sizeof sink) {}
+            }
+        }
     }
     close(fds[0]);
     int ws = 0;
     pid_t w;
     while ((w = waitpid(pid, &ws, 0)) < 0 && errno == EINTR) {}
+    int wait_errno = errno;
+    if (w < 0 || WIFSIGNALED(ws) || !WIFEXITED(ws) || WEXITSTATUS(ws) != 0 || !whole || r.status) free(got);
     if (w < 0) return wf_error(WF_ERR_INTERNAL, "%s: its process %ld was lost (waitpid: %s)", what, (long)pid,
-                               strerror(errno));
+                               strerror(wait_errno));
     if (WIFSIGNALED(ws)) {
         *crashed = 1;
         const char *note = signal_note(WTERMSIG(ws));
@@ -157,12 +192,17 @@ wf_status wf_isolate_run(const char *what, wf_isolate_fn fn, void *arg, void *ou
                         WIFEXITED(ws) ? WEXITSTATUS(ws) : -1);
     }
     if (r.status) return wf_error((wf_status)r.status, "%s", msg);
+    if (tail) {
+        *tail = got;
+        *tail_size = got_size;
+    }
     return WF_OK;
 }
 
 typedef struct item_job {
     wf_survey_ctx *ctx;
     size_t i;
+    unsigned long mark; /* the parent's cache at the fork */
 } item_job;
 
 /* WFISIM_TEST_CRASH_ITEM (tests only): the child of the item named dies by the signal asked. */
@@ -188,6 +228,13 @@ static wf_status make_item(void *arg, void *out)
     return wf_survey_make_item(j->ctx, j->i, out);
 }
 
+/* What the child drew for the item's persistence history, for the parent's cache. */
+static wf_status item_tail(void *arg, void **tail, size_t *size)
+{
+    const item_job *j = arg;
+    return wf_survey_history_export(j->ctx, j->mark, tail, size);
+}
+
 wf_status wf_survey_make_item_isolated(wf_survey_ctx *ctx, size_t i, wf_survey_item_result *res, int *crashed)
 {
     *crashed = 0;
@@ -196,6 +243,13 @@ wf_status wf_survey_make_item_isolated(wf_survey_ctx *ctx, size_t i, wf_survey_i
     if (st) return st;
     char name[64];
     wf_survey_item_name(ctx, i, name, sizeof name);
-    item_job j = {ctx, i};
-    return wf_isolate_run(name, make_item, &j, res, sizeof *res, crashed);
+    item_job j = {ctx, i, wf_survey_history_mark(ctx)};
+    void *tail = NULL;
+    size_t size = 0;
+    st = wf_isolate_run_tail(name, make_item, item_tail, &j, res, sizeof *res, &tail, &size, crashed);
+    /* the next items of the SCA then draw only what is new; a tail not taken in costs only
+     * that drawing again (the products are the same) */
+    if (!st && tail) (void)wf_survey_history_import(ctx, tail, size);
+    free(tail);
+    return st;
 }

@@ -27,9 +27,21 @@ typedef wf_status (*wf_isolate_fn)(void *arg, void *out);
  * killed while sending it may have sent part). */
 wf_status wf_isolate_run(const char *what, wf_isolate_fn fn, void *arg, void *out, size_t out_size, int *crashed);
 
+/* What the child gives back besides out, of a size known only there: after fn succeeded,
+ * *tail (malloc'd, or NULL) of *size bytes. */
+typedef wf_status (*wf_isolate_tail_fn)(void *arg, void **tail, size_t *size);
+
+/* wf_isolate_run, and when fn succeeded and tail_fn gave one, the child's tail: *tail
+ * (malloc'd, the caller frees it; NULL when none, or when tail_fn failed in the child, or
+ * on any failure) of *tail_size bytes. */
+wf_status wf_isolate_run_tail(const char *what, wf_isolate_fn fn, wf_isolate_tail_fn tail_fn, void *arg, void *out,
+                              size_t out_size, void **tail, size_t *tail_size, int *crashed);
+
 /* wf_survey_make_item in a child process (the MPI ranks make every item so). The item's input
  * digests are computed in this process first, so that the files' digests stay cached here
- * for later items (the child's cache dies with it).
+ * for later items (the child's cache dies with it); the earlier exposures the child drew for
+ * the item's persistence history come back through the pipe into this process's cache, so
+ * the next item of the SCA draws only the exposure before it.
  * Test hook: WFISIM_TEST_CRASH_ITEM="E:S" (or "E:S:segv", "E:S:abort") makes the child of
  * exposure E SCA S die by SIGKILL (SIGSEGV, SIGABRT) before it makes the item. */
 wf_status wf_survey_make_item_isolated(wf_survey_ctx *ctx, size_t i, wf_survey_item_result *res, int *crashed);

@@ -28,15 +28,21 @@ struct wf_persist_history {
     int own[WF_PERSIST_DEPTH_MAX]; /* 1: freed with the history; 0: the cache's */
 };
 
-#define CACHE_SLOTS 16 /* > WF_PERSIST_DEPTH_MAX: one history's slots are never evicted */
+/* Per SCA, the last CACHE_DEPTH exposures drawn or used: a history (at most
+ * WF_PERSIST_DEPTH_MAX slots, all of its SCA) then never loses a slot it holds, and a run in
+ * plan order (every SCA of one exposure, then the next) keeps each SCA's recent past. */
+#define CACHE_SCAS 32
+#define CACHE_DEPTH WF_PERSIST_DEPTH_MAX
+
+typedef struct cache_entry {
+    long long expid;
+    slot_list list;
+    unsigned long used;  /* 0: empty */
+    unsigned long added; /* the tick it came in at (wf_persist_cache_export's mark) */
+} cache_entry;
 
 struct wf_persist_cache {
-    struct {
-        long long expid;
-        int sca;
-        slot_list list;
-        unsigned long used; /* 0: empty */
-    } s[CACHE_SLOTS];
+    cache_entry s[CACHE_SCAS][CACHE_DEPTH];
     unsigned long tick;
 };
 
@@ -49,8 +55,93 @@ wf_status wf_persist_cache_new(wf_persist_cache **out)
 void wf_persist_cache_free(wf_persist_cache *c)
 {
     if (!c) return;
-    for (int i = 0; i < CACHE_SLOTS; i++) free(c->s[i].list.e);
+    for (int k = 0; k < CACHE_SCAS; k++)
+        for (int i = 0; i < CACHE_DEPTH; i++) free(c->s[k][i].list.e);
     free(c);
+}
+
+/* The entry of (expid, sca), or NULL; *slot: where a new one goes (the least recently used). */
+static cache_entry *cache_find(wf_persist_cache *c, long long expid, int sca, cache_entry **slot)
+{
+    cache_entry *row = c->s[sca], *lru = &row[0];
+    for (int i = 0; i < CACHE_DEPTH; i++) {
+        if (row[i].used && row[i].expid == expid) return &row[i];
+        if (row[i].used < lru->used) lru = &row[i];
+    }
+    *slot = lru;
+    return NULL;
+}
+
+static void cache_put(wf_persist_cache *c, cache_entry *e, long long expid, slot_list list)
+{
+    free(e->list.e);
+    e->list = list;
+    e->expid = expid;
+    e->used = e->added = ++c->tick;
+}
+
+unsigned long wf_persist_cache_mark(const wf_persist_cache *c)
+{
+    return c ? c->tick : 0;
+}
+
+/* The export: per entry int64 expid, int32 sca, uint32 n, n uint32 pixels, n uint16 codes. */
+wf_status wf_persist_cache_export(const wf_persist_cache *c, unsigned long mark, void **buf, size_t *size)
+{
+    *buf = NULL;
+    *size = 0;
+    if (!c) return WF_OK;
+    size_t total = 0;
+    for (int k = 0; k < CACHE_SCAS; k++)
+        for (int i = 0; i < CACHE_DEPTH; i++)
+            if (c->s[k][i].used && c->s[k][i].added > mark) total += 16 + c->s[k][i].list.n * 6;
+    if (!total) return WF_OK;
+    unsigned char *p = malloc(total);
+    if (!p) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence histories drawn");
+    *buf = p;
+    *size = total;
+    for (int k = 0; k < CACHE_SCAS; k++)
+        for (int i = 0; i < CACHE_DEPTH; i++) {
+            const cache_entry *e = &c->s[k][i];
+            if (!e->used || e->added <= mark) continue;
+            int64_t expid = e->expid;
+            int32_t sca = k;
+            uint32_t n = (uint32_t)e->list.n;
+            memcpy(p, &expid, 8);
+            memcpy(p + 8, &sca, 4);
+            memcpy(p + 12, &n, 4);
+            p += 16;
+            for (uint32_t j = 0; j < n; j++, p += 4) memcpy(p, &e->list.e[j].pixel, 4);
+            for (uint32_t j = 0; j < n; j++, p += 2) memcpy(p, &e->list.e[j].code, 2);
+        }
+    return WF_OK;
+}
+
+wf_status wf_persist_cache_import(wf_persist_cache *c, const void *buf, size_t size)
+{
+    const unsigned char *p = buf, *end = p + size;
+    while (c && p < end) {
+        int64_t expid;
+        int32_t sca;
+        uint32_t n;
+        if (end - p < 16) return wf_error(WF_ERR_INPUT, "persistence histories: a record cut short");
+        memcpy(&expid, p, 8);
+        memcpy(&sca, p + 8, 4);
+        memcpy(&n, p + 12, 4);
+        p += 16;
+        if (sca < 0 || sca >= CACHE_SCAS || (size_t)(end - p) / 6 < n)
+            return wf_error(WF_ERR_INPUT, "persistence histories: a record of SCA %d with %u pixels does not fit",
+                            (int)sca, (unsigned)n);
+        cache_entry *slot;
+        if (cache_find(c, expid, sca, &slot)) { p += (size_t)n * 6; continue; } /* the same bytes */
+        slot_list list = {malloc((n ? n : 1) * sizeof(entry)), n};
+        if (!list.e) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence histories");
+        for (uint32_t j = 0; j < n; j++) memcpy(&list.e[j].pixel, p + 4 * (size_t)j, 4);
+        for (uint32_t j = 0; j < n; j++) memcpy(&list.e[j].code, p + 4 * (size_t)n + 2 * (size_t)j, 2);
+        p += (size_t)n * 6;
+        cache_put(c, slot, expid, list);
+    }
+    return WF_OK;
 }
 
 wf_status wf_persist_history_new(int ncols, int nrows, double min_stimulus, double full_well,
@@ -246,31 +337,28 @@ static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg
 }
 
 wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config *cfg,
-                                          const wf_clock *clock, double dt, wf_persist_cache *cache)
+                                          const wf_clock *clock, double dt, wf_persist_cache *cache, int *drawn)
 {
-    if (!cache) {
+    long long expid = cfg->ro.exposure;
+    int sca = (int)cfg->ro.sca;
+    *drawn = 1;
+    if (!cache || sca < 0 || sca >= CACHE_SCAS) {
         slot_list list;
         wf_status st = exposure_list(h, cfg, clock, &list);
         return st ? st : add_slot(h, list, 1, dt);
     }
-    long long expid = cfg->ro.exposure;
-    int sca = (int)cfg->ro.sca, k = -1;
-    for (int i = 0; i < CACHE_SLOTS && k < 0; i++)
-        if (cache->s[i].used && cache->s[i].expid == expid && cache->s[i].sca == sca) k = i;
-    if (k < 0) { /* the least recently used goes */
-        k = 0;
-        for (int i = 1; i < CACHE_SLOTS; i++)
-            if (cache->s[i].used < cache->s[k].used) k = i;
+    cache_entry *slot, *e = cache_find(cache, expid, sca, &slot);
+    if (e) {
+        *drawn = 0;
+        e->used = ++cache->tick;
+    } else {
         slot_list list;
         wf_status st = exposure_list(h, cfg, clock, &list);
         if (st) return st;
-        free(cache->s[k].list.e);
-        cache->s[k].list = list;
-        cache->s[k].expid = expid;
-        cache->s[k].sca = sca;
+        cache_put(cache, slot, expid, list);
+        e = slot;
     }
-    cache->s[k].used = ++cache->tick;
-    return add_slot(h, cache->s[k].list, 0, dt);
+    return add_slot(h, e->list, 0, dt);
 }
 
 static wf_status fill(void *ctx, int y0, int y1, int ncols, uint16_t *code)

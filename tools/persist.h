@@ -7,7 +7,7 @@
  * e-/s: < 400 e- in 900 s) or supernovae. So an item's history is a function of the plan,
  * the configuration and the catalogs: any split of a survey run gives the same bytes.
  * Memory: 8 bytes per pixel and slot kept (a saturated star keeps ~100 pixels); a run's
- * cache holds 16 exposures' lists. */
+ * cache holds up to 8 exposures' lists per SCA. */
 #ifndef WF_TOOLS_PERSIST_H
 #define WF_TOOLS_PERSIST_H
 
@@ -27,17 +27,25 @@ wf_status wf_persist_history_add_source(wf_persist_history *h, const wf_scene_so
                                         double exptime, double dt);
 
 /* Earlier exposures' kept pixels, by (exposure id, SCA), kept across a survey run's items in
- * one process: an exposure is the history of up to `depth` later ones. What it holds is a
- * function of its key and the run's inputs, so using it changes no byte, only the cost. */
+ * one process: per SCA its last WF_PERSIST_DEPTH_MAX exposures, so the next item of an SCA
+ * draws only the exposure before it. What it holds is a function of its key and the run's
+ * inputs, so using it changes no byte, only the cost. */
 typedef struct wf_persist_cache wf_persist_cache;
 wf_status wf_persist_cache_new(wf_persist_cache **out);
 void wf_persist_cache_free(wf_persist_cache *c);
 
+/* Where the cache stands now; wf_persist_cache_export(c, mark) gives the exposures added since
+ * (a child process's drawing, for its parent), as bytes for wf_persist_cache_import (*buf
+ * malloc'd, NULL when none). Import keeps the entries it already holds. */
+unsigned long wf_persist_cache_mark(const wf_persist_cache *c);
+wf_status wf_persist_cache_export(const wf_persist_cache *c, unsigned long mark, void **buf, size_t *size);
+wf_status wf_persist_cache_import(wf_persist_cache *c, const void *buf, size_t size);
+
 /* The next slot from the exposure cfg describes (its scene as `wfisim expose` would draw it,
  * bright objects only; the grid scene whole), clock its read pattern; through cache when not
- * NULL (which must outlive h). */
+ * NULL (which must outlive h). *drawn: 1 when it was drawn, 0 when the cache held it. */
 wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config *cfg,
-                                          const wf_clock *clock, double dt, wf_persist_cache *cache);
+                                          const wf_clock *clock, double dt, wf_persist_cache *cache, int *drawn);
 
 /* The history as the firmware's source (valid while h lives); depth 0 when no slot kept a pixel. */
 void wf_persist_history_source(wf_persist_history *h, wf_persist_source *out);

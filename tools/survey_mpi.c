@@ -32,7 +32,9 @@ static void nap(void)
 typedef struct shared {
     pthread_mutex_t mu;
     wf_survey_ctx *ctx;
-    size_t next, n, done_items;
+    size_t n, done_items;
+    size_t *order, *start, nwalks, next_walk; /* the items as walks (wf_survey_walks) */
+    size_t *cur, *end;    /* per rank, the rest of its walk: order[cur .. end) */
     int stop;             /* an item failed: hand out no more */
     unsigned char *lost;  /* per item, 1: its process crashed; the others go on */
     size_t nlost;
@@ -44,11 +46,17 @@ typedef struct shared {
     time_t t0;
 } shared;
 
-/* The next item to make, or -1 when none is left or the run is stopping. */
-static long long take(shared *s)
+/* The next item for rank w to make: the next of its walk, or the first of the next walk; -1
+ * when none is left or the run is stopping. */
+static long long take(shared *s, int w)
 {
     pthread_mutex_lock(&s->mu);
-    long long i = s->stop || s->next >= s->n ? -1 : (long long)s->next++;
+    long long i = -1;
+    if (!s->stop && s->cur[w] == s->end[w] && s->next_walk < s->nwalks) {
+        s->cur[w] = s->start[s->next_walk];
+        s->end[w] = s->start[++s->next_walk];
+    }
+    if (!s->stop && s->cur[w] < s->end[w]) i = (long long)s->order[s->cur[w]++];
     pthread_mutex_unlock(&s->mu);
     return i;
 }
@@ -83,7 +91,7 @@ static void record(shared *s, int rank, size_t i, wf_status st, int crashed, con
 static void *local_worker(void *arg)
 {
     shared *s = arg;
-    for (long long i; (i = take(s)) >= 0;) {
+    for (long long i; (i = take(s, 0)) >= 0;) {
         wf_survey_item_result res;
         int crashed;
         wf_status st = wf_survey_make_item_isolated(s->ctx, (size_t)i, &res, &crashed);
@@ -119,7 +127,7 @@ static wf_status dispatch(shared *s, int nranks, int threaded)
         }
         MPI_Recv(&r, (int)sizeof r, MPI_BYTE, ms.MPI_SOURCE, TAG_REPORT, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
         if (r.has_result) record(s, ms.MPI_SOURCE, (size_t)r.item, r.status, r.crashed, r.message, &r.res);
-        int64_t next = take(s);
+        int64_t next = take(s, ms.MPI_SOURCE);
         MPI_Send(&next, 1, MPI_INT64_T, ms.MPI_SOURCE, TAG_WORK, MPI_COMM_WORLD);
         if (next < 0) active--;
     }
@@ -219,7 +227,10 @@ wf_status wf_survey_run_mpi(const wf_config *cfg, const wf_survey_run_options *o
         s.t0 = time(NULL);
         s.res = calloc(n, sizeof *s.res);
         s.lost = calloc(n, 1);
-        if (!s.res || !s.lost) { /* the workers must still be told to stop */
+        s.cur = calloc((size_t)nranks, sizeof *s.cur);
+        s.end = calloc((size_t)nranks, sizeof *s.end);
+        if (!s.res || !s.lost || !s.cur || !s.end ||
+            wf_survey_walks(ctx, (size_t)nranks, &s.order, &s.start, &s.nwalks)) { /* the workers must still be told to stop */
             s.stop = 1;
             s.st = WF_ERR_NOMEM;
             snprintf(s.message, sizeof s.message, "out of memory for %zu results", n);
@@ -232,6 +243,10 @@ wf_status wf_survey_run_mpi(const wf_config *cfg, const wf_survey_run_options *o
         stats->silent = 0;
         free(s.res);
         free(s.lost);
+        free(s.cur);
+        free(s.end);
+        free(s.order);
+        free(s.start);
         pthread_mutex_destroy(&s.mu);
     } else if (!st) {
         st = work(ctx);

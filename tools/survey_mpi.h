@@ -1,7 +1,9 @@
 /* `wfisim survey run` on many processes (bin/wfisim-mpi, built with `make MPI=1`; the plain
  * program needs no MPI). Every rank reads the plan and selects the same items; rank 0 hands
- * them out in plan order, one at a time, to whichever rank asks next (items differ in cost),
- * and collects what each made. Each item is made by wf_survey_make_item, exactly as a
+ * them out one at a time to whichever rank asks next (items differ in cost), by walks
+ * (wf_survey_walks: consecutive items of one SCA in exposure order): a rank asking gets the
+ * next item of its walk, or starts the next walk, so its cache holds the earlier exposures of
+ * each history but the newest. It collects what each made. Each item is made by wf_survey_make_item, exactly as a
  * one-process run makes it, so the products are the same bytes whatever the number of ranks.
  * Before any item is handed out, rank 0 alone checks every item's product against this run's
  * inputs (wf_survey_check_inputs: a refusal names the product one process would name, and nothing

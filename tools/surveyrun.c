@@ -69,16 +69,20 @@ int wf_survey_product_ok(const char *path)
     return wf_fits_verify_checksums(path, 0) == WF_OK;
 }
 
-/* The rows of the plan with EXPID in [first, last] (last < 0: to the end), in file order. */
-static wf_status read_plan(const char *path, long first, long last, wf_survey_row **out, size_t *n)
+/* The rows of the whole plan with EXPID in [first, last] (last < 0: to the end), in file order,
+ * copied (the plan is read once per run), and each one's index in plan. */
+static wf_status select_rows(const wf_survey_row *plan, size_t nplan, long first, long last, wf_survey_row **out,
+                             size_t **full, size_t *n)
 {
-    wf_status st = wf_survey_read_plan(path, out, n);
-    if (st) return st;
-    wf_survey_row *rows = *out;
-    size_t k = 0;
-    for (size_t i = 0; i < *n; i++)
-        if (rows[i].expid >= first && (last < 0 || rows[i].expid <= last)) rows[k++] = rows[i];
-    *n = k;
+    *n = 0;
+    *out = malloc((nplan ? nplan : 1) * sizeof **out);
+    *full = malloc((nplan ? nplan : 1) * sizeof **full);
+    if (!*out || !*full) return wf_error(WF_ERR_NOMEM, "out of memory for the plan");
+    for (size_t i = 0; i < nplan; i++)
+        if (plan[i].expid >= first && (last < 0 || plan[i].expid <= last)) {
+            (*out)[*n] = plan[i];
+            (*full)[(*n)++] = i;
+        }
     return WF_OK;
 }
 
@@ -210,7 +214,7 @@ static void history_extra(const wf_config *base, const wf_survey_row *plan, cons
                                 j + 1, plan[h->row[j]].expid, h->dt[j]);
 }
 
-static wf_status prepare(const wf_survey_ctx *ctx, size_t item, wf_digest_cache *cache, product *p, history *h);
+static wf_status prepare(const wf_survey_ctx *ctx, size_t item, wf_digest_cache *cache, product *p);
 
 static wf_status prepare_row(const wf_config *base, const wf_survey_run_options *opt, const wf_survey_row *x, int sca,
                              wf_digest_cache *cache, product *p, const wf_survey_row *plan, const history *h)
@@ -248,6 +252,7 @@ struct wf_survey_ctx {
     size_t nplan;
     size_t *full;             /* per row of rows, its index in plan */
     wf_config *scratch;       /* an earlier exposure's configuration */
+    history *hist;            /* per item, its persistence history's rows (from the plan, once) */
     wf_persist_cache *pcache; /* earlier exposures' bright pixels, for the next items */
     unsigned char *state;     /* per item, P_* */
     size_t todo;              /* items the check found to make (0: nothing will be written) */
@@ -256,12 +261,10 @@ struct wf_survey_ctx {
     wf_digest_cache *cache;   /* file digests, computed once per process */
 };
 
-static wf_status prepare(const wf_survey_ctx *ctx, size_t item, wf_digest_cache *cache, product *p, history *h)
+static wf_status prepare(const wf_survey_ctx *ctx, size_t item, wf_digest_cache *cache, product *p)
 {
     const wf_survey_item *it = &ctx->items[item];
-    wf_status st = history_rows(ctx->base, ctx->opt, ctx->plan, ctx->full[it->row], it->sca, ctx->scratch, h);
-    if (st) return st;
-    return prepare_row(ctx->base, ctx->opt, &ctx->rows[it->row], it->sca, cache, p, ctx->plan, h);
+    return prepare_row(ctx->base, ctx->opt, &ctx->rows[it->row], it->sca, cache, p, ctx->plan, &ctx->hist[item]);
 }
 
 void wf_survey_free(wf_survey_ctx *ctx)
@@ -270,6 +273,7 @@ void wf_survey_free(wf_survey_ctx *ctx)
     free(ctx->rows);
     free(ctx->plan);
     free(ctx->full);
+    free(ctx->hist);
     free(ctx->scratch);
     wf_persist_cache_free(ctx->pcache);
     free(ctx->items);
@@ -352,8 +356,7 @@ static wf_status write_manifest(wf_survey_ctx *ctx, const wf_survey_run_stats *s
     fits_clear_errmsg();
     int nscas = opt->nscas ? opt->nscas : WF_NSCA;
     /* the run-wide parts: those of the first item (only the configuration's is per product) */
-    history h;
-    wf_status st = prepare(ctx, 0, ctx->cache, p, &h);
+    wf_status st = prepare(ctx, 0, ctx->cache, p);
     if (st) return st;
     wf_digest run = p->digest;
     char *lines = NULL;
@@ -409,7 +412,7 @@ static wf_status write_manifest(wf_survey_ctx *ctx, const wf_survey_run_stats *s
     /* every item of the run as it stands */
     fprintf(out, "# the products of the run: file, WFDIGEST in its header, whether this run's inputs made it\n");
     for (size_t i = 0; i < ctx->nitems && !st; i++) {
-        if ((st = prepare(ctx, i, ctx->cache, p, &h))) break;
+        if ((st = prepare(ctx, i, ctx->cache, p))) break;
         const char *name = strrchr(p->image, '/') ? strrchr(p->image, '/') + 1 : p->image;
         wf_digest_found was;
         if (!exists(p->image)) fprintf(out, "product %s missing\n", name);
@@ -469,18 +472,19 @@ wf_status wf_survey_begin(const wf_config *base, const wf_survey_run_options *op
     if (!ctx) return wf_error(WF_ERR_NOMEM, "out of memory");
     ctx->base = base;
     ctx->opt = opt;
-    wf_status st = read_plan(opt->plan_path, opt->first, opt->last, &ctx->rows, &ctx->nrows);
+    wf_status st = wf_survey_read_plan(opt->plan_path, &ctx->plan, &ctx->nplan);
     if (st) { free(ctx); return st; }
-    if ((st = wf_survey_read_plan(opt->plan_path, &ctx->plan, &ctx->nplan))) { wf_survey_free(ctx); return st; }
-    ctx->full = malloc((ctx->nrows ? ctx->nrows : 1) * sizeof *ctx->full);
+    if ((st = select_rows(ctx->plan, ctx->nplan, opt->first, opt->last, &ctx->rows, &ctx->full, &ctx->nrows))) {
+        wf_survey_free(ctx);
+        return st;
+    }
     ctx->scratch = malloc(sizeof *ctx->scratch);
-    if (!ctx->full || !ctx->scratch || wf_persist_cache_new(&ctx->pcache)) {
+    /* test hook: every history drawn whole (the products must not change) */
+    const char *hook = getenv("WFISIM_TEST_PERSIST_CACHE");
+    int cache_on = !(hook && !strcmp(hook, "off"));
+    if (!ctx->scratch || (cache_on && wf_persist_cache_new(&ctx->pcache))) {
         wf_survey_free(ctx);
         return wf_error(WF_ERR_NOMEM, "out of memory");
-    }
-    for (size_t i = 0, k = 0; i < ctx->nrows; i++) { /* rows is a subsequence of plan */
-        while (k < ctx->nplan && ctx->plan[k].expid != ctx->rows[i].expid) k++;
-        ctx->full[i] = k++;
     }
     if (!ctx->nrows) st = wf_error(WF_ERR_INPUT, "%s: no exposure in the range asked for", opt->plan_path);
     int nscas = opt->nscas ? opt->nscas : WF_NSCA;
@@ -489,7 +493,9 @@ wf_status wf_survey_begin(const wf_config *base, const wf_survey_run_options *op
     ctx->job = malloc(sizeof *ctx->job);
     ctx->items = malloc(most * sizeof *ctx->items);
     ctx->state = calloc(most, 1);
-    if (!st && (!ctx->p || !ctx->job || !ctx->items || !ctx->state)) st = wf_error(WF_ERR_NOMEM, "out of memory");
+    ctx->hist = calloc(most, sizeof *ctx->hist);
+    if (!st && (!ctx->p || !ctx->job || !ctx->items || !ctx->state || !ctx->hist))
+        st = wf_error(WF_ERR_NOMEM, "out of memory");
     if (!st) st = wf_digest_cache_create(&ctx->cache);
     for (size_t i = 0; i < ctx->nrows && !st; i++)
         for (int k = 0; k < nscas && !st; k++) {
@@ -499,8 +505,12 @@ wf_status wf_survey_begin(const wf_config *base, const wf_survey_run_options *op
                 if (!(st = configure(base, opt, &ctx->rows[i], sca, &ctx->p->cfg, &clock)))
                     st = in_area(&ctx->p->cfg, opt, &inside);
             }
-            if (!inside) ctx->outside++;
-            else ctx->items[ctx->nitems++] = (wf_survey_item){(int)i, sca};
+            if (!inside) {
+                ctx->outside++;
+                continue;
+            }
+            ctx->items[ctx->nitems] = (wf_survey_item){(int)i, sca};
+            st = history_rows(base, opt, ctx->plan, ctx->full[i], sca, ctx->scratch, &ctx->hist[ctx->nitems++]);
         }
     if (!st && !ctx->nitems) st = wf_error(WF_ERR_INPUT, "--area: no SCA of the exposures asked for overlaps it");
     if (st) { wf_survey_free(ctx); return st; }
@@ -520,8 +530,7 @@ wf_status wf_survey_check_inputs(wf_survey_ctx *ctx)
      * done; the damage of a product with this run's digest is left to wf_survey_make_item
      * (its checksums are verified where it is made). */
     for (size_t i = 0; i < ctx->nitems && !st; i++) {
-        history h;
-        if ((st = prepare(ctx, i, ctx->cache, p, &h))) break;
+        if ((st = prepare(ctx, i, ctx->cache, p))) break;
         unsigned char *s = &ctx->state[i];
         *s = P_MISSING;
         if (!exists(p->image)) continue;
@@ -569,8 +578,55 @@ unsigned char *wf_survey_item_states(wf_survey_ctx *ctx)
 
 wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i)
 {
-    history h;
-    return prepare(ctx, i, ctx->cache, ctx->p, &h);
+    return prepare(ctx, i, ctx->cache, ctx->p);
+}
+
+unsigned long wf_survey_history_mark(const wf_survey_ctx *ctx)
+{
+    return wf_persist_cache_mark(ctx->pcache);
+}
+
+wf_status wf_survey_history_export(const wf_survey_ctx *ctx, unsigned long mark, void **buf, size_t *size)
+{
+    return wf_persist_cache_export(ctx->pcache, mark, buf, size);
+}
+
+wf_status wf_survey_history_import(wf_survey_ctx *ctx, const void *buf, size_t size)
+{
+    return wf_persist_cache_import(ctx->pcache, buf, size);
+}
+
+wf_status wf_survey_walks(const wf_survey_ctx *ctx, size_t nworkers, size_t **order, size_t **start, size_t *nwalks)
+{
+    size_t n = ctx->nitems, two = 2 * (nworkers ? nworkers : 1), len = (n + two - 1) / two, w = 0;
+    if (len < 1) len = 1;
+    size_t *walk = malloc((n ? n : 1) * sizeof *walk), *cursor = malloc((n + 1) * sizeof *cursor);
+    *order = malloc((n ? n : 1) * sizeof **order);
+    *start = calloc(n + 1, sizeof **start);
+    if (!walk || !cursor || !*order || !*start) {
+        free(walk);
+        free(cursor);
+        free(*order);
+        free(*start);
+        *order = *start = NULL;
+        return wf_error(WF_ERR_NOMEM, "out of memory for the walks");
+    }
+    /* the items are in plan order: each goes on its SCA's open walk, or opens one (numbered
+     * in order of their first item) when that holds len */
+    size_t open[WF_NSCA + 1] = {0}, count[WF_NSCA + 1] = {0};
+    for (size_t i = 0; i < n; i++) {
+        int sca = ctx->items[i].sca;
+        if (count[sca]++ % len == 0) open[sca] = w++;
+        walk[i] = open[sca];
+    }
+    for (size_t i = 0; i < n; i++) (*start)[walk[i] + 1]++;
+    for (size_t q = 0; q < w; q++) (*start)[q + 1] += (*start)[q];
+    memcpy(cursor, *start, (w + 1) * sizeof *cursor);
+    for (size_t i = 0; i < n; i++) (*order)[cursor[walk[i]]++] = i; /* plan order within a walk */
+    free(walk);
+    free(cursor);
+    *nwalks = w;
+    return WF_OK;
 }
 
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap)
@@ -583,19 +639,23 @@ const char *wf_survey_item_note(const wf_survey_item_result *res)
     return res->changed ? " (made from other inputs: redone)" : res->redone ? " (damaged product redone)" : "";
 }
 
-/* The item's history, each earlier exposure drawn as its own product would be (tools/persist.h). */
+/* The item's history, each earlier exposure drawn as its own product would be (tools/persist.h),
+ * or taken from the process's cache; *drawn: how many were drawn. */
 static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, const wf_config *cfg,
-                               wf_persist_history **out, wf_persist_source *src)
+                               wf_persist_history **out, wf_persist_source *src, int *drawn)
 {
     wf_persist_history *ph;
+    *drawn = 0;
     wf_status st = wf_persist_history_new(cfg->ro.ncols, cfg->ro.nrows, cfg->persist.min_stimulus,
                                           cfg->ro.det.on.saturation ? cfg->ro.det.full_well : INFINITY, &ph);
     for (int j = 0; j < h->n && !st; j++) {
         const wf_survey_row *r = &ctx->plan[h->row[j]];
         wf_clock clock;
+        int d = 1;
         if (!(st = configure(ctx->base, ctx->opt, r, ctx->items[i].sca, ctx->scratch, &clock)))
-            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache);
+            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache, &d);
         if (st) st = wf_error(st, "persistence history from exposure %d: %s", r->expid, wf_error_message());
+        *drawn += d;
     }
     if (st) { wf_persist_history_free(ph); return st; }
     wf_persist_history_source(ph, src);
@@ -611,8 +671,8 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
     wf_survey_item_name(ctx, i, name, sizeof name);
     if (state == P_UNCHECKED) return wf_error(WF_ERR_INPUT, "%s: made before the run's check", name);
     product *p = ctx->p;
-    history h;
-    wf_status st = prepare(ctx, i, NULL, p, &h);
+    const history *h = &ctx->hist[i];
+    wf_status st = prepare(ctx, i, NULL, p);
     if (st) return st;
     if (!(state == P_SAME && wf_survey_product_ok(p->image) && wf_survey_product_ok(p->truth))) {
         /* the truth beside an image from other inputs goes first: an interruption then
@@ -629,7 +689,11 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         p->cfg.quiet = 1;
         wf_persist_history *ph = NULL;
         wf_persist_source src;
-        if (h.n && (st = build_history(ctx, i, &h, &p->cfg, &ph, &src))) return wf_error(st, "%s: %s", name, wf_error_message());
+        int drawn = 0;
+        if (h->n && (st = build_history(ctx, i, h, &p->cfg, &ph, &src, &drawn)))
+            return wf_error(st, "%s: %s", name, wf_error_message());
+        res->hist_used = h->n;
+        res->hist_drawn = drawn;
         if (ph) job->persist = &src;
         st = wf_pipeline_expose(job);
         wf_persist_history_free(ph);
@@ -679,6 +743,8 @@ static void tally(const wf_survey_ctx *ctx, const wf_survey_item_result *res, wf
         stats->redone += res[i].redone;
         stats->changed += res[i].changed;
         stats->sne_drawn += (long)res[i].sne;
+        stats->hist_used += res[i].hist_used;
+        stats->hist_drawn += res[i].hist_drawn;
     }
 }
 

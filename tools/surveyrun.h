@@ -61,6 +61,7 @@ typedef struct wf_survey_run_stats {
     long changed;                   /* products made from other inputs, remade (--on-change redo) */
     long sne_drawn;                 /* SN entries in the truth of the products rendered */
     long outside;                   /* items outside --area, not made */
+    long hist_used, hist_drawn;     /* earlier exposures in the persistence histories, and drawn */
     int silent;                     /* 1: another process reports this run (MPI ranks > 0) */
 } wf_survey_run_stats;
 
@@ -91,6 +92,8 @@ typedef struct wf_survey_item_result {
     int32_t redone;        /* 1: a damaged product was replaced */
     int32_t changed;       /* 1: a product from other inputs was replaced */
     int64_t sne;           /* SNe drawn */
+    int32_t hist_used;     /* earlier exposures in its persistence history */
+    int32_t hist_drawn;    /* of them drawn for it (the others were in the process's cache) */
     wf_survey_index_row row;
 } wf_survey_item_result;
 
@@ -111,6 +114,19 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
 /* Computes item i's input digest in this process, so that its files' digests stay in the
  * run's cache (a child process that then makes the item finds them there). */
 wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i);
+/* The persistence histories this process's cache took in since mark (wf_survey_history_mark),
+ * as bytes for another process's wf_survey_history_import (*buf malloc'd, NULL when none):
+ * how an item's child gives what it drew back to the process that makes the next items. */
+unsigned long wf_survey_history_mark(const wf_survey_ctx *ctx);
+wf_status wf_survey_history_export(const wf_survey_ctx *ctx, unsigned long mark, void **buf, size_t *size);
+wf_status wf_survey_history_import(wf_survey_ctx *ctx, const void *buf, size_t size);
+/* The items as walks for a run on nworkers processes: a walk is consecutive items of one SCA
+ * in plan (exposure) order, so that the process that makes it finds in its cache all the
+ * earlier exposures of each history but the newest (tools/persist.h); walks are cut to
+ * ceil(items / (2 nworkers)) items, so that every worker has some, and listed by their first
+ * item. (*order)[k] for k in [(*start)[w], (*start)[w + 1]) are walk w's items; both
+ * malloc'd. */
+wf_status wf_survey_walks(const wf_survey_ctx *ctx, size_t nworkers, size_t **order, size_t **start, size_t *nwalks);
 /* "exposure E SCA S" of item i, for messages. */
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap);
 /* How item i's result reads in a progress line: "", " (damaged product redone)", ... */
