@@ -218,7 +218,8 @@ done < diff/jobs.txt
 [ -s diff.list ] || die "no difference image was made"
 "$WFISIM" efficiency --label single --types galaxy,star --out eff single.list > eff.log 2>&1 &&
     "$WFISIM" efficiency --label coadd --types galaxy,star,sn --out eff coadd.list >> eff.log 2>&1 &&
-    "$WFISIM" efficiency --label diff --types sn --isolated sne.fits --out eff diff.list >> eff.log 2>&1 ||
+    "$WFISIM" efficiency --label diff --types sn --out eff diff.list >> eff.log 2>&1 &&
+    "$WFISIM" efficiency --label diff_isolated --types sn --isolated sne.fits --out eff diff.list >> eff.log 2>&1 ||
     { cat eff.log >&2; die "efficiency failed"; }
 stage efficiency
 "$WFISIM" hosts --out hosts coadd.list > hosts.log 2>&1 || { cat hosts.log >&2; die "hosts failed"; }
@@ -261,7 +262,10 @@ noise() { # LOGS... -> the median of the measured noise scales ("noise x S" in d
     printf '  "sn_n_true_diff": %s,\n  "sn_n_found_diff": %s,\n  "diff_n_false": %s,\n' \
         "$(key $E/diff_summary.json n_true_sn)" "$(key $E/diff_summary.json n_found_sn)" \
         "$(key $E/diff_summary.json n_false)"
-    printf '  "sn_n_not_isolated_diff": %s,\n' "$(key $E/diff_summary.json n_not_isolated_sn)"
+    printf '  "sn_m50_diff_isolated": %s,\n  "sn_m50_diff_isolated_err": %s,\n' \
+        "$(key $E/diff_isolated_summary.json m50_sn)" "$(key $E/diff_isolated_summary.json m50_err_sn)"
+    printf '  "sn_n_true_diff_isolated": %s,\n  "sn_n_not_isolated_diff": %s,\n' \
+        "$(key $E/diff_isolated_summary.json n_true_sn)" "$(key $E/diff_isolated_summary.json n_not_isolated_sn)"
     for k in hosts_total hosts_correct hosts_nearest_wrong hosts_undetected hosts_nearest_correct \
         hosts_dlr_wrong sne_total sne_hostless hosts_outside; do
         printf '  "%s": %s,\n' "$k" "$(key $H $k)"

@@ -77,13 +77,26 @@ START_TEST(tiny_survey)
      * pixels, each of which gains sqrt(N)) */
     ck_assert_msg(gc - gs > 0.15 && gc - gs < gain + 0.3, "galaxies: coadd %.3f single %.3f (point gain %.3f)", gc,
                   gs, gain);
+    /* the measured noise scales of detection (docs/ANALYSIS.md, "Detection thresholds"):
+     * drizzle's covariance is positive, so the filtered sky's sigma exceeds what ERR says,
+     * by less than Fruchter & Hook's large-aperture ratio R = r / (1 - 1/(3r)), r = pixfrac /
+     * (0.0575 / 0.11): the coadds' pixfrac 0.7, a difference's epoch resampled with pixfrac 1 */
+    double rs = 0.0575 / 0.11, r7 = 0.7 / rs, r1 = 1.0 / rs;
+    double cn = num(j, "coadd_noise_scale"), dn = num(j, "diff_noise_scale");
+    ck_assert_msg(cn > 1.02 && cn < r7 / (1 - 1 / (3 * r7)), "coadd noise scale %.3f", cn);
+    ck_assert_msg(dn > 1.02 && dn < r1 / (1 - 1 / (3 * r1)), "difference noise scale %.3f", dn);
     /* an SN on a difference image: one epoch's noise plus a template of one epoch (sqrt 2),
-     * 0.38 mag shallower than a star in one epoch, within the fit's error and the template's
-     * SN light */
+     * 0.38 mag shallower than a star in one epoch (both thresholds 1.5 of the measured
+     * sigma), within the fit's error and the template's SN light */
     double sd = num(j, "sn_m50_diff"), esd = num(j, "sn_m50_diff_err");
     double expect = ss - 1.25 * log10(2.0);
+    fprintf(stderr, "tiny survey: stars single %.3f +- %.3f coadd %.3f +- %.3f (gain %.3f expected %.3f); galaxies "
+                    "single %.3f coadd %.3f; SN diff %.3f +- %.3f (expected %.3f); noise scales coadd %.3f diff %.3f\n",
+            ss, ess, sc, esc, sc - ss, gain, gs, gc, sd, esd, expect, cn, dn);
     ck_assert_msg(fabs(sd - expect) < 0.6 + 3 * esd, "SN m50 on differences %.3f +- %.3f, expected %.3f", sd, esd,
                   expect);
+    /* isolated SNe (SPEC 8) are a subset of the SNe scored on the differences */
+    ck_assert_double_le(num(j, "sn_n_true_diff_isolated") + num(j, "sn_n_not_isolated_diff"), num(j, "sn_n_true_diff"));
     /* the hosts: every SN with a host in the coadd is one of correct, wrong, undetected,
      * by either rule; every host is in the truth (the renderer and sn generate drew the same
      * extended synthetic field) */
