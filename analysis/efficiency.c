@@ -517,9 +517,10 @@ typedef struct run {
     size_t niso;
 } run;
 
-static int cmp_iso(const void *a, const void *b)
+/* Orders iso_entry and gal_mag alike: both begin with their long long id. */
+static int cmp_id(const void *a, const void *b)
 {
-    long long p = ((const iso_entry *)a)->id, q = ((const iso_entry *)b)->id;
+    long long p = *(const long long *)a, q = *(const long long *)b;
     return (p > q) - (p < q);
 }
 
@@ -536,7 +537,7 @@ static wf_status read_isolation(const char *path, run *r)
     for (size_t i = 0; i < s.n; i++) r->iso[i] = (iso_entry){s.id[i], s.host_id[i], s.host_offset[i], s.host_a[i]};
     r->niso = s.n;
     wf_sn_sample_free(&s);
-    qsort(r->iso, r->niso, sizeof *r->iso, cmp_iso);
+    qsort(r->iso, r->niso, sizeof *r->iso, cmp_id);
     return WF_OK;
 }
 
@@ -544,12 +545,6 @@ typedef struct gal_mag {
     long long id;
     double mag;
 } gal_mag;
-
-static int cmp_gal_mag(const void *a, const void *b)
-{
-    long long p = ((const gal_mag *)a)->id, q = ((const gal_mag *)b)->id;
-    return (p > q) - (p < q);
-}
 
 /* crowded[i] = 1 for the line's SNe that are not isolated: within iso_factor x HOSTA of their
  * host, or with a host brighter than iso_host_mag in this image's truth (a host absent from
@@ -564,13 +559,13 @@ static wf_status mark_crowded(const char *list_path, const line *ln, const wf_ef
     ng = 0;
     for (long i = 0; i < t->n; i++)
         if (t->type[i] == WF_EFF_GALAXY) g[ng++] = (gal_mag){t->id[i], t->mag[i]};
-    qsort(g, (size_t)ng, sizeof *g, cmp_gal_mag);
+    qsort(g, (size_t)ng, sizeof *g, cmp_id);
     wf_status st = WF_OK;
     for (long i = 0; i < t->n && !st; i++) {
         crowded[i] = 0;
         if (t->type[i] != WF_EFF_SN) continue;
         iso_entry key = {.id = t->id[i]};
-        const iso_entry *e = bsearch(&key, r->iso, r->niso, sizeof *r->iso, cmp_iso);
+        const iso_entry *e = bsearch(&key, r->iso, r->niso, sizeof *r->iso, cmp_id);
         if (!e) {
             st = wf_error(WF_ERR_INPUT, "%s:%d: SN %lld of the truth is not in the --isolated sample %s", list_path,
                           ln->lineno, t->id[i], o->isolated);
@@ -578,7 +573,7 @@ static wf_status mark_crowded(const char *list_path, const line *ln, const wf_ef
         }
         if (e->host < 0) continue; /* hostless */
         gal_mag gk = {.id = e->host};
-        const gal_mag *h = bsearch(&gk, g, (size_t)ng, sizeof *g, cmp_gal_mag);
+        const gal_mag *h = bsearch(&gk, g, (size_t)ng, sizeof *g, cmp_id);
         crowded[i] = !(e->off > o->iso_factor * e->a) || (h && !(h->mag > o->iso_host_mag));
     }
     free(g);

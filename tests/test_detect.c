@@ -498,21 +498,6 @@ START_TEST(theta_stays_in_range)
 }
 END_TEST
 
-static uint64_t splitmix(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-}
-
-static double gauss(uint64_t *s)
-{
-    double u = ((double)(splitmix(s) >> 11) + 0.5) / 9007199254740992.0;
-    double v = (double)(splitmix(s) >> 11) / 9007199254740992.0;
-    return sqrt(-2.0 * log(u)) * cos(2.0 * M_PI * v);
-}
-
 enum { NN = 1024 };
 
 /* Independent noise: the measured ratio is 1, with and without the filter, also with
@@ -523,7 +508,7 @@ START_TEST(noise_ratio_independent)
     unsigned char *mask = calloc(NN * NN, 1);
     ck_assert(sci && err && mask);
     uint64_t seed = 11;
-    for (int i = 0; i < NN * NN; i++) sci[i] = (float)(3.0 * gauss(&seed)), err[i] = 3.0f;
+    for (int i = 0; i < NN * NN; i++) sci[i] = (float)(3.0 * wf_test_gauss(&seed)), err[i] = 3.0f;
     double r;
     long used;
     for (int f = 0; f < 2; f++) {
@@ -533,8 +518,8 @@ START_TEST(noise_ratio_independent)
     }
     /* 400 Gaussian sources of peak 5..100 sigma, sigma 1.5 px, and a masked block of garbage */
     for (int k = 0; k < 400; k++) {
-        double cx = 10 + (NN - 20) * (splitmix(&seed) >> 11) / 9007199254740992.0;
-        double cy = 10 + (NN - 20) * (splitmix(&seed) >> 11) / 9007199254740992.0;
+        double cx = 10 + (NN - 20) * (wf_test_splitmix(&seed) >> 11) / 9007199254740992.0;
+        double cy = 10 + (NN - 20) * (wf_test_splitmix(&seed) >> 11) / 9007199254740992.0;
         double peak = 3.0 * (5 + 95 * (k % 20) / 19.0);
         for (int y = (int)cy - 8; y <= (int)cy + 8; y++)
             for (int x = (int)cx - 8; x <= (int)cx + 8; x++)
@@ -561,7 +546,7 @@ START_TEST(noise_ratio_correlated_closed_form)
     unsigned char *mask = calloc(NN * NN, 1);
     ck_assert(sci && err && g && mask);
     uint64_t seed = 5;
-    for (int i = 0; i < (NN + 1) * (NN + 1); i++) g[i] = gauss(&seed);
+    for (int i = 0; i < (NN + 1) * (NN + 1); i++) g[i] = wf_test_gauss(&seed);
     for (int y = 0; y < NN; y++)
         for (int x = 0; x < NN; x++) {
             const double *a = g + (size_t)y * (NN + 1) + x;

@@ -21,21 +21,6 @@
 #define APER 4.5    /* aperture radius, pixels (3 PSF sigma: 99% of the flux) */
 #define SPACING 32  /* point sources on a grid */
 
-static uint64_t splitmix(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-}
-
-static double gauss(uint64_t *s)
-{
-    double u = ((double)(splitmix(s) >> 11) + 0.5) / 9007199254740992.0;
-    double v = (double)(splitmix(s) >> 11) / 9007199254740992.0;
-    return sqrt(-2.0 * log(u)) * cos(2.0 * M_PI * v);
-}
-
 /* Sky with Gaussian noise plus point sources of flux 200..2000 on a grid. */
 static float *noisy_image(void)
 {
@@ -44,7 +29,7 @@ static float *noisy_image(void)
     uint64_t s = 7;
     for (int y = 0; y < NY; y++)
         for (int x = 0; x < NX; x++) {
-            double v = SKY + SIGMA * gauss(&s);
+            double v = SKY + SIGMA * wf_test_gauss(&s);
             int cx = (x / SPACING) * SPACING + SPACING / 2, cy = (y / SPACING) * SPACING + SPACING / 2;
             double flux = 200.0 + 1800.0 * (double)((cx / SPACING + 3 * (cy / SPACING)) % 16) / 15.0;
             double r2 = (x - cx) * (x - cx) + (y - cy) * (y - cy);
@@ -136,8 +121,8 @@ START_TEST(test_integers_lossless)
     static uint16_t cube[NR * H * W], back16[NR * H * W];
     static uint32_t dq[H * W], back32[H * W];
     uint64_t s = 3;
-    for (size_t i = 0; i < NR * H * W; i++) cube[i] = i < 65536 ? (uint16_t)i : (uint16_t)splitmix(&s);
-    for (size_t i = 0; i < H * W; i++) dq[i] = i < 64 ? (i < 32 ? 1u << i : ~(1u << (i - 32))) : (uint32_t)splitmix(&s);
+    for (size_t i = 0; i < NR * H * W; i++) cube[i] = i < 65536 ? (uint16_t)i : (uint16_t)wf_test_splitmix(&s);
+    for (size_t i = 0; i < H * W; i++) dq[i] = i < 64 ? (i < 32 ? 1u << i : ~(1u << (i - 32))) : (uint32_t)wf_test_splitmix(&s);
     long ax3[3] = {W, H, NR}, ax2[2] = {W, H};
     snprintf(path, sizeof path, "%s/cube.fits", dir);
     write_product(path, USHORT_IMG, TUSHORT, 3, ax3, cube, 2, 16, 1, 7, 0);
@@ -284,7 +269,7 @@ START_TEST(test_row_noise)
     uint64_t s = 99;
     for (int i = 0; i < N; i++) {
         const double d = i - 2000.0;
-        row[i] = (float)(100.0 + 0.05 * i + 5000.0 * exp(-0.5 * d * d / 2.25) + 3.0 * gauss(&s));
+        row[i] = (float)(100.0 + 0.05 * i + 5000.0 * exp(-0.5 * d * d / 2.25) + 3.0 * wf_test_gauss(&s));
     }
     double n = wf_fits_row_noise(row, N, scratch);
     ck_assert_msg(fabs(n / 3.0 - 1) < 0.06, "row noise %.4f, sigma 3", n);
@@ -335,14 +320,14 @@ START_TEST(test_row_noise_exact)
         const int kind = trial / 8 % 10;
         const double scale = pow(10.0, (trial % 13) - 6.0), base = (trial % 3 - 1) * 1e3 * scale;
         for (long i = 0; i < n; i++) {
-            double v = base + scale * gauss(&s);
+            double v = base + scale * wf_test_gauss(&s);
             switch (kind) {
             case 1: v = -fabs(v); break;                          /* all negative */
             case 2: v = floor(v / scale); break;                  /* integers: ties */
-            case 3: v = (double)((int)(4 * fabs(gauss(&s))) % 3); break; /* three values */
+            case 3: v = (double)((int)(4 * fabs(wf_test_gauss(&s))) % 3); break; /* three values */
             case 4: if (i % 7 == 0) v = NAN; break;
             case 5: if (i % 11 == 0) v = i % 2 ? INFINITY : -INFINITY; break;
-            case 6: v = 1e-42 * gauss(&s); break;                 /* denormals */
+            case 6: v = 1e-42 * wf_test_gauss(&s); break;                 /* denormals */
             case 7: if (i % 3) v = 0.0; break;                    /* mostly zeros */
             case 8: v = i % 2 ? NAN : v; break;                   /* half NaN */
             default: break;

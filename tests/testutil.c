@@ -193,3 +193,18 @@ unsigned char *wf_test_expose_stream(const wf_readout_config *cfg, const wf_cloc
     wf_link_memory_close(&mem);
     return out;
 }
+
+uint64_t wf_test_splitmix(uint64_t *s)
+{
+    uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+}
+
+double wf_test_gauss(uint64_t *s)
+{
+    double u = ((double)(wf_test_splitmix(s) >> 11) + 0.5) / 9007199254740992.0;
+    double v = (double)(wf_test_splitmix(s) >> 11) / 9007199254740992.0;
+    return sqrt(-2.0 * log(u)) * cos(2.0 * M_PI * v);
+}

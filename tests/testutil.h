@@ -5,6 +5,7 @@
 #define WF_TESTUTIL_H
 
 #include <check.h>
+#include <stdint.h>
 #include <stdio.h>
 
 /* $WFISIM_REFERENCE/galsim or ../shared/reference/galsim, NULL when absent. */
@@ -45,6 +46,11 @@ int wf_test_file_contains(const char *path, const char *needle);
 /* The number at a path of JSON keys (each searched inside the previous one's value), as in
  * the reference facts.json; NAN when absent. Enough for the reference files, not general. */
 double wf_test_json_number(const char *text, const char *const *keys, int nkeys);
+
+/* Test data, not simulation noise (that is hal/noise): splitmix64 words from the state *s,
+ * and standard normals from two of them (Box-Muller). */
+uint64_t wf_test_splitmix(uint64_t *s);
+double wf_test_gauss(uint64_t *s);
 
 #define WF_SKIP(reason)                                                        \
     do {                                                                       \
