@@ -1,5 +1,7 @@
 /* `wfisim coadd`: drizzle (analysis/drizzle.h) any number of products of one filter onto a
- * TAN grid, weighted by inverse variance (1/ERR^2), pixels flagged in DQ left out.
+ * TAN grid, pixels flagged in DQ left out, each input weighted by the inverse variance of its
+ * sky (1 / median(ERR)^2 over its good pixels: one weight per input, so that a source's own
+ * shot noise does not bias its flux).
  *
  * Memory is bounded by the output tile being built, never by the number of inputs: the
  * output is made tile_rows rows at a time; for each tile every input whose footprint meets it
@@ -13,9 +15,10 @@
  *   primary  FILTER, NINPUT, KERNEL, PIXFRAC, PIXSCALE, DQMASK, MJD-BEG/MJD-END
  *   SCI      float32, e-/s per output pixel (flux-conserving: see drizzle.h), 0 where WHT = 0
  *   ERR      float32, e-/s per output pixel, standard deviation of SCI from ERR of inputs
- *   WHT      float32, drizzle's weight sum(1/ERR^2 x overlap / drop area)
+ *   WHT      float32, drizzle's weight sum(input weight x overlap / drop area)
  *   CTX      int32, number of inputs that contributed to the pixel
- *   INPUTS   table: FILE, EXPOSURE, SCA, MJD, FILTER, one row per input
+ *   INPUTS   table: FILE, EXPOSURE, SCA, MJD, FILTER, WEIGHT (0: not on the grid), one row
+ *            per input
  * Every image HDU carries the grid's TAN WCS. */
 #ifndef WF_COADD_H
 #define WF_COADD_H

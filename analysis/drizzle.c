@@ -172,7 +172,7 @@ long wf_drizzle_add(wf_drizzle_tile *t, const wf_drizzle_block *b, double pixfra
                 x[k] = w00 * b->ox[c00] + w10 * b->ox[c10] + w01 * b->ox[c01] + w11 * b->ox[c11];
                 y[k] = w00 * b->oy[c00] + w10 * b->oy[c10] + w01 * b->oy[c01] + w11 * b->oy[c11];
             }
-            hits += wf_drizzle_drop(t, x, y, pixfrac, d, 1.0 / (e * e), e * e, id);
+            hits += wf_drizzle_drop(t, x, y, pixfrac, d, b->weight, e * e, id);
         }
     return hits;
 }

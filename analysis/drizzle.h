@@ -48,10 +48,12 @@ typedef struct wf_drizzle_block {
     const float *sci, *err;
     const uint32_t *dq;
     const double *ox, *oy;
+    double weight; /* every pixel's: one per input (its sky's 1/ERR^2, analysis/coadd.h) */
 } wf_drizzle_block;
 
 /* Drops every good pixel of the block (DQ & dq_mask == 0, SCI finite, ERR finite and > 0)
- * with weight 1 / ERR^2 onto the tile. id identifies the input for CTX (> 0, one per input).
+ * onto the tile with the block's weight and ERR^2 as its variance. id identifies the input
+ * for CTX (> 0, one per input).
  * Returns the number of drops that landed on the tile. */
 long wf_drizzle_add(wf_drizzle_tile *t, const wf_drizzle_block *b, double pixfrac,
                     uint32_t dq_mask, int32_t id);

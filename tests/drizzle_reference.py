@@ -3,8 +3,10 @@
 usage: drizzle_reference.py COADD.fits INPUT.fits...
 
 Each input is drizzled with drizzle.cdrizzle.tdriz (python3-drizzle, the C core of
-STScI's drizzle): square kernel, the coadd's PIXFRAC, weights 1/ERR^2 with DQ-flagged
-pixels 0, units cps, and the pixmap (input pixel centre -> output pixel, 0-based) from
+STScI's drizzle): square kernel, the coadd's PIXFRAC, one weight per input (wfisim's
+convention, analysis/coadd.h: 1/median(ERR)^2 over the good pixels of 64 rows spread over
+the image, rows step/2, step/2 + step, ... with step = ny // 64) with DQ-flagged pixels 0,
+units cps, and the pixmap (input pixel centre -> output pixel, 0-based) from
 astropy's WCS of each header. scale is the output/input pixel-scale ratio.
 
 Debian bookworm's python3-drizzle 1.13.4 carries C core 1.12, which interpolates the
@@ -42,7 +44,11 @@ def main():
         dq = h['DQ'].data.astype(np.int64)
         iwcs = WCS(h['SCI'].header)
         iscale = np.sqrt(abs(np.linalg.det(iwcs.pixel_scale_matrix)))
-        w = np.where((dq & mask) == 0, 1.0 / err**2, 0.0).astype(np.float32)
+        step = max(1, sci.shape[0] // 64)
+        rows = np.arange(step // 2, sci.shape[0], step)
+        e = err[rows][((dq[rows] & mask) == 0) & np.isfinite(err[rows]) & (err[rows] > 0)]
+        m = float(np.median(e))
+        w = np.where((dq & mask) == 0, 1.0 / (m * m), 0.0).astype(np.float32)
         # Debian's drizzle (C core 1.12) leaves out input pixels at the image's edges (the
         # last row and column, its scan-line bugs: STScI drizzle #63, #89, #104): pad all
         # round with pixels of weight 0 so that only the padding is left out
