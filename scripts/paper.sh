@@ -170,6 +170,30 @@ xargs -P "$THREADS" -L 1 sh -c '"$WFISIM" coadd --center "$1,$2" --size "$NPIX,$
 fail_if coadd/errors.txt "a coadd failed"
 stage coadd
 
+# 4b. the single exposures (a sample of SINGLES, spread over the run) drizzled alone onto the
+#    grid of a patch they reach: the reference depth on the 0.0575" grid the coadds and the
+#    differences are detected on (a coarser, undersampled grid is detected to another depth;
+#    docs/ANALYSIS.md, "Depth on the drizzled grid")
+N=$(wc -l < products.txt)
+awk -v n="$N" -v k="$SINGLES" 'BEGIN { last = -1 }
+    { b = int((NR - 1) * k / n); if (b != last) { print; last = b } }' products.txt > singles.txt
+: > coadd/single_jobs.txt
+while read -r _ _ _ FILE TRUTH _ _; do
+    while read -r P PRA PDEC; do
+        if [ -s "coadd/$P.inputs" ] && awk -v f="$FILE" '$4 == f { found = 1 } END { exit !found }' "coadd/$P.inputs"; then
+            echo "$P $PRA $PDEC ${FILE%.fits} $TRUTH" >> coadd/single_jobs.txt
+            break
+        fi
+    done < patches.txt
+done < singles.txt
+# shellcheck disable=SC2016
+xargs -P "$THREADS" -L 1 sh -c '"$WFISIM" coadd --center "$1,$2" --size "$NPIX,$NPIX" --quiet \
+    --out "coadd/$0.e$3.fits" "render/$3.fits" > "coadd/$0.e$3.log" 2>&1 ||
+    { [ $? -eq 2 ] && grep -q "overlaps\|lands on" "coadd/$0.e$3.log"; } || cat "coadd/$0.e$3.log" >> coadd/errors.txt' \
+    < coadd/single_jobs.txt
+fail_if coadd/errors.txt "a resampled single failed"
+stage resample
+
 # 5. difference images: each epoch on each patch it reaches, against the template at the
 #    other end of the survey (SNe bright in one are faded in the other)
 : > diff/jobs.txt
@@ -187,12 +211,13 @@ xargs -P "$THREADS" -L 1 sh -c 'o="diff/$0_$2"
 fail_if diff/errors.txt "a difference image failed"
 stage diff
 
-# 6. detection: the chosen single exposures, the deep coadds and every difference image
-N=$(wc -l < products.txt)
-awk -v n="$N" -v k="$SINGLES" 'BEGIN { last = -1 }
-    { b = int((NR - 1) * k / n); if (b != last) { print; last = b } }' products.txt > singles.txt
+# 6. detection: the chosen single exposures (on their own grid and resampled), the deep
+#    coadds and every difference image
 : > cat/jobs.txt
 awk '{ print "render/" $4, "cat/" $4, 1.5, 1 }' singles.txt >> cat/jobs.txt
+while read -r P _ _ STEM _; do
+    [ -f "coadd/$P.e$STEM.fits" ] && echo "coadd/$P.e$STEM.fits cat/$P.e$STEM.fits 1.5 auto" >> cat/jobs.txt
+done < coadd/single_jobs.txt
 for f in coadd/*.all.fits; do [ -f "$f" ] && echo "$f cat/${f#coadd/} $COADD_THRESH auto" >> cat/jobs.txt; done
 for f in diff/*.fits; do [ -f "$f" ] && echo "$f cat/${f#diff/} $DIFF_THRESH auto" >> cat/jobs.txt; done
 : > cat/errors.txt
@@ -214,9 +239,15 @@ done < patches.txt
 while read -r P _ STEM TRUTH; do
     [ -f "diff/${P}_$STEM.fits" ] && echo "diff/${P}_$STEM.fits cat/${P}_$STEM.fits render/$TRUTH" >> diff.list
 done < diff/jobs.txt
+: > resampled.list
+while read -r P _ _ STEM TRUTH; do
+    [ -f "coadd/$P.e$STEM.fits" ] && echo "coadd/$P.e$STEM.fits cat/$P.e$STEM.fits render/$TRUTH" >> resampled.list
+done < coadd/single_jobs.txt
+[ -s resampled.list ] || die "no single exposure reaches a patch"
 [ -s coadd.list ] || die "no deep coadd was made"
 [ -s diff.list ] || die "no difference image was made"
 "$WFISIM" efficiency --label single --types galaxy,star --out eff single.list > eff.log 2>&1 &&
+    "$WFISIM" efficiency --label resampled --types galaxy,star --out eff resampled.list >> eff.log 2>&1 &&
     "$WFISIM" efficiency --label coadd --types galaxy,star,sn --out eff coadd.list >> eff.log 2>&1 &&
     "$WFISIM" efficiency --label diff --types sn --out eff diff.list >> eff.log 2>&1 &&
     "$WFISIM" efficiency --label diff_isolated --types sn --isolated sne.fits --out eff diff.list >> eff.log 2>&1 ||
@@ -248,13 +279,16 @@ noise() { # LOGS... -> the median of the measured noise scales ("noise x S" in d
             "$k" "$(key $E/single_summary.json m50_err_$k)"
         printf '  "%s_m50_coadd": %s,\n  "%s_m50_coadd_err": %s,\n' "$k" "$(key $E/coadd_summary.json m50_$k)" \
             "$k" "$(key $E/coadd_summary.json m50_err_$k)"
-        for s in single coadd; do
+        printf '  "%s_m50_resampled": %s,\n  "%s_m50_resampled_err": %s,\n' "$k" \
+            "$(key $E/resampled_summary.json m50_$k)" "$k" "$(key $E/resampled_summary.json m50_err_$k)"
+        for s in single resampled coadd; do
             printf '  "%s_n_true_%s": %s,\n  "%s_n_found_%s": %s,\n' "$k" "$s" "$(key $E/${s}_summary.json n_true_$k)" \
                 "$k" "$s" "$(key $E/${s}_summary.json n_found_$k)"
         done
     done
     printf '  "single_n_false": %s,\n  "coadd_n_false": %s,\n' "$(key $E/single_summary.json n_false)" \
         "$(key $E/coadd_summary.json n_false)"
+    printf '  "resampled_noise_scale": %s,\n' "$(noise $(awk '{ print $2 ".log" }' resampled.list))"
     printf '  "coadd_noise_scale": %s,\n  "diff_noise_scale": %s,\n' \
         "$(noise cat/*.all.fits.log)" "$(noise $(awk '{ print $2 ".log" }' diff.list))"
     printf '  "sn_m50_diff": %s,\n  "sn_m50_diff_err": %s,\n' "$(key $E/diff_summary.json m50_sn)" \
