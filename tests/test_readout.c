@@ -1125,6 +1125,67 @@ START_TEST(linear_rate_moments)
 }
 END_TEST
 
+/* A rate changing in time only from row 10 on (rows 0-9 constant). */
+static wf_status lower_slope(void *ctx, int y0, int y1, int ncols, float *slope, int *any)
+{
+    const linear_source *l = ctx;
+    *any = 0;
+    for (int y = y0; y < y1; y++)
+        for (int x = 0; x < ncols; x++) {
+            slope[(size_t)(y - y0) * ncols + x] = y >= 10 ? (float)l->g : 0.0f;
+            *any |= y >= 10;
+        }
+    return WF_OK;
+}
+
+/* Moments sampling of a rate changing in time, with photon noise: each pixel with a slope
+ * takes its own interval means, so the mean resultant is the closed form of check_linear
+ * within 5 standard errors; a pixel without one is drawn the same whether its tile holds
+ * sloped pixels or not, so the bytes do not depend on the tile height. */
+START_TEST(moments_time_variable)
+{
+    wf_readout_config cfg;
+    wf_clock clock;
+    small_config(&cfg, &clock, 64, 80);
+    cfg.sampling = WF_SAMPLE_MOMENTS;
+    cfg.time_variable = 1;
+    memset(&cfg.det.on, 0, sizeof cfg.det.on);
+    cfg.det.on.photon_noise = 1;
+    const double r0 = 50.0, g = 0.02;
+    linear_source ls = {r0, g};
+    wf_scene_source src = {&ls, linear_rate, NULL, lower_slope};
+    const int heights[] = {4, 20, 80};
+    decoded ref = {0};
+    for (int i = 0; i < 3; i++) {
+        cfg.tile_rows = heights[i];
+        decoded d;
+        run_decoded(&cfg, &clock, &src, 1, &d);
+        if (i == 0) { ref = d; continue; }
+        char what[64];
+        snprintf(what, sizeof what, "tile height %d", heights[i]);
+        assert_same(&ref, &d, what);
+        free_decoded(&d);
+    }
+    const double T = wf_clock_exposure_time(&clock), tm = 0.5 * T;
+    const size_t n = (size_t)ref.ncols * ref.nrows, first = (size_t)10 * ref.ncols, m = n - first;
+    for (int r = 0; r < clock.ma.nresultants; r++) {
+        int nr = clock.ma.first[r + 1] - clock.ma.first[r];
+        double want = 0.0;
+        for (int j = clock.ma.first[r]; j < clock.ma.first[r + 1]; j++) {
+            double t = wf_clock_read_time(&clock, clock.ma.read[j]);
+            want += r0 * t + g * (t * t / 2 - t * tm);
+        }
+        want = want / nr + cfg.det.bias_adu;
+        double mean, var, se;
+        const uint16_t *plane = ref.res + (size_t)r * n + first;
+        sample_cov(plane, plane, m, &mean, &var, &se);
+        ck_assert_msg(fabs(mean - want) < 5.0 * sqrt(var / m), "R%d: mean %.3f, closed form %.3f (se %.3f)", r, mean,
+                      want, sqrt(var / m));
+    }
+    free_decoded(&ref);
+}
+END_TEST
+
 /* A grid scene behind a wrapper that records the rows it was asked for; instance 1 does not
  * draw its first tile until instance 0 has taken one of its run's (or 10 s have passed), so
  * the fast instance finishes its run and takes the back of the slow one's whatever the
@@ -1222,6 +1283,7 @@ static Suite *suite(void)
     tcase_add_test(tc, linear_rate_moments);
     tcase_add_test(tc, moments_covariance_closed_form);
     tcase_add_test(tc, moments_nonlinearity_mean);
+    tcase_add_test(tc, moments_time_variable);
     tcase_add_test(tc, tiles_taken_from_a_slow_thread);
     suite_add_tcase(s, tc);
     return s;
