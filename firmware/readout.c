@@ -534,7 +534,7 @@ static inline wf_rng *more(more_noise *m)
 /* w feeds inversion below a mean of 10; above, w and *w2 feed the first PTRS attempt when
  * the caller has a second unused word (w2 != NULL), else the stream does it all. */
 static inline double poisson_word(uint32_t w, const uint32_t *w2, double mean, double expm,
-                                  more_noise *mn, const double *inv_k)
+                                  more_noise *mn)
 {
     if (!(mean > 0.0)) return 0.0;
     if (mean >= 10.0) {
@@ -550,7 +550,7 @@ static inline double poisson_word(uint32_t w, const uint32_t *w2, double mean, d
     double p = p2, cdf = f2, k = 2.0;
     while (u > cdf && k < 200.0) { /* stop where the terms no longer move the sum */
         k += 1.0;
-        p *= inv_k ? mean * inv_k[(int)k] : mean / k;
+        p *= mean / k;
         double next = cdf + p;
         if (next == cdf) break;
         cdf = next;
@@ -790,7 +790,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
                     if (slow[x]) {
                         more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x),
                                          .read = (uint32_t)k, .purpose = WF_PURPOSE_PHOTON};
-                        cnt[x] = poisson_word(w1[x], &w2[x], m[x], em[x], &mn, NULL);
+                        cnt[x] = poisson_word(w1[x], &w2[x], m[x], em[x], &mn);
                     }
                     q[x] += cnt[x];
                 }
@@ -801,11 +801,11 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
                                  .purpose = WF_PURPOSE_PHOTON};
                 if (ro->slope_any) {
                     double mean = interval_mean(ro, row0 + (size_t)x, frames, tau);
-                    q[x] += poisson_word(w1[x], &w2[x], mean, exp(-mean), &mn, NULL);
+                    q[x] += poisson_word(w1[x], &w2[x], mean, exp(-mean), &mn);
                     continue;
                 }
                 double mean = m[x] * frames;
-                q[x] += poisson_word(w1[x], &w2[x], mean, frames == 1.0 ? em[x] : exp(-mean), &mn, NULL);
+                q[x] += poisson_word(w1[x], &w2[x], mean, frames == 1.0 ? em[x] : exp(-mean), &mn);
             }
         }
         if (ro->cosmic_on)
@@ -854,11 +854,11 @@ static inline double draw_at(const uint32_t *words, size_t nc, int x, int *c, do
                              double expm, more_noise *mn)
 {
     if (mean >= 10.0) {
-        double k = poisson_word(words[(size_t)*c * nc + x], &words[(size_t)(*c + 1) * nc + x], mean, expm, mn, NULL);
+        double k = poisson_word(words[(size_t)*c * nc + x], &words[(size_t)(*c + 1) * nc + x], mean, expm, mn);
         *c += 2;
         return k;
     }
-    return poisson_word(words[(size_t)(*c)++ * nc + x], NULL, mean, expm, mn, NULL);
+    return poisson_word(words[(size_t)(*c)++ * nc + x], NULL, mean, expm, mn);
 }
 
 /* ---- moments: a group's mean from three draws ------------------------------------------
@@ -1180,7 +1180,7 @@ static void single_photons(wf_readout *ro, int y, const double *e, double *q, ui
         double m = e[x];
         if (m < 10.0) { /* inversion from word 1 (no further stream); mean 0 gives 0 */
             more_noise unused = {0};
-            q[x] = poisson_word(w1[x], NULL, m, exp(-m), &unused, NULL);
+            q[x] = poisson_word(w1[x], NULL, m, exp(-m), &unused);
         } else { /* i >= nr: the list compacts onto itself */
             rx[nr] = (uint32_t)x;
             rpx[nr] = pixel_id(ro, y, x);
