@@ -3,7 +3,8 @@
  * linearity correction, ramp fit), with nonlinearity on and off. Reports the mean fitted
  * rate of each mode, their relative difference with its standard error, the ratio of the
  * scatters, and the CPU time of each readout.
- * usage: bench_direct_error NPIX MA_TABLE */
+ * usage: bench_direct_error NPIX MA_TABLE [direct|moments [RATE,RATE,...]]
+ * (the mode compared with per-read, direct by default; rates in e-/s, 1,30,300,3000 by default) */
 #include <fitsio.h>
 #include <math.h>
 #include <stdio.h>
@@ -87,15 +88,24 @@ int main(int argc, char **argv)
 {
     int n = argc > 1 ? atoi(argv[1]) : 256;
     const char *ma = argc > 2 ? argv[2] : "6";
-    const double rates[] = {1.0, 30.0, 300.0, 3000.0};
-    printf("| MA table | rate e-/s | NL | per-read mean | direct mean | direct - per-read (rel.) | "
-           "std. error (rel.) | scatter ratio | CPU s per-read | CPU s direct |\n");
+    const char *mode = argc > 3 ? argv[3] : "direct";
+    wf_sampling other = WF_SAMPLE_DIRECT;
+    if (!strcmp(mode, "moments")) other = WF_SAMPLE_MOMENTS;
+    else if (strcmp(mode, "direct")) { fprintf(stderr, "mode %s: direct or moments\n", mode); return 2; }
+    double rates[16] = {1.0, 30.0, 300.0, 3000.0};
+    int nrates = 4;
+    if (argc > 4) {
+        nrates = 0;
+        for (char *p = argv[4]; *p && nrates < 16; p += *p == ',') rates[nrates++] = strtod(p, &p);
+    }
+    printf("| MA table | rate e-/s | NL | per-read mean | %s mean | %s - per-read (rel.) | "
+           "std. error (rel.) | scatter ratio | CPU s per-read | CPU s %s |\n", mode, mode, mode);
     printf("|---|---|---|---|---|---|---|---|---|---|\n");
     for (int nl = 0; nl <= 1; nl++)
-        for (size_t i = 0; i < sizeof rates / sizeof *rates; i++) {
+        for (int i = 0; i < nrates; i++) {
             double m[2], sd[2], cpu[2];
             for (int s = 0; s < 2; s++)
-                if (run(n, ma, rates[i], nl, s ? WF_SAMPLE_DIRECT : WF_SAMPLE_PER_READ, &m[s], &sd[s], &cpu[s]))
+                if (run(n, ma, rates[i], nl, s ? other : WF_SAMPLE_PER_READ, &m[s], &sd[s], &cpu[s]))
                     return 1;
             long cnt = (long)(n - 2) * (n - 2);
             double se = sqrt((sd[0] * sd[0] + sd[1] * sd[1]) / cnt) / m[0];

@@ -1,7 +1,7 @@
 /* Firmware-path benchmark: one exposure of a sky-only scene through the readout, packets
  * to a null link (bytes counted, not kept), so that the time and peak RSS are those of the
  * firmware path alone.
- * usage: bench_readout NCOLS NROWS TILE_ROWS per-read|direct|single MA_TABLE THREADS [raw]
+ * usage: bench_readout NCOLS NROWS TILE_ROWS per-read|direct|moments|single MA_TABLE THREADS [raw]
  * `raw` turns deflate off, to separate the link's compression from the detector chain.
  * The checksum (sum of the packets' header CRC-32s, which cover the payload's CRC) does not
  * depend on the order threads send in, so two builds can be compared for identical output. */
@@ -29,7 +29,7 @@ static wf_status null_send(void *ctx, const void *p, size_t len)
 int main(int argc, char **argv)
 {
     if (argc != 7 && !(argc == 8 && !strcmp(argv[7], "raw"))) {
-        fprintf(stderr, "usage: %s NCOLS NROWS TILE_ROWS per-read|direct|single MA_TABLE THREADS [raw]\n", argv[0]);
+        fprintf(stderr, "usage: %s NCOLS NROWS TILE_ROWS per-read|direct|moments|single MA_TABLE THREADS [raw]\n", argv[0]);
         return 2;
     }
     wf_expose_job job = {0};
@@ -38,7 +38,9 @@ int main(int argc, char **argv)
     ro->nrows = atoi(argv[2]);
     ro->tile_rows = atoi(argv[3]);
     ro->mode = strcmp(argv[4], "single") ? WF_MODE_RAMP : WF_MODE_SINGLE;
-    ro->sampling = strcmp(argv[4], "direct") ? WF_SAMPLE_PER_READ : WF_SAMPLE_DIRECT;
+    ro->sampling = !strcmp(argv[4], "direct")    ? WF_SAMPLE_DIRECT
+                   : !strcmp(argv[4], "moments") ? WF_SAMPLE_MOMENTS
+                                                 : WF_SAMPLE_PER_READ;
     ro->exptime = 300.0;
     ro->exposure = 1;
     ro->sca = 1;
@@ -65,7 +67,7 @@ int main(int argc, char **argv)
     if (st) { fprintf(stderr, "bench: %s\n", wf_error_message()); return 1; }
     double wall = (b.tv_sec - a.tv_sec) + (b.tv_nsec - a.tv_nsec) * 1e-9;
     double reads = ro->mode == WF_MODE_RAMP
-                       ? (ro->sampling == WF_SAMPLE_DIRECT ? job.clock.ma.nresultants : job.clock.ma.nreads)
+                       ? (ro->sampling != WF_SAMPLE_PER_READ ? job.clock.ma.nresultants : job.clock.ma.nreads)
                        : 1;
     struct rusage ru;
     getrusage(RUSAGE_SELF, &ru);

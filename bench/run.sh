@@ -43,7 +43,7 @@ row_readout() { # label, args...
   echo
   echo "Packets go to a null link, so this is the readout alone (scene source, detector chain,"
   echo "resultant averaging, deflate). Pixel-reads per CPU-second count every digitised read"
-  echo "(per-read) or every drawn resultant (direct)."
+  echo "(per-read) or every drawn resultant (direct, moments)."
   echo
   echo "| case | command | wall s | CPU s | M pixel-reads / CPU-s | arena MiB | peak RSS MiB |"
   echo "|---|---|---|---|---|---|---|"
@@ -54,8 +54,10 @@ done
 for t in 16 64 256; do
   row_readout "direct, ${t}-row tiles, 2 threads" $N $N $t direct 6 2
 done
+row_readout "moments, 64-row tiles, 2 threads" $N $N 64 moments 6 2
 row_readout "per-read, MA table 11 (977 s), 64-row tiles, 2 threads" $N $N 64 per-read 11 2
 row_readout "direct, MA table 11 (977 s), 64-row tiles, 2 threads" $N $N 64 direct 11 2
+row_readout "moments, MA table 11 (977 s), 64-row tiles, 2 threads" $N $N 64 moments 11 2
 {
   echo
   echo "## Error of direct-resultant sampling (knob: exposure.sampling)"
@@ -66,6 +68,13 @@ row_readout "direct, MA table 11 (977 s), 64-row tiles, 2 threads" $N $N 64 dire
   echo
   $B/bench_direct_error 256 6
   $B/bench_direct_error 256 11 | tail -n +3
+  echo
+  echo "## Error of moments sampling (knob: exposure.sampling)"
+  echo
+  echo "The same on a 1024x1024 SCA at a sky-like, a faint-source and two bright-source rates:"
+  echo "\`bench_direct_error 1024 6 moments 0.4,5,300,3000\`:"
+  echo
+  $B/bench_direct_error 1024 6 moments 0.4,5,300,3000
   echo
   echo "## Peak RSS against image size (per-read, 64-row tiles, 1 thread)"
   echo

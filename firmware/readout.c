@@ -12,6 +12,18 @@
 #include "hal/size.h"
 
 
+/* Moments sampling's per-resultant constants, fixed by the MA table (see ramp_grouped). */
+typedef struct moments_group {
+    double abar;   /* E[A | T] / T: the group mean's share of the group's total increment */
+    double cvar;   /* Var[A | T] / T */
+    double vu;     /* E[S | T] = vu T^2 + bs T: the within-group spread of the charge */
+    double bs;
+} moments_group;
+
+/* Poisson inversion's 1/k, so the moments draws multiply rather than divide (k < 200) */
+#define INV_K_MAX 200
+#define MOMENTS_ROWS 8 /* moments_row's scratch rows */
+
 struct wf_readout {
     wf_readout_config cfg;
     wf_clock clock;
@@ -66,7 +78,23 @@ struct wf_readout {
     double *zero;                  /* [ncols + 8] no charge (reference pixels), then scratch */
     float *ref_z;                  /* [ncols + 8] reference pixels' read-noise normals */
     uint8_t *ref_sat;              /* [ncols + 8] saturation flags nobody reads */
+    /* moments sampling (NULL / unused otherwise) */
+    double *spread;                /* halo block: E[S | T] of the group, for the nonlinearity */
+    double *mrow;                  /* [MOMENTS_ROWS][ncols]: one row's means, starts and draws */
+    float *mz;                     /* [3][ncols]: one row's normals from words 1-3 */
+    moments_group mgroup[WF_MA_MAX_RESULTANTS];
+    double inv_k[INV_K_MAX + 1];
 };
+
+const char *wf_sampling_name(wf_sampling s)
+{
+    switch (s) {
+    case WF_SAMPLE_PER_READ: return "per-read";
+    case WF_SAMPLE_DIRECT: return "direct";
+    case WF_SAMPLE_MOMENTS: return "moments";
+    }
+    return "unknown";
+}
 
 static int corr_on(const wf_readout_config *cfg)
 {
@@ -135,7 +163,8 @@ static int direct_blocks(const wf_ma_table *ma);
  * of doubles per instance; counts above, only in bright stars, take pow). */
 #define RECIP_TABLE 65536
 
-/* Noise blocks per row the mode needs at once: one, or enough for a whole group. */
+/* Noise blocks per row the mode needs at once: one (per-read, moments), or enough for a
+ * whole group (direct). */
 static int words_blocks(const wf_readout_config *cfg, const wf_clock *clock)
 {
     return cfg->mode == WF_MODE_RAMP && cfg->sampling == WF_SAMPLE_DIRECT ? direct_blocks(&clock->ma) : 1;
@@ -161,6 +190,9 @@ static wf_status check_config(const wf_readout_config *cfg, const wf_clock *cloc
     if (!(t > 0.0 && t <= WF_EXPOSURE_TIME_MAX))
         return wf_error(WF_ERR_RANGE, "readout: exposure time %g s is outside (0, %g] s", t,
                         WF_EXPOSURE_TIME_MAX);
+    if (cfg->sampling != WF_SAMPLE_PER_READ && cfg->sampling != WF_SAMPLE_DIRECT &&
+        cfg->sampling != WF_SAMPLE_MOMENTS)
+        return wf_error(WF_ERR_RANGE, "readout: sampling %d is none of per-read, direct, moments", (int)cfg->sampling);
     if (!(cfg->det.gain > 0.0))
         return wf_error(WF_ERR_RANGE, "readout: gain %g e-/ADU must be > 0", cfg->det.gain);
     if (corr_on(cfg) && cfg->mode != WF_MODE_RAMP)
@@ -197,6 +229,11 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     if (cfg->mode == WF_MODE_RAMP && cfg->time_variable) {
         ADD(wf_size_mul(halo, sizeof(float)));
         ADD(wf_size_mul(halo, sizeof(double)));
+    }
+    if (cfg->mode == WF_MODE_RAMP && cfg->sampling == WF_SAMPLE_MOMENTS) {
+        ADD(wf_size_mul(halo, sizeof(double)));
+        ADD(wf_size_mul3(MOMENTS_ROWS, nc, sizeof(double)));
+        ADD(wf_size_mul3(3, nc, sizeof(float)));
     }
     ADD(wf_size_mul(tile, sizeof(float)));
     ADD(wf_size_mul3(4 * sizeof(uint32_t), (size_t)words_blocks(cfg, clock), nc));
@@ -279,6 +316,46 @@ static wf_status single_init(wf_readout *ro, wf_arena *arena)
     return WF_OK;
 }
 
+/* Moments sampling's constants, once per exposure (the derivation is at ramp_grouped).
+ * Group r's reads sit at u_i = (t_i - t_0) / (t_(n-1) - t_0) of its span in frames, the
+ * n - 1 intervals between them at fractions p_j = u_j - u_(j-1), interval j seen by the
+ * n - j reads from j on (weight w_j = (n - j) / n). */
+static void moments_init(wf_readout *ro)
+{
+    const wf_ma_table *ma = &ro->clock.ma;
+    for (int k = 1; k <= INV_K_MAX; k++) ro->inv_k[k] = 1.0 / k;
+    for (int r = 0; r < ma->nresultants; r++) {
+        const int *reads = ma->read + ma->first[r];
+        const int n = ma->first[r + 1] - ma->first[r];
+        moments_group *g = &ro->mgroup[r];
+        memset(g, 0, sizeof *g);
+        const double span = reads[n - 1] - reads[0];
+        if (n < 2 || !(span > 0.0)) continue; /* one read: no increment within the group */
+        double s1 = 0.0, s2 = 0.0;
+        for (int j = 1; j < n; j++) {
+            double p = (reads[j] - reads[j - 1]) / span, w = (double)(n - j) / n;
+            s1 += w * p;
+            s2 += w * w * p;
+        }
+        g->abar = s1;
+        g->cvar = s2 - s1 * s1;
+        double ubar = 0.0, uu = 0.0, c = 0.0, cross = 0.0;
+        for (int i = 0; i < n; i++) {
+            double u = (reads[i] - reads[0]) / span;
+            ubar += u;
+            uu += u * u;
+            c += u * (1.0 - u);
+            for (int k = 0; k < n; k++) {
+                double v = (reads[k] - reads[0]) / span;
+                cross += (u < v ? u : v) * (1.0 - (u < v ? v : u));
+            }
+        }
+        ubar /= n;
+        g->vu = uu / n - ubar * ubar;
+        g->bs = c / n - cross / ((double)n * n);
+    }
+}
+
 wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
                             const wf_scene_source *scene, const wf_noise *noise,
                             const wf_link *link, wf_arena *arena, wf_readout **out)
@@ -307,6 +384,12 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
             TAKE(ro->dmean, halo, "expected-electron slopes");
         }
         ro->t_mid = 0.5 * wf_clock_exposure_time(clock);
+        if (cfg->sampling == WF_SAMPLE_MOMENTS) {
+            TAKE(ro->spread, halo, "within-group spread");
+            TAKE(ro->mrow, MOMENTS_ROWS * (size_t)cfg->ncols, "moments rows");
+            TAKE(ro->mz, 3 * (size_t)cfg->ncols, "moments normals");
+            moments_init(ro);
+        }
     }
     TAKE(ro->charge, halo, "collected charge");
     TAKE(ro->meas, halo, "measured charge");
@@ -609,7 +692,7 @@ static wf_status send_refrows(wf_readout *ro)
     const wf_detector *d = &ro->cfg.det;
     const wf_ma_table *ma = &ro->clock.ma;
     const int W = ro->cn->width, B = WF_CN_BORDER, H = ro->cn->height, nres = ma->nresultants;
-    const int direct = ro->cfg.sampling == WF_SAMPLE_DIRECT;
+    const int direct = ro->cfg.sampling != WF_SAMPLE_PER_READ; /* resultants drawn at once */
     size_t mark = wf_arena_mark(ro->arena);
     void *p;
     wf_status st = wf_arena_calloc(ro->arena, 2 * B * (size_t)W, sizeof(double), "reference row sums", &p);
@@ -778,13 +861,168 @@ static inline double draw_at(const uint32_t *words, size_t nc, int x, int *c, do
     return poisson_word(words[(size_t)(*c)++ * nc + x], NULL, mean, expm, mn);
 }
 
-static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
+/* ---- moments: a group's mean from three draws ------------------------------------------
+ *
+ * Within group r (n reads at frames t_0 < ... < t_(n-1), span s = t_(n-1) - t_0), let D_j be
+ * the electrons of interval j (t_(j-1), t_j], independent Poisson of means mu_j (mu_j = lambda
+ * (t_j - t_(j-1)) at a constant rate lambda per frame), T = sum_j D_j the group's total increment
+ * and A = sum_j w_j D_j, w_j = (n - j)/n, the group mean of the accumulated charge above the
+ * charge Q_0 at its first read. Given T, (D_j) is multinomial(T, p_j = mu_j / mu), mu = sum mu_j:
+ *     E[A | T] = T abar,               abar = sum_j w_j p_j
+ *     Var[A | T] = T (sum_j w_j^2 p_j - abar^2)
+ * exactly, so that, with E[T] = Var[T] = mu,
+ *     E[A] = mu abar, Var[A] = mu sum_j w_j^2 p_j, Cov(A, T) = mu abar,
+ * the per-read process's moments (Var[A] = E Var[A|T] + Var E[A|T] = mu (s2 - abar^2) + mu abar^2).
+ * n consecutive reads: abar = 1/2, Var[A | T] = T (n - 2)/(12 n), Var[A] = mu (2n - 1)/(6n),
+ * Cov(A, T) = mu/2 (Var[A] - Cov^2/Var[T] = mu (n-1)(n-2)/(12n) with mu = (n-1) lambda).
+ * These hold whatever law T has with mean and variance mu, so each draw is:
+ *  - the lead (the charge up to t_0) and T: Poisson by inversion of one word below a mean of
+ *    10, N(mu, mu) above (clamped at 0: P < 1e-3 at 10). Above 10 the Poisson's skewness
+ *    1/sqrt(mu) < 0.32 is all the normal drops, a third-moment effect this mode does not
+ *    claim, and one word replaces PTRS's rejection loop; below, the normal would put
+ *    visible mass below zero and miss the discreteness that faint pixels show;
+ *  - A = T abar + sqrt(T cvar) N(0, 1), normal with the exact conditional mean and variance
+ *    (not clamped to [0, T], so that both moments stay exact; the read noise of the mean,
+ *    N(0, sigma^2/n), is far wider than what leaves that range).
+ * Word 0 of the (pixel, resultant, WF_PURPOSE_MOMENTS) block is the read-noise normal, words
+ * 1-3 the lead, T and A: one block per resultant whatever n.
+ *
+ * Nonlinearity f(q) = q + beta q^2 acts on each read before the average, so the resultant
+ * holds (1/n) sum_i f(Q_i) = f(Qbar) + beta S with S = (1/n) sum_i (Q_i - Qbar)^2 the spread
+ * of the group's charge: exact for the quadratic, and the term 1/2 f''(Qbar) S of
+ * E[f(Q)] ~ f(E Q) + 1/2 f''(E Q) Var(Q) taken over the group's reads. S is replaced by its
+ * expectation given T: with u_i = (t_i - t_0)/s, Cov(N_i, N_k | T) = T u_i (1 - u_k) for
+ * u_i <= u_k (N_i the increment to read i), so
+ *     E[S | T] = vu T^2 + bs T,  vu = (1/n) sum_i (u_i - ubar)^2,
+ *     bs = (1/n) sum_i u_i (1 - u_i) - (1/n^2) sum_i sum_k min(u_i,u_k) (1 - max(u_i,u_k)),
+ * which makes the mean resultant exact for the quadratic (E over T of E[S | T] is E[S]);
+ * noiseless, S is the deterministic ramp's vu T^2. A saturated group (its last charge at the
+ * full well) gets no correction: its reads are clipped, and the resultant is flagged. */
+
+/* Moments' draws of a row's chunk: out[x] = Poisson(mean[x]) by inversion of the word w[x]
+ * below a mean of 10 (from its start e0[x] = exp(-mean[x])), N(mean, mean) from the normal
+ * z[x] above, clamped at 0 (see above). The inversion runs the pixels in lockstep, one
+ * term of every pixel's sum per pass, so that it vectorises: a pixel's count is the number of
+ * partial sums below its uniform, the smallest k with u <= F_k, as a scalar search gives;
+ * the passes stop when no pixel's uniform is above its sum (the sums only grow, so such a
+ * pixel is done), or at 200 terms. Each pixel's count depends on its own numbers alone. */
+enum { MOMENTS_CHUNK = 256 };
+
+WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, const float *restrict z,
+                                            const double *restrict mean, const double *restrict e0,
+                                            const double *restrict inv_k, double *restrict out)
+{
+    double u[MOMENTS_CHUNK], p[MOMENTS_CHUNK], cdf[MOMENTS_CHUNK], cnt[MOMENTS_CHUNK];
+    for (int x = 0; x < n; x++) {
+        const int small = mean[x] > 0.0 && mean[x] < 10.0;
+        u[x] = small ? ((double)w[x] + 0.5) * (1.0 / 4294967296.0) : 0.0; /* 0: never counts */
+        p[x] = cdf[x] = small ? e0[x] : 1.0;
+        cnt[x] = 0.0;
+    }
+    for (int k = 1; k <= INV_K_MAX; k++) {
+        int any = 0;
+        for (int x = 0; x < n; x++) {
+            const int above = u[x] > cdf[x];
+            cnt[x] += above;
+            any |= above;
+            p[x] *= mean[x] * inv_k[k];
+            cdf[x] += p[x];
+        }
+        if (!any) break;
+    }
+    for (int x = 0; x < n; x++) {
+        const double g = mean[x] + sqrt(mean[x] > 0.0 ? mean[x] : 0.0) * (double)z[x];
+        out[x] = mean[x] < 10.0 ? cnt[x] : (g > 0.0 ? g : 0.0);
+    }
+}
+
+/* Group r of row y by moments (photon noise on): the lead, then A and T as above, from the
+ * row's words (ro->words: word 0 read noise, 1 lead, 2 T, 3 A). A pixel whose rate changes
+ * in time takes its interval means, and with them its own abar and cvar; the others the
+ * group's. Adds the lead and T to q, sets a (the group's mean charge) and sp (E[S | T]). */
+static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double tau_lead, double *q, double *a,
+                        double *sp)
+{
+    const wf_ma_table *ma = &ro->clock.ma;
+    const wf_clock *ck = &ro->clock;
+    const int *reads = ma->read + ma->first[r];
+    const int n = ma->first[r + 1] - ma->first[r], nc = ro->cfg.ncols;
+    const int span = reads[n - 1] - reads[0];
+    const moments_group *g = &ro->mgroup[r];
+    const double *m = ro->mean + row0, *em = ro->expm + row0;
+    const uint32_t *w = ro->words;
+    double *lm = ro->mrow, *le = lm + nc, *ld = le + nc, *mu = ld + nc, *me = mu + nc, *t = me + nc, *ab = t + nc,
+           *cv = ab + nc;
+    float *z1 = ro->mz, *z2 = z1 + nc, *z3 = z2 + nc;
+    wf_norm_from_u32(w + 3 * (size_t)nc, nc, z3);
+    for (int x = 0; x < nc; x++) {
+        lm[x] = m[x] * lead;
+        mu[x] = m[x] * span;
+        ab[x] = g->abar;
+        cv[x] = g->cvar;
+    }
+    /* exp(-m k) as exp(-m)^k: within a few ulp, and multiplies that vectorise where exp does
+     * not; a chunk at a time, so that the passes stay in L1 */
+    for (int x0 = 0; x0 < nc; x0 += MOMENTS_CHUNK) {
+        const int c = nc - x0 < MOMENTS_CHUNK ? nc - x0 : MOMENTS_CHUNK;
+        for (int x = x0; x < x0 + c; x++) le[x] = me[x] = 1.0;
+        for (int j = 0; j < (int)lead; j++)
+            for (int x = x0; x < x0 + c; x++) le[x] *= em[x];
+        for (int j = 0; j < span; j++)
+            for (int x = x0; x < x0 + c; x++) me[x] *= em[x];
+    }
+    for (int x = 0; ro->slope_any && x < nc; x++) {
+        if (ro->dmean[row0 + (size_t)x] == 0.0) continue;
+        const size_t i = row0 + (size_t)x;
+        lm[x] = interval_mean(ro, i, lead, tau_lead);
+        le[x] = exp(-lm[x]);
+        double s1 = 0.0, s2 = 0.0, sum = 0.0;
+        for (int j = 1; j < n; j++) {
+            double tj = 0.5 * (wf_clock_read_time(ck, reads[j - 1]) + wf_clock_read_time(ck, reads[j])) - ro->t_mid;
+            double mj = interval_mean(ro, i, reads[j] - reads[j - 1], tj), wj = (double)(n - j) / n;
+            sum += mj;
+            s1 += wj * mj;
+            s2 += wj * wj * mj;
+        }
+        mu[x] = sum;
+        me[x] = exp(-sum);
+        ab[x] = sum > 0.0 ? s1 / sum : 0.0;
+        cv[x] = sum > 0.0 ? s2 / sum - ab[x] * ab[x] : 0.0;
+    }
+    for (int x0 = 0; x0 < nc; x0 += MOMENTS_CHUNK) {
+        const int c = nc - x0 < MOMENTS_CHUNK ? nc - x0 : MOMENTS_CHUNK;
+        /* the normals of the lead and T only where a mean reaches 10 (a bright pixel) */
+        int big1 = 0, big2 = 0;
+        for (int x = x0; x < x0 + c; x++) {
+            big1 |= lm[x] >= 10.0;
+            big2 |= mu[x] >= 10.0;
+        }
+        if (big1) wf_norm_from_u32(w + nc + x0, c, z1 + x0);
+        if (big2) wf_norm_from_u32(w + 2 * (size_t)nc + x0, c, z2 + x0);
+        moments_poisson_chunk(c, w + nc + x0, z1 + x0, lm + x0, le + x0, ro->inv_k, ld + x0);
+        moments_poisson_chunk(c, w + 2 * (size_t)nc + x0, z2 + x0, mu + x0, me + x0, ro->inv_k, t + x0);
+    }
+    for (int x = 0; x < nc; x++) {
+        const double tc = n > 1 ? t[x] : 0.0, v = tc * cv[x];
+        q[x] += ld[x];
+        a[x] = q[x] + tc * ab[x] + (v > 0.0 ? sqrt(v) : 0.0) * (double)z3[x];
+        q[x] += tc;
+        sp[x] = tc * (tc * g->vu + g->bs);
+    }
+}
+
+/* Direct and moments sampling: each resultant drawn at once. They differ only in how a
+ * pixel's group is drawn (every interval, or three draws); the rest (persistence, cosmic
+ * rays, full well, nonlinearity, IPC, read noise, gain, ADC, saturation) is this one path. */
+static wf_status ramp_grouped(wf_readout *ro, int y0, int y1, int h0, int h1)
 {
     const wf_detector *d = &ro->cfg.det;
     const wf_ma_table *ma = &ro->clock.ma;
     const int nc = ro->cfg.ncols, rows = y1 - y0, hn = (h1 - h0) * nc;
     const size_t plane = (size_t)rows * nc;
-    const int nblocks = direct_blocks(ma);
+    const int moments = ro->cfg.sampling == WF_SAMPLE_MOMENTS;
+    const int nblocks = moments ? 1 : direct_blocks(ma);
+    const wf_purpose purpose = moments ? WF_PURPOSE_MOMENTS : WF_PURPOSE_RESULTANT;
     double *avg = ro->meas; /* reused: average charge of the group, then measured */
     int next_dep = 0, prev_read = -1;
     for (int r = 0; r < ma->nresultants; r++) {
@@ -795,6 +1033,7 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
         double tau_lead = 0.5 * (wf_clock_read_time(ck, prev_read) + wf_clock_read_time(ck, reads[0])) - ro->t_mid;
         const int lead_from = prev_read;
         prev_read = reads[n - 1];
+        const moments_group *g = &ro->mgroup[r];
         double seen = 0.0; /* frames of charge each read of the group adds, averaged */
         for (int j = 1; j < n; j++) seen += (reads[j] - reads[j - 1]) * (double)(n - j) / n;
         for (int y = h0; y < h1; y++) {
@@ -802,15 +1041,20 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
             double *a = avg + (size_t)(y - h0) * nc;
             const double *m = ro->mean + (size_t)(y - h0) * nc;
             const double *em = ro->expm + (size_t)(y - h0) * nc;
+            double *sp = moments ? ro->spread + (size_t)(y - h0) * nc : NULL;
             float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
             int photons = d->on.photon_noise && !ro->noise_off;
             if (photons || (z && d->on.read_noise && !ro->noise_off)) {
-                row_noise(ro, y, (uint32_t)r, WF_PURPOSE_RESULTANT, photons ? nblocks : 1,
+                row_noise(ro, y, (uint32_t)r, purpose, photons ? nblocks : 1,
                           z && d->on.read_noise ? z : NULL);
             } else if (z) {
                 memset(z, 0, (size_t)nc * sizeof *z);
             }
             const size_t row0 = (size_t)(y - h0) * nc;
+            if (moments && photons) {
+                moments_row(ro, r, row0, lead, tau_lead, q, a, sp);
+                continue;
+            }
             for (int x = 0; x < nc; x++) {
                 if (!photons && ro->slope_any) { /* each interval at its own mean rate */
                     q[x] += interval_mean(ro, row0 + (size_t)x, lead, tau_lead);
@@ -823,12 +1067,14 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
                     }
                     a[x] = q[x] + within / n;
                     q[x] += total;
+                    if (moments) sp[x] = total * total * g->vu; /* the ramp's own spread */
                     continue;
                 }
                 if (!photons) {
                     q[x] += m[x] * lead;
                     a[x] = q[x] + m[x] * seen;
                     q[x] += m[x] * span;
+                    if (moments) sp[x] = m[x] * span * m[x] * span * g->vu;
                     continue;
                 }
                 more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)r,
@@ -875,6 +1121,9 @@ static wf_status ramp_direct(wf_readout *ro, int y0, int y1, int h0, int h1)
             if (d->on.saturation && avg[i] > d->full_well) avg[i] = d->full_well;
         }
         wf_det_measure_row(d, avg, hn, ro->meas); /* in place: avg is ro->meas */
+        if (moments && d->on.nonlinearity)
+            for (int i = 0; i < hn; i++)
+                if (!(d->on.saturation && ro->charge[i] >= d->full_well)) ro->meas[i] += d->nl_beta * ro->spread[i];
         for (int y = y0; y < y1; y++) {
             const double *v = ipc_row(ro, y, h0, h1);
             if (ro->cn) {
@@ -1075,8 +1324,8 @@ wf_status wf_readout_run_tile(wf_readout *ro, int tile)
         }
         expected_per_frame(ro, hn);
         if (ro->cosmic_on && (st = wf_cosmic_tile(&ro->cosmic, h0, h1, y0, y1))) return st;
-        st = cfg->sampling == WF_SAMPLE_DIRECT ? ramp_direct(ro, y0, y1, h0, h1)
-                                               : ramp_per_read(ro, y0, y1, h0, h1);
+        st = cfg->sampling == WF_SAMPLE_PER_READ ? ramp_per_read(ro, y0, y1, h0, h1)
+                                                 : ramp_grouped(ro, y0, y1, h0, h1);
         if (st) return st;
         wf_persist_mark(&ro->persist, y0, y1, ro->sat, WF_SAT_PERSISTENCE);
         /* SATURATION ahead of its RESULTANTS: the assembler then fits each row from the
@@ -1129,7 +1378,7 @@ wf_status wf_readout_send_meta(wf_readout *ro, const char *extra)
                   "ncols = %d\nnrows = %d\nmode = %s\nsampling = %s\nexposure = %u\nsca = %u\n"
                   "seed = %llu\nframe_time = %.17g\nexptime = %.17g\n",
                   c->ncols, c->nrows, c->mode == WF_MODE_RAMP ? "ramp" : "single",
-                  c->sampling == WF_SAMPLE_DIRECT ? "direct" : "per-read", c->exposure, c->sca,
+                  wf_sampling_name(c->sampling), c->exposure, c->sca,
                   (unsigned long long)c->seed, ro->clock.frame_time, exposure_time(c, &ro->clock));
     if (c->mode == WF_MODE_RAMP) {
         const wf_ma_table *ma = &ro->clock.ma;

@@ -34,7 +34,18 @@ typedef enum { WF_MODE_RAMP = 0, WF_MODE_SINGLE = 1 } wf_mode;
  * it skips the per-read nonlinearity, IPC and ADC, so with nonlinearity on it applies it to
  * the group's mean charge (error measured in docs/BENCHMARKS.md), and reads are not
  * quantised one by one. */
-typedef enum { WF_SAMPLE_PER_READ = 0, WF_SAMPLE_DIRECT = 1 } wf_sampling;
+/* Moments: each resultant's group mean drawn with the exact mean and covariance of the
+ * per-read process (the charge before the group, the group's total increment and its group
+ * mean given that total: three draws and the read noise, whatever the group's length), so
+ * it is statistically equivalent to per-read sampling to second order and costs one noise
+ * block per resultant. Nonlinearity takes the group mean plus its second-order correction
+ * from the within-group spread of the charge (firmware/readout.c, "moments"). */
+typedef enum { WF_SAMPLE_PER_READ = 0, WF_SAMPLE_DIRECT = 1, WF_SAMPLE_MOMENTS = 2 } wf_sampling;
+
+/* "per-read", "direct" or "moments" (the exposure.sampling choice, the META and the FITS
+ * SAMPLING keyword); "unknown" outside the enum. A name, like wf_filter_name: nothing can
+ * fail that a status would report. */
+const char *wf_sampling_name(wf_sampling s);
 
 typedef struct wf_readout_config {
     int ncols, nrows;    /* active pixels of the SCA [4088, 4088] */

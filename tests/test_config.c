@@ -386,6 +386,32 @@ START_TEST(test_bad_set)
 }
 END_TEST
 
+/* exposure.sampling takes the three names wf_sampling_name gives, in the enum's order, and
+ * refuses another by the key's name with the choices */
+START_TEST(test_sampling_names)
+{
+    const char *names[] = {"per-read", "direct", "moments"};
+    const wf_sampling want[] = {WF_SAMPLE_PER_READ, WF_SAMPLE_DIRECT, WF_SAMPLE_MOMENTS};
+    for (int i = 0; i < 3; i++) {
+        wf_config cfg;
+        wf_config_defaults(&cfg);
+        char set[64];
+        snprintf(set, sizeof set, "exposure.sampling=%s", names[i]);
+        ck_assert_msg(wf_config_set(&cfg, set, "--set") == WF_OK, "%s: %s", set, wf_error_message());
+        ck_assert_int_eq(cfg.ro.sampling, want[i]);
+        ck_assert_str_eq(wf_sampling_name(want[i]), names[i]);
+    }
+    wf_config cfg, before;
+    wf_config_defaults(&cfg);
+    memcpy(&before, &cfg, sizeof cfg);
+    ck_assert_int_eq(wf_config_set(&cfg, "exposure.sampling=moment", "--set #2"), WF_ERR_INPUT);
+    assert_message_has("--set #2");
+    assert_message_has("exposure.sampling");
+    assert_message_has("per-read, direct, moments");
+    ck_assert_mem_eq(&cfg, &before, sizeof cfg);
+}
+END_TEST
+
 START_TEST(test_finish_constraints)
 {
     wf_config cfg;
@@ -672,6 +698,7 @@ static Suite *config_suite(void)
     tcase_add_loop_test(tc, test_bad_file, 0, (int)(sizeof bad_files / sizeof *bad_files));
     tcase_add_test(tc, test_unreadable_file);
     tcase_add_loop_test(tc, test_bad_set, 0, (int)(sizeof bad_sets / sizeof *bad_sets));
+    tcase_add_test(tc, test_sampling_names);
     tcase_add_test(tc, test_finish_constraints);
     tcase_add_test(tc, test_ma_table_from_file);
     tcase_add_test(tc, test_time_limits);

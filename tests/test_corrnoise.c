@@ -242,10 +242,23 @@ START_TEST(independent_of_tiles_and_threads)
     run(&cfg, &clock, 1, &d);
     ck_assert(!memcmp(c.res, d.res, n * 2));
     ck_assert(!memcmp(c.cols, d.cols, (size_t)c.nres * c.nrows * 16));
+    /* and moments sampling */
+    cfg.sampling = WF_SAMPLE_MOMENTS;
+    cfg.tile_rows = 7;
+    stream e, f;
+    run(&cfg, &clock, 2, &e);
+    cfg.tile_rows = 32;
+    run(&cfg, &clock, 1, &f);
+    ck_assert(!memcmp(e.res, f.res, n * 2));
+    ck_assert(!memcmp(e.rows, f.rows, (size_t)e.nres * 8 * e.width * 2));
+    ck_assert(!memcmp(e.cols, f.cols, (size_t)e.nres * e.nrows * 16));
+    ck_assert_msg(memcmp(e.res, c.res, n * 2), "moments drew direct's resultants");
     stream_free(&a);
     stream_free(&b);
     stream_free(&c);
     stream_free(&d);
+    stream_free(&e);
+    stream_free(&f);
 }
 END_TEST
 

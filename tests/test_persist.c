@@ -220,6 +220,8 @@ START_TEST(dark_after_saturating_star_per_read) { check_closed_form(WF_SAMPLE_PE
 END_TEST
 START_TEST(dark_after_saturating_star_direct) { check_closed_form(WF_SAMPLE_DIRECT); }
 END_TEST
+START_TEST(dark_after_saturating_star_moments) { check_closed_form(WF_SAMPLE_MOMENTS); }
+END_TEST
 
 /* Single frame: GalSim's applyPersistence, the current at the mid-time times the exposure */
 START_TEST(single_frame_is_galsims)
@@ -332,8 +334,9 @@ START_TEST(independent_of_tiles_and_threads)
     dark_config(&cfg, &clock, 24);
     wf_detector_defaults(&cfg.det);
     const int heights[] = {1, 5, 11, 24};
-    for (int s = 0; s < 2; s++) {
-        cfg.sampling = s ? WF_SAMPLE_DIRECT : WF_SAMPLE_PER_READ;
+    const wf_sampling samplings[] = {WF_SAMPLE_PER_READ, WF_SAMPLE_DIRECT, WF_SAMPLE_MOMENTS};
+    for (int s = 0; s < 3; s++) {
+        cfg.sampling = samplings[s];
         unsigned char *ref = NULL;
         size_t lref = 0;
         for (int i = 0; i < 4; i++)
@@ -566,6 +569,7 @@ static Suite *suite(void)
     tcase_add_test(tc, model_is_galsims);
     tcase_add_test(tc, dark_after_saturating_star_per_read);
     tcase_add_test(tc, dark_after_saturating_star_direct);
+    tcase_add_test(tc, dark_after_saturating_star_moments);
     tcase_add_test(tc, single_frame_is_galsims);
     tcase_add_test(tc, released_electrons_are_poisson);
     tcase_add_test(tc, off_is_byte_identical);

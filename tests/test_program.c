@@ -50,8 +50,8 @@ START_TEST(tile_height_and_threads_do_not_matter)
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
-    const char *modes[] = {"ramp --sampling per-read", "ramp --sampling direct", "single"};
-    for (int m = 0; m < 3; m++) {
+    const char *modes[] = {"ramp --sampling per-read", "ramp --sampling direct", "ramp --sampling moments", "single"};
+    for (int m = 0; m < 4; m++) {
         ck_assert_int_eq(wf_test_run("%s expose " SMALL " --mode %s --tile-rows 80 --out %s/ref%d", bin, modes[m], d, m), 0);
         char ref[4200];
         snprintf(ref, sizeof ref, "%s/ref%d/" FITS, d, m);

@@ -962,13 +962,15 @@ typedef struct sampling_setting {
 
 static wf_status sampling_knob(acc_run *run, const scene_in *in, const float *truth, int nl)
 {
-    static const sampling_setting set[3] = {{"per-read", WF_MODE_RAMP, WF_SAMPLE_PER_READ},
-                                            {"direct", WF_MODE_RAMP, WF_SAMPLE_DIRECT},
-                                            {"single", WF_MODE_SINGLE, WF_SAMPLE_PER_READ}};
-    const int n = 3;
+    enum { NSET = 4 };
+    static const sampling_setting set[NSET] = {{"per-read", WF_MODE_RAMP, WF_SAMPLE_PER_READ},
+                                               {"direct", WF_MODE_RAMP, WF_SAMPLE_DIRECT},
+                                               {"moments", WF_MODE_RAMP, WF_SAMPLE_MOMENTS},
+                                               {"single", WF_MODE_SINGLE, WF_SAMPLE_PER_READ}};
+    const int n = NSET;
     long np = (long)in->n * in->n;
-    float *sci = malloc(sizeof *sci * (size_t)np * 3);
-    unsigned *dq = malloc(sizeof *dq * (size_t)np * 3);
+    float *sci = malloc(sizeof *sci * (size_t)np * NSET);
+    unsigned *dq = malloc(sizeof *dq * (size_t)np * NSET);
     float *input = malloc(sizeof *input * (size_t)np);
     wf_status st = WF_OK;
     if (!sci || !dq || !input) {
@@ -976,7 +978,7 @@ static wf_status sampling_knob(acc_run *run, const scene_in *in, const float *tr
         goto out;
     }
     for (long i = 0; i < np; i++) input[i] = truth[i] + (float)in->cfg.ro.det.dark_current;
-    acc_row rows[3];
+    acc_row rows[NSET];
     for (int k = 0; k < n && !st; k++) {
         row_init(&rows[k], "scene", nl ? "sampling-nl" : "sampling-lin", "sampling", set[k].value);
         rows[k].reference = k == 0;

@@ -12,7 +12,7 @@
  *    large, bulge- and disk-dominated galaxies;
  *  - scene: a corner of the SCA with a synthetic field: pupil_bin, PSF oversampling, PSF
  *    image size and flux_fraction on the noise-free rates, and the ramp sampling (per-read,
- *    direct, single) through readout, assembly and ramp fit;
+ *    direct, moments, single) through readout, assembly and ramp fit;
  *  - detector: what leaving an effect out does to a star's photometry (persistence: a faint
  *    star on the pixels of a saturating one that ended 56-3600 s before).
  *

@@ -21,6 +21,7 @@
 #include "sim/fits/fitsout.h"
 #include "tools/rampfit.h"
 #include "firmware/corrnoise.h"
+#include "firmware/readout.h"
 #include "tools/refpix.h"
 
 /* Per-row bookkeeping: which payloads have covered the row. Rows, not tiles, are the unit,
@@ -561,7 +562,13 @@ static int write_primary(fitsfile *f, const meta *m, int *status)
     fits_write_key_lng(f, "EXPOSURE", m->exposure, "exposure id", status);
     fits_write_key_lng(f, "SCA", m->sca, "sensor chip assembly, 1-18", status);
     fits_write_key_str(f, "MODE", m->mode, "ramp: up the ramp; single: single frame", status);
-    if (m->sampling) fits_write_key_str(f, "SAMPLING", m->sampling, "per-read or direct resultants", status);
+    if (m->sampling) {
+        /* the comment names the modes the readout knows, so a new one cannot be left out */
+        char cmt[FLEN_COMMENT];
+        snprintf(cmt, sizeof cmt, "%s, %s or %s resultants", wf_sampling_name(WF_SAMPLE_PER_READ),
+                 wf_sampling_name(WF_SAMPLE_DIRECT), wf_sampling_name(WF_SAMPLE_MOMENTS));
+        fits_write_key_str(f, "SAMPLING", m->sampling, cmt, status);
+    }
     key_dbl(f, "EXPTIME", m->exptime, "[s] exposure time", status);
     if (m->ramp) {
         key_dbl(f, "FRAMTIME", m->clock.frame_time, "[s] time per full-frame read", status);

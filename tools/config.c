@@ -18,7 +18,7 @@
 /* Enum keys store the index of the chosen name as an int, so the choice lists below must
  * stay in the order of the C enums and the enums must be int-sized. */
 _Static_assert(WF_MODE_RAMP == 0 && WF_MODE_SINGLE == 1, "exposure.mode choices follow wf_mode");
-_Static_assert(WF_SAMPLE_PER_READ == 0 && WF_SAMPLE_DIRECT == 1,
+_Static_assert(WF_SAMPLE_PER_READ == 0 && WF_SAMPLE_DIRECT == 1 && WF_SAMPLE_MOMENTS == 2,
                "exposure.sampling choices follow wf_sampling");
 _Static_assert(sizeof(wf_mode) == sizeof(int) && sizeof(wf_sampling) == sizeof(int),
                "enum keys are stored through int");
@@ -84,7 +84,7 @@ enum { KD_SHAPES, KD_RUN, KD_FILE, KD_PART, KD_CORR };
 #define MAX(v) .has_hi = 1, .hi = (v)
 
 static const char *const modes[] = {"ramp", "single", NULL};
-static const char *const samplings[] = {"per-read", "direct", NULL};
+static const char *const samplings[] = {"per-read", "direct", "moments", NULL};
 
 static const char *const scene_kinds[] = {"synthetic", "catalog", "grid", "galsim", NULL};
 static const char *const pupil_bins[] = {"1", "2", "4", "8", NULL};
@@ -110,7 +110,10 @@ static const key_desc keys[] = {
             "single-frame chain."},
     {.name = "exposure.sampling", .type = KT_ENUM, .unit = "", .def = "per-read",
      .choices = samplings, FIELD(ro.sampling),
-     .doc = "Ramp mode: draw every read (`per-read`) or each resultant at once (`direct`)."},
+     .doc = "Ramp mode: draw every read (`per-read`), each resultant at once (`direct`: every "
+            "interval's electrons, exact for a linear pixel), or each resultant's group mean from its "
+            "exact mean and covariance (`moments`: three draws per resultant, equivalent to per-read "
+            "to second order; docs/ACCURACY.md)."},
     {.name = "exposure.exptime", .type = KT_DOUBLE, .unit = "s", .def = "300", ABOVE(0),
      MAX(WF_EXPOSURE_TIME_MAX), FIELD(ro.exptime),
      .doc = "Exposure time in single mode; ramp mode takes it from the MA table (its last read, "

@@ -85,7 +85,7 @@ static const char *usage_text =
     "  --out DIR            output directory [out]           --seed N     noise seed [1]\n"
     "  --tile-rows N        rows per tile [64]               --threads N  readout threads [1]\n"
     "  --mode ramp|single   up the ramp or GalSim single frame [ramp]\n"
-    "  --sampling per-read|direct   how resultants are drawn [per-read]\n"
+    "  --sampling per-read|direct|moments   how resultants are drawn [per-read]\n"
     "  --config FILE        YAML configuration (see docs/CONFIG.md)\n"
     "  --set KEY=VALUE      override one configuration key (repeatable)\n"
     "  --stream FILE|-      write the packet stream instead of FITS\n"
