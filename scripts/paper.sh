@@ -32,6 +32,11 @@ DIFF_THRESH=1.5
 # The synthetic field fainter than its defaults (H 26, V 27, 2.5 stars per arcmin^2): a coadd
 # of 146 epochs reaches ~2.7 mag deeper than one, and its 50% point needs objects beyond it.
 SYNTH="--set scene.synthetic.h_faint=29.5 --set scene.synthetic.star_density=40 --set scene.synthetic.star_v_faint=32"
+# Persistence off: each product's earlier exposures within the hour (the visit's other
+# pointings, which this area does not render) would be drawn for it alone, 8.8 of the 15.8
+# CPU-s of a product here (docs/ANALYSIS.md, "make paper"); `--set
+# detector.effects.persistence=true` puts it back
+DETECTOR="--set detector.effects.persistence=false"
 DATA=${WFISIM_DATA:-}
 SETS=
 
@@ -70,7 +75,7 @@ mkdir -p "$OUT"
 cd "$OUT"
 : > times.txt
 # plan and survey settings every rendering command shares
-PSETS="--set seed=$SEED $SYNTH $SETS"
+PSETS="--set seed=$SEED $SYNTH $DETECTOR $SETS"
 
 now() { date +%s.%N; }
 T0=$(now)
