@@ -1,6 +1,7 @@
 #include "analysis/coadd.h"
 #include "analysis/drizzle.h"
 #include "sim/fits/fitsout.h"
+#include "sim/numeric/median.h"
 
 #include <errno.h>
 #include <fitsio.h>
@@ -222,12 +223,6 @@ static wf_status read_rect(fitsfile *f, const input *in, int hdu, int type, long
     return wf_fits_error(status, in->path, "reading input pixels");
 }
 
-static int cmp_float(const void *pa, const void *pb)
-{
-    float a = *(const float *)pa, b = *(const float *)pb;
-    return a < b ? -1 : a > b;
-}
-
 /* An input's weight: 1 / ERR^2 of its sky, the median of ERR over the good pixels of
  * WEIGHT_ROWS rows spread over the image. One weight for all its pixels, not 1 / ERR^2 of
  * each: a source's own shot noise is in its pixels' ERR, so per-pixel weights favour the
@@ -268,8 +263,7 @@ static wf_status input_weight(input *in, uint32_t dq_mask)
     }
     in->weight = 0;
     if (!st && n) {
-        qsort(err, n, sizeof *err, cmp_float);
-        double m = n % 2 ? err[n / 2] : 0.5 * ((double)err[n / 2 - 1] + err[n / 2]);
+        double m = wf_median_float(err, n);
         in->weight = 1.0 / (m * m);
     }
     free(err);

@@ -13,12 +13,7 @@
 #include <stdlib.h>
 
 #include "analysis/detect.h"
-
-static int cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
+#include "sim/numeric/median.h"
 
 wf_status wf_detect_noise_ratio(const float *sci, const float *err, const unsigned char *mask, int nx, int ny,
                                 int filter, double *ratio, long *nsamples)
@@ -56,8 +51,7 @@ wf_status wf_detect_noise_ratio(const float *sci, const float *err, const unsign
     if (m < 100) {
         rc = wf_error(WF_ERR_INPUT, "noise scale: only %zu sky pixels below the background to measure it from", m);
     } else {
-        qsort(neg, m, sizeof *neg, cmp_float);
-        double med = m % 2 ? neg[m / 2] : 0.5 * ((double)neg[m / 2 - 1] + neg[m / 2]);
+        double med = wf_median_float(neg, m);
         *ratio = med / 0.6744897501960817; /* Phi^-1(3/4) */
         *nsamples = used;
     }
