@@ -46,7 +46,7 @@ int main(int argc, char **argv)
     long limit = -1;
     int simd = -1;
     double core = -1.0, tol = -1.0;
-    int levels = 0;
+    int levels = 0, synthetic = 0;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--dump") && i + 1 < argc) dump = argv[++i];
         else if (!strcmp(argv[i], "--compare") && i + 1 < argc) compare = argv[++i];
@@ -55,9 +55,10 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--core") && i + 1 < argc) core = atof(argv[++i]);
         else if (!strcmp(argv[i], "--tol") && i + 1 < argc) tol = atof(argv[++i]);
         else if (!strcmp(argv[i], "--levels") && i + 1 < argc) levels = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--synthetic")) synthetic = 1;
         else {
             fprintf(stderr, "usage: bench_profile [--dump FILE] [--compare FILE] [--limit N] "
-                            "[--simd LANES] [--core R] [--levels L] [--tol T]\n");
+                            "[--simd LANES] [--core R] [--levels L] [--tol T] [--synthetic]\n");
             return 2;
         }
     }
@@ -70,10 +71,12 @@ int main(int argc, char **argv)
     char set[2 * WF_PATH_MAX];
     wf_config_defaults(&cfg);
     snprintf(set, sizeof set, "paths.data=%s", data);
-    if (wf_config_set(&cfg, set, NULL) || wf_config_set(&cfg, "scene.kind=galsim", NULL))
+    if (wf_config_set(&cfg, set, NULL) ||
+        wf_config_set(&cfg, synthetic ? "scene.kind=synthetic" : "scene.kind=galsim", NULL))
         return fail("config");
     snprintf(set, sizeof set, "scene.catalog=%s/galsim/scene_catalog_sca1_pointingA.csv.gz", ref);
-    if (wf_config_set(&cfg, set, NULL) || wf_config_finish(&cfg, &clock)) return fail("config");
+    if ((!synthetic && wf_config_set(&cfg, set, NULL)) || wf_config_finish(&cfg, &clock))
+        return fail("config");
 
     wf_scene_inputs in;
     memset(&in, 0, sizeof in);
