@@ -165,8 +165,9 @@ void wf_det_reciprocity_counts(const wf_detector *det, double exptime, const dou
 }
 
 /* The electronics after the charge, per pixel, shared by the single-frame and the ramp's
- * rows: read noise, gain, bias, rounding (wf_det_quantize without its volatile: GCC never
- * folds (x + c) - c unless told -fassociative-math, and a select keeps the row branch-free),
+ * rows: read noise, gain, bias, rounding (as wf_det_quantize, by adding and removing
+ * 1.5 * 2^52, which GCC never folds unless told -fassociative-math: SSE2's default clone has
+ * no rounding instruction, and a select keeps the row branch-free),
  * the ADC's [0, adc_max]; *clipped where the full well (q) or the ceiling was reached
  * (saturation on). The detector's numbers come in a local copy, so the loops' stores cannot
  * alias them and they vectorise. */
@@ -253,19 +254,56 @@ void wf_det_ramp_read_row(const wf_detector *det, const double *e, const double 
         ramp_read_body(det, e, q, z, n, r, sum, first_sat, 0);
 }
 
+/* ADU to the 16-bit word: rounded half to even into [0, 65535], NaN to 0 */
+static inline __attribute__((always_inline)) uint16_t u16_lane(double v)
+{
+    const double magic = 6755399441055744.0, big = 2251799813685248.0;
+    double rr = __builtin_copysign((v + magic) - magic, v); /* nearbyint, half to even */
+    v = (v > -big) & (v < big) ? rr : v;
+    v = v >= 0.0 ? v : 0.0; /* NaN too */
+    v = v > 65535.0 ? 65535.0 : v;
+    return (uint16_t)v;
+}
+
 WF_CLONES
 void wf_det_resultant_row(double *sum, int n, int nreads, uint16_t *out)
 {
-    const double magic = 6755399441055744.0, big = 2251799813685248.0;
     for (int i = 0; i < n; i++) {
-        double v = sum[i] / nreads;
-        double rr = __builtin_copysign((v + magic) - magic, v); /* nearbyint, half to even */
-        v = (v > -big) & (v < big) ? rr : v;
-        v = v >= 0.0 ? v : 0.0; /* NaN too */
-        v = v > 65535.0 ? 65535.0 : v;
-        out[i] = (uint16_t)v;
+        out[i] = u16_lane(sum[i] / nreads);
         sum[i] = 0.0;
     }
+}
+
+static inline __attribute__((always_inline)) void group_row_body(
+    const wf_detector *det, const double *restrict e, const double *restrict q,
+    const float *restrict z, int n, int nreads, uint8_t r, uint8_t *restrict first,
+    uint16_t *restrict out, int unit_gain)
+{
+    adc_par p = adc_par_of(det);
+    p.sigma = det->read_noise_e / sqrt((double)nreads);
+    const int nl = det->on.nonlinearity;
+    const double beta = det->nl_beta;
+    for (int i = 0; i < n; i++) {
+        uint8_t clipped;
+        double adu = adc_lane(&p, e[i], q[i], z[i], unit_gain, &clipped);
+        /* the last read's own signal, clipped at the well, against the ceiling */
+        double last = q[i] < p.fw ? q[i] : p.fw;
+        last = nl ? last + beta * last * last : last;
+        clipped = (uint8_t)(clipped | (p.satur & (last / p.gain + p.bias >= p.adc)));
+        uint8_t cand = (uint8_t)(r | (uint8_t)(clipped - 1u)); /* r, else 255 */
+        if (p.satur) first[i] = first[i] < cand ? first[i] : cand;
+        out[i] = u16_lane(adu);
+    }
+}
+
+WF_CLONES
+void wf_det_group_row(const wf_detector *det, const double *e, const double *q, const float *z,
+                      int n, int nreads, uint8_t r, uint8_t *first_sat, uint16_t *out)
+{
+    if (det->gain == 1.0)
+        group_row_body(det, e, q, z, n, nreads, r, first_sat, out, 1);
+    else
+        group_row_body(det, e, q, z, n, nreads, r, first_sat, out, 0);
 }
 
 double wf_det_saturation_adu(const wf_detector *det)

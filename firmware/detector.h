@@ -6,6 +6,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <math.h>
 
 typedef struct wf_detector {
     struct {              /* switches (1 on, 0 off) */
@@ -59,16 +60,10 @@ double wf_det_reciprocity_rate(double rate, double alpha, double f0);
 void wf_det_ipc_row(const double *above, const double *row, const double *below, int ncols,
                     const double k[3][3], double *out);
 
-/* Round half to even (the ADC's rounding, GalSim quantize), inline for the per-read loop:
- * adding and removing 1.5 * 2^52 leaves no fraction bits, so the FPU's default
- * round-to-nearest-even does the rounding; beyond 2^51 every double is already whole. */
-static inline double wf_det_quantize(double adu)
-{
-    const double magic = 6755399441055744.0; /* 1.5 * 2^52 */
-    if (!(adu > -2251799813685248.0 && adu < 2251799813685248.0)) return adu;
-    volatile double shifted = adu + magic; /* volatile: no algebraic shortcut, even at -O3 */
-    return __builtin_copysign(shifted - magic, adu);
-}
+/* Round half to even (the ADC's rounding, GalSim quantize): nearbyint in the default
+ * rounding mode, which no code here changes; inline for the per-read loop, where it becomes
+ * one vector rounding instruction (the build's -fno-math-errno -fno-trapping-math). */
+static inline double wf_det_quantize(double adu) { return nearbyint(adu); }
 
 /* Index of the first value that is not finite (a scene's rates), -1 when all are. */
 int wf_det_first_nonfinite(const float *v, int n);
@@ -106,6 +101,14 @@ void wf_det_ramp_read_row(const wf_detector *det, const double *e, const double 
 /* A resultant's row from its reads' ADU sums: out[x] = sum[x] / nreads rounded half to even
  * into [0, 65535] (NaN: 0), and sum[x] = 0 for the next. */
 void wf_det_resultant_row(double *sum, int n, int nreads, uint16_t *out);
+
+/* A resultant drawn at once (the ramp's direct and moments sampling), as one read of
+ * wf_det_ramp_read_row with the read noise of the mean of nreads reads, sigma/sqrt(nreads):
+ * e the resultant's charge, q the charge at its last read, which saturates the resultant
+ * where it reached the full well or, after nonlinearity, the ADC ceiling; out[x] as
+ * wf_det_resultant_row rounds. The arrays must not overlap. */
+void wf_det_group_row(const wf_detector *det, const double *e, const double *q, const float *z,
+                      int n, int nreads, uint8_t r, uint8_t *first_sat, uint16_t *out);
 
 /* Smallest ADU value that means saturated: the lower of the ADC ceiling and the full well
  * after nonlinearity and gain, plus the bias. */

@@ -903,36 +903,128 @@ static inline double draw_at(const uint32_t *words, size_t nc, int x, int *c, do
  * below a mean of 10 (from its start e0[x] = exp(-mean[x])), N(mean, mean) from the normal
  * z[x] above, clamped at 0 (see above). The inversion runs the pixels in lockstep, one
  * term of every pixel's sum per pass, so that it vectorises: a pixel's count is the number of
- * partial sums below its uniform, the smallest k with u <= F_k, as a scalar search gives;
- * the passes stop when no pixel's uniform is above its sum (the sums only grow, so such a
- * pixel is done), or at 200 terms. Each pixel's count depends on its own numbers alone. */
+ * partial sums below its uniform, the smallest k with u <= F_k, as a scalar search gives.
+ * A pixel whose uniform is no longer above its sum is done (the sums only grow), so once
+ * most of the chunk is done the pixels still going are packed together and only they go on
+ * (a chunk's passes run to its largest count, ~mean + 3.5 sqrt(mean) over 256 pixels, where
+ * the average pixel stops near its mean). Each pixel's terms are the same operations in the
+ * same order whether packed or not, so its count is too; at most 200 terms. */
 enum { MOMENTS_CHUNK = 256 };
+
+/* Passes over the pixels at [0, n), terms k0 (<= INV_K_MAX), k0 + 1, ..., at least one,
+ * until a pass finds fewer than `until` of them still counting, or none; returns the next
+ * term's k and sets *live to the last pass's count. */
+WF_CLONES static int moments_passes(int n, int k0, int until, const double *restrict u, double *restrict p,
+                                    double *restrict cdf, double *restrict cnt, const double *restrict mean,
+                                    const double *restrict inv_k, int *live)
+{
+    int k = k0, na;
+    do {
+        na = 0;
+        for (int x = 0; x < n; x++) {
+            const int above = u[x] > cdf[x];
+            cnt[x] += above;
+            na += above;
+            p[x] *= mean[x] * inv_k[k];
+            cdf[x] += p[x];
+        }
+        k++;
+    } while (k <= INV_K_MAX && na >= until && na > 0);
+    *live = na;
+    return k;
+}
 
 WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, const float *restrict z,
                                             const double *restrict mean, const double *restrict e0,
                                             const double *restrict inv_k, double *restrict out)
 {
     double u[MOMENTS_CHUNK], p[MOMENTS_CHUNK], cdf[MOMENTS_CHUNK], cnt[MOMENTS_CHUNK];
+    double pu[MOMENTS_CHUNK], pp[MOMENTS_CHUNK], pc[MOMENTS_CHUNK], pn[MOMENTS_CHUNK], pm[MOMENTS_CHUNK];
+    int at[MOMENTS_CHUNK];
+    /* every comparison and load made whatever the branch: a conditional one (a possible
+     * trap, to the compiler) keeps these loops scalar */
     for (int x = 0; x < n; x++) {
-        const int small = mean[x] > 0.0 && mean[x] < 10.0;
-        u[x] = small ? ((double)w[x] + 0.5) * (1.0 / 4294967296.0) : 0.0; /* 0: never counts */
-        p[x] = cdf[x] = small ? e0[x] : 1.0;
+        const double mx = mean[x], ex = e0[x], ux = ((double)w[x] + 0.5) * (1.0 / 4294967296.0);
+        const int small = (mx > 0.0) & (mx < 10.0);
+        u[x] = small ? ux : 0.0; /* 0: never counts */
+        p[x] = cdf[x] = small ? ex : 1.0;
         cnt[x] = 0.0;
     }
-    for (int k = 1; k <= INV_K_MAX; k++) {
-        int any = 0;
-        for (int x = 0; x < n; x++) {
-            const int above = u[x] > cdf[x];
-            cnt[x] += above;
-            any |= above;
-            p[x] *= mean[x] * inv_k[k];
-            cdf[x] += p[x];
+    for (int x = n; x < MOMENTS_CHUNK; x++) { /* never read; set so that no compiler doubts it */
+        u[x] = 0.0;
+        p[x] = cdf[x] = 1.0;
+        cnt[x] = 0.0;
+    }
+    int live;
+    int k = moments_passes(n, 1, n / 4 > 8 ? n / 4 : 8, u, p, cdf, cnt, mean, inv_k, &live);
+    /* pack the live ones (their next term is k) and go on with them alone, repacking as
+     * they thin out */
+    int m = 0;
+    if (live > 0 && k <= INV_K_MAX) {
+        for (int x = 0; x < n; x++)
+            if (u[x] > cdf[x]) {
+                at[m] = x;
+                pu[m] = u[x];
+                pp[m] = p[x];
+                pc[m] = cdf[x];
+                pn[m] = cnt[x];
+                pm[m] = mean[x];
+                m++;
+            }
+    }
+    while (m > 0 && k <= INV_K_MAX) {
+        k = moments_passes(m, k, m / 4 > 8 ? m / 4 : 8, pu, pp, pc, pn, pm, inv_k, &live);
+        int j = 0;
+        for (int i = 0; i < m; i++) {
+            if (pu[i] > pc[i] && k <= INV_K_MAX) { /* still counting: keep it packed */
+                at[j] = at[i];
+                pu[j] = pu[i];
+                pp[j] = pp[i];
+                pc[j] = pc[i];
+                pn[j] = pn[i];
+                pm[j] = pm[i];
+                j++;
+            } else {
+                cnt[at[i]] = pn[i];
+            }
         }
-        if (!any) break;
+        m = j;
     }
     for (int x = 0; x < n; x++) {
         const double g = mean[x] + sqrt(mean[x] > 0.0 ? mean[x] : 0.0) * (double)z[x];
-        out[x] = mean[x] < 10.0 ? cnt[x] : (g > 0.0 ? g : 0.0);
+        const double gc = g > 0.0 ? g : 0.0;
+        out[x] = mean[x] < 10.0 ? cnt[x] : gc;
+    }
+}
+
+/* exp(-m k) as exp(-m)^k for k = lead and span: within a few ulp, and multiplies that
+ * vectorise where exp does not; a chunk at a time, so that the passes stay in L1 */
+WF_CLONES static void moments_powers(int nc, const double *restrict em, int lead, int span, double *restrict le,
+                                     double *restrict me)
+{
+    for (int x0 = 0; x0 < nc; x0 += MOMENTS_CHUNK) {
+        const int c = nc - x0 < MOMENTS_CHUNK ? nc - x0 : MOMENTS_CHUNK;
+        for (int x = x0; x < x0 + c; x++) le[x] = me[x] = 1.0;
+        for (int j = 0; j < lead; j++)
+            for (int x = x0; x < x0 + c; x++) le[x] *= em[x];
+        for (int j = 0; j < span; j++)
+            for (int x = x0; x < x0 + c; x++) me[x] *= em[x];
+    }
+}
+
+/* The group's draws into the charge q, the group mean a and the spread sp (moments_row);
+ * grows: 0 for a one-read group, which has no increment within it. */
+WF_CLONES static void moments_finish(int nc, int grows, const double *restrict ld, const double *restrict t,
+                                     const double *restrict ab, const double *restrict cv,
+                                     const float *restrict z3, double vu, double bs, double *restrict q,
+                                     double *restrict a, double *restrict sp)
+{
+    for (int x = 0; x < nc; x++) {
+        const double tc = grows ? t[x] : 0.0, v = tc * cv[x];
+        q[x] += ld[x];
+        a[x] = q[x] + tc * ab[x] + (v > 0.0 ? sqrt(v) : 0.0) * (double)z3[x];
+        q[x] += tc;
+        sp[x] = tc * (tc * vu + bs);
     }
 }
 
@@ -955,22 +1047,14 @@ static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double 
            *cv = ab + nc;
     float *z1 = ro->mz, *z2 = z1 + nc, *z3 = z2 + nc;
     wf_norm_from_u32(w + 3 * (size_t)nc, nc, z3);
+    const double abar = g->abar, cvar = g->cvar; /* copies: g could alias the stores */
     for (int x = 0; x < nc; x++) {
         lm[x] = m[x] * lead;
         mu[x] = m[x] * span;
-        ab[x] = g->abar;
-        cv[x] = g->cvar;
+        ab[x] = abar;
+        cv[x] = cvar;
     }
-    /* exp(-m k) as exp(-m)^k: within a few ulp, and multiplies that vectorise where exp does
-     * not; a chunk at a time, so that the passes stay in L1 */
-    for (int x0 = 0; x0 < nc; x0 += MOMENTS_CHUNK) {
-        const int c = nc - x0 < MOMENTS_CHUNK ? nc - x0 : MOMENTS_CHUNK;
-        for (int x = x0; x < x0 + c; x++) le[x] = me[x] = 1.0;
-        for (int j = 0; j < (int)lead; j++)
-            for (int x = x0; x < x0 + c; x++) le[x] *= em[x];
-        for (int j = 0; j < span; j++)
-            for (int x = x0; x < x0 + c; x++) me[x] *= em[x];
-    }
+    moments_powers(nc, em, (int)lead, span, le, me);
     for (int x = 0; ro->slope_any && x < nc; x++) {
         if (ro->dmean[row0 + (size_t)x] == 0.0) continue;
         const size_t i = row0 + (size_t)x;
@@ -1002,13 +1086,7 @@ static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double 
         moments_poisson_chunk(c, w + nc + x0, z1 + x0, lm + x0, le + x0, ro->inv_k, ld + x0);
         moments_poisson_chunk(c, w + 2 * (size_t)nc + x0, z2 + x0, mu + x0, me + x0, ro->inv_k, t + x0);
     }
-    for (int x = 0; x < nc; x++) {
-        const double tc = n > 1 ? t[x] : 0.0, v = tc * cv[x];
-        q[x] += ld[x];
-        a[x] = q[x] + tc * ab[x] + (v > 0.0 ? sqrt(v) : 0.0) * (double)z3[x];
-        q[x] += tc;
-        sp[x] = tc * (tc * g->vu + g->bs);
-    }
+    moments_finish(nc, n > 1, ld, t, ab, cv, z3, g->vu, g->bs, q, a, sp);
 }
 
 /* Direct and moments sampling: each resultant drawn at once. They differ only in how a
@@ -1134,20 +1212,9 @@ static wf_status ramp_grouped(wf_readout *ro, int y0, int y1, int h0, int h1)
             uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
             uint16_t *out = ro->res_out + (size_t)r * plane + (size_t)(y - y0) * nc;
             const float *z = ro->gauss + (size_t)(y - y0) * nc;
-            for (int x = 0; x < nc; x++) {
-                /* A resultant holds a saturated read when its last read did: the charge at
-                 * that read reached the well, or its measured signal the ADC ceiling. */
-                int clipped = 0;
-                if (d->on.saturation) {
-                    double last = q[x] < d->full_well ? q[x] : d->full_well;
-                    if (d->on.nonlinearity) last = wf_det_nonlinearity(last, d->nl_beta);
-                    clipped = q[x] >= d->full_well || last / d->gain + d->bias_adu >= d->adc_max;
-                }
-                /* the mean of n reads' independent read noise is N(0, sigma^2 / n) */
-                double adu = digitise(d, v[x], d->read_noise_e / sqrt((double)n), z[x], &clipped);
-                if (clipped && sat[x] == 255) sat[x] = (uint8_t)r;
-                out[x] = to_u16(adu);
-            }
+            /* A resultant holds a saturated read when its last read did: the charge at that
+             * read reached the well, or its measured signal the ADC ceiling. */
+            wf_det_group_row(d, v, q, z, nc, n, (uint8_t)r, sat, out);
         }
     }
     return WF_OK;
