@@ -281,18 +281,24 @@ static inline __attribute__((always_inline)) void group_row_body(
 {
     adc_par p = adc_par_of(det);
     p.sigma = det->read_noise_e / sqrt((double)nreads);
-    const int nl = det->on.nonlinearity;
-    const double beta = det->nl_beta;
+    /* 0 without nonlinearity: last + 0 last^2 is last (last <= fw is never +inf) */
+    const double beta = det->on.nonlinearity ? det->nl_beta : 0.0;
+    /* two passes, the flags and the words, as each vectorises alone and together do not */
+    if (p.satur)
+        for (int i = 0; i < n; i++) {
+            /* the last read's own signal, clipped at the well, against the ceiling: a charge
+             * that reaches it counts as the full well's */
+            double last = q[i] < p.fw ? q[i] : p.fw;
+            last = last + beta * last * last;
+            const double qs = last / p.gain + p.bias >= p.adc ? p.fw : q[i];
+            uint8_t clipped;
+            (void)adc_lane(&p, e[i], qs, z[i], unit_gain, &clipped);
+            uint8_t cand = (uint8_t)(r | (uint8_t)(clipped - 1u)); /* r, else 255 */
+            first[i] = first[i] < cand ? first[i] : cand;
+        }
     for (int i = 0; i < n; i++) {
         uint8_t clipped;
-        double adu = adc_lane(&p, e[i], q[i], z[i], unit_gain, &clipped);
-        /* the last read's own signal, clipped at the well, against the ceiling */
-        double last = q[i] < p.fw ? q[i] : p.fw;
-        last = nl ? last + beta * last * last : last;
-        clipped = (uint8_t)(clipped | (p.satur & (last / p.gain + p.bias >= p.adc)));
-        uint8_t cand = (uint8_t)(r | (uint8_t)(clipped - 1u)); /* r, else 255 */
-        if (p.satur) first[i] = first[i] < cand ? first[i] : cand;
-        out[i] = u16_lane(adu);
+        out[i] = u16_lane(adc_lane(&p, e[i], q[i], z[i], unit_gain, &clipped));
     }
 }
 
