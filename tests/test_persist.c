@@ -561,6 +561,50 @@ START_TEST(survey_history_any_split)
 }
 END_TEST
 
+/* A plan slot shorter than its read pattern: F184's 900 s exposures are read by MA table 11
+ * for 977 s, with 50 s of slew to the next, so the earlier one's last read comes 27 s after
+ * the later one's planned start. The later exposure then begins one frame (its reset) after
+ * that read: its history says so, and the run does not stop at an exposure "ending -27 s
+ * before". */
+START_TEST(survey_ramp_longer_than_slot)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], prod[4300];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    wf_survey_row *rows;
+    size_t nrows;
+    ck_assert_int_eq(wf_survey_read_plan(plan, &rows, &nrows), WF_OK);
+    size_t e = 0;
+    while (e + 1 < nrows && !(strcmp(rows[e].filter, "F184") == 0 && strcmp(rows[e + 1].filter, "F184") == 0)) e++;
+    ck_assert_uint_lt(e + 1, nrows);
+    const double slot = (rows[e + 1].mjd_start - rows[e].mjd_start) * 86400.0;
+    ck_assert_msg(slot < 977.0 - 20.0, "F184 slot %g s: the premise (shorter than MA table 11) is gone", slot);
+    const int later = rows[e + 1].expid, earlier = rows[e].expid;
+    free(rows);
+    ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures %d --scas 3 --mode ramp " SMALL
+                                 " --out %s/r", bin, plan, later, d), 0);
+    snprintf(prod, sizeof prod, "%s/r/wfisim_e%06d_sca03.fits", d, later);
+    fitsfile *f = NULL;
+    int status = 0;
+    long ex = -1;
+    double frame = 0.0, dt = -1.0;
+    char comment[FLEN_COMMENT], table[FLEN_VALUE];
+    fits_open_file(&f, prod, READONLY, &status);
+    fits_read_key(f, TLONG, "PERSEX1", &ex, comment, &status);
+    fits_read_key(f, TDOUBLE, "FRAMTIME", &frame, NULL, &status);
+    fits_read_key(f, TSTRING, "MA_TABLE", table, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_int_eq(ex, earlier);
+    ck_assert_str_eq(table, "11");
+    ck_assert_msg(sscanf(comment, "its EXPID; ended %lf s before start", &dt) == 1, "PERSEX1 comment '%s'", comment);
+    ck_assert_msg(fabs(dt - frame) < 1e-3, "earlier F184 exposure ended %g s before, want one frame %g s", dt, frame);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("persist");
@@ -577,6 +621,7 @@ static Suite *suite(void)
     tcase_add_test(tc, zero_gap_refused);
     tcase_add_test(tc, history_threshold_exact);
     tcase_add_test(tc, survey_history_any_split);
+    tcase_add_test(tc, survey_ramp_longer_than_slot);
     suite_add_tcase(s, tc);
     return s;
 }

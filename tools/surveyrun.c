@@ -182,7 +182,8 @@ typedef struct history {
  * most detector.persistence.window before this one's start, the most recent first, at most
  * detector.persistence.depth: from the plan alone, so a run that starts mid-plan (--exposures,
  * another rank, a resume) finds the same ones. Their end is their start plus the exposure
- * time they are read for (the MA table's last read). */
+ * time they are read for (the MA table's last read), at the latest one frame before this
+ * exposure begins. */
 static wf_status history_rows(const wf_config *base, const wf_survey_run_options *opt, const wf_survey_row *plan,
                               size_t full, int sca, wf_config *scratch, history *h)
 {
@@ -196,6 +197,13 @@ static wf_status history_rows(const wf_config *base, const wf_survey_run_options
         double t = scratch->ro.mode == WF_MODE_SINGLE ? scratch->ro.exptime : wf_clock_exposure_time(&clock);
         double dt = (x->mjd_start - plan[k].mjd_start) * 86400.0 - t;
         if (dt > base->persist.window) break;
+        /* An exposure cannot begin before the one before it was read out. Where the plan's
+         * slot is shorter than the read pattern (F184's 900 s read by MA table 11 for 977 s,
+         * 50 s of slew before the next: 27 s too short; or any --ma-table longer than the
+         * exposures), the later one begins one frame (its reset) after the earlier's last read;
+         * its MJD stays the plan's. */
+        const double gap = scratch->ro.mode == WF_MODE_SINGLE ? 0.0 : clock.frame_time;
+        if (dt < gap) dt = gap;
         h->row[h->n] = k;
         h->dt[h->n++] = dt;
     }
