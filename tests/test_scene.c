@@ -179,14 +179,17 @@ START_TEST(noise_tolerance_bounds)
     wf_catalog gal;
     ck_assert_msg(wf_catalog_read_galaxies(path, &gal) == WF_OK, "%s", wf_error_message());
     const double tau = 1.0;
-    double *pix[3][N];
-    int x0[3][N], y0[3][N], nx[3][N], ny[3][N];
+    /* modes: 0 exact, 1 tolerance tau, 2 exact without the split, 3 as 1 without the sky in
+     * the rates but at its noise (sky_noise: a persistence history's objects) */
+    double *pix[4][N];
+    int x0[4][N], y0[4][N], nx[4][N], ny[4][N];
     double sigma = 0.0;
-    for (int m = 0; m < 3; m++) {
+    for (int m = 0; m < 4; m++) {
         setup_small(&ss);
-        ss.sky_on = 1;
+        ss.sky_on = m != 3;
+        ss.sky_noise = m == 3;
         ss.core_radius = m == 2 ? 0.0 : 2.0;
-        ss.noise_tolerance = m == 1 ? tau : 0.0;
+        ss.noise_tolerance = m == 1 || m == 3 ? tau : 0.0;
         wf_scene *scene;
         ck_assert_msg(wf_scene_create(&ss, &gal, NULL, &scene) == WF_OK, "%s", wf_error_message());
         ck_assert_int_eq(wf_scene_object_count(scene), N);
@@ -195,7 +198,7 @@ START_TEST(noise_tolerance_bounds)
         sigma = sqrt(st.sky_min * ss.exptime) / ss.exptime; /* e-/s, the stamps' unit */
         printf("noise tolerance: mode %d: of %ld galaxies, %ld drawn with the split PSF, %ld with smooth knots\n", m,
                st.galaxies, st.split, st.knots_smooth);
-        if (m == 1) {
+        if (m == 1 || m == 3) {
             ck_assert_msg(st.split >= 2, "only %ld galaxies took the split", st.split);
             ck_assert_msg(st.knots_smooth >= 2 && st.knots_smooth < N, "%ld galaxies took smooth knots",
                           st.knots_smooth);
@@ -216,6 +219,9 @@ START_TEST(noise_tolerance_bounds)
         ck_assert(nx[0][k] == nx[2][k] && ny[0][k] == ny[2][k]);
         size_t np = (size_t)nx[0][k] * ny[0][k];
         ck_assert_msg(!memcmp(pix[0][k], pix[2][k], np * sizeof(double)), "object %d: tau 0 is not the unsplit scene", k);
+        ck_assert(nx[1][k] == nx[3][k] && ny[1][k] == ny[3][k] && x0[1][k] == x0[3][k] && y0[1][k] == y0[3][k]);
+        ck_assert_msg(!memcmp(pix[1][k], pix[3][k], (size_t)nx[1][k] * ny[1][k] * sizeof(double)),
+                      "object %d: sky_noise without the sky is not drawn as with it", k);
         /* over the union of the two stamps, zero outside each */
         int ux0 = x0[0][k] < x0[1][k] ? x0[0][k] : x0[1][k], uy0 = y0[0][k] < y0[1][k] ? y0[0][k] : y0[1][k];
         int ux1 = x0[0][k] + nx[0][k] > x0[1][k] + nx[1][k] ? x0[0][k] + nx[0][k] : x0[1][k] + nx[1][k];
@@ -238,7 +244,7 @@ START_TEST(noise_tolerance_bounds)
          * bound adds every dropped mode at its envelope: measured 1/7 of it at most in
          * tests/test_profile.c, 0.016 sigma here) */
         if (k == 0) ck_assert_msg(worst <= 0.1 * tau * sigma, "the magnitude-18 galaxy moved by %g sigma", worst / sigma);
-        for (int m = 0; m < 3; m++) free(pix[m][k]);
+        for (int m = 0; m < 4; m++) free(pix[m][k]);
     }
     ck_assert_msg(changed >= 3, "only %d faint objects took the looser knobs", changed);
     wf_catalog_free(&gal);

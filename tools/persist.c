@@ -323,6 +323,7 @@ static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg
         wf_scene_setup ss;
         wf_pipeline_scene_setup(cfg, clock, 1, &ss);
         ss.sky_on = 0;
+        ss.sky_noise = 1; /* drawn to the accuracy of the exposure's own product */
         wf_scene_source src;
         st = wf_scene_create(&ss, have_gal ? &gal : NULL, have_stars ? &stars : NULL, &scene);
         if (!st) st = wf_scene_source_for(scene, 0, &src);

@@ -681,7 +681,7 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
      * its own folding, which the folding knob bounds; measured <= 0.04 of that, ~0.1 with the box that changes with them,
      * over GalSim's scene). Each may be as large as
      * noise_tolerance x one pixel's sky noise over the exposure, in e-. With no sky there is
-     * no noise to hide in. */
+     * no noise to hide in (unless sky_noise: the exposure had it, the rates leave it out). */
     if (!(setup->noise_tolerance >= 0.0 && setup->noise_tolerance < INFINITY)) {
         st = wf_error(WF_ERR_RANGE, "scene: noise_tolerance %g is not a finite value >= 0", setup->noise_tolerance);
         return st;
@@ -692,7 +692,8 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
         return st;
     }
     const double kp = s->ppsf.kmax * s->acc.pixel_scale / (2.0 * M_PI), modes = M_PI * kp * kp;
-    const double sky_sigma = setup->sky_on && s->stats.sky_min > 0.0 ? sqrt(s->stats.sky_min * setup->exptime) : 0.0;
+    const int sky_noise = setup->sky_on || setup->sky_noise;
+    const double sky_sigma = sky_noise && s->stats.sky_min > 0.0 ? sqrt(s->stats.sky_min * setup->exptime) : 0.0;
     const double tol_rate = setup->noise_tolerance > 0.0 ? setup->noise_tolerance * sky_sigma / setup->exptime : 0.0;
     for (size_t i = 0; i < s->nobj; i++) {
         object *o = &s->obj[i];

@@ -56,6 +56,9 @@ typedef struct wf_scene_setup {
     size_t pool_bytes;      /* stamp pool per renderer (float stamps) [24 MiB] */
     int threads;            /* renderers to prepare [1] */
     int sky_on;             /* add the sky [1] */
+    int sky_noise;          /* noise_tolerance's scale is the exposure's sky noise even when
+                             * sky_on is 0 (a persistence history: its exposure had the sky,
+                             * its stimulus is the objects' charge alone) [0] */
     double stray_light;     /* zodiacal light x (1 + this) [0.1, SPEC 2 / GalSim] */
     double bright_mag;      /* point sources brighter than this AB magnitude are drawn with a
                              * wide PSF (4x the image side, pupil_bin 4 or finer: the halo and
