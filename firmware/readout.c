@@ -913,10 +913,10 @@ enum { MOMENTS_CHUNK = 256 };
 
 /* Passes over the pixels at [0, n), terms k0 (<= INV_K_MAX), k0 + 1, ..., at least one,
  * until a pass finds fewer than `until` of them still counting, or none; returns the next
- * term's k and sets *live to the last pass's count. */
+ * term's k. */
 WF_CLONES static int moments_passes(int n, int k0, int until, const double *restrict u, double *restrict p,
                                     double *restrict cdf, double *restrict cnt, const double *restrict mean,
-                                    const double *restrict inv_k, int *live)
+                                    const double *restrict inv_k)
 {
     int k = k0, na;
     do {
@@ -930,7 +930,6 @@ WF_CLONES static int moments_passes(int n, int k0, int until, const double *rest
         }
         k++;
     } while (k <= INV_K_MAX && na >= until && na > 0);
-    *live = na;
     return k;
 }
 
@@ -938,42 +937,32 @@ WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, c
                                             const double *restrict mean, const double *restrict e0,
                                             const double *restrict inv_k, double *restrict out)
 {
-    double u[MOMENTS_CHUNK], p[MOMENTS_CHUNK], cdf[MOMENTS_CHUNK], cnt[MOMENTS_CHUNK];
+    /* the pixels still counting, packed (uniform, term, partial sum, count so far, mean, and
+     * where each sits in the chunk); a finished pixel's count goes to cnt */
     double pu[MOMENTS_CHUNK], pp[MOMENTS_CHUNK], pc[MOMENTS_CHUNK], pn[MOMENTS_CHUNK], pm[MOMENTS_CHUNK];
+    double cnt[MOMENTS_CHUNK];
     int at[MOMENTS_CHUNK];
     /* every comparison and load made whatever the branch: a conditional one (a possible
      * trap, to the compiler) keeps these loops scalar */
     for (int x = 0; x < n; x++) {
         const double mx = mean[x], ex = e0[x], ux = ((double)w[x] + 0.5) * (1.0 / 4294967296.0);
         const int small = (mx > 0.0) & (mx < 10.0);
-        u[x] = small ? ux : 0.0; /* 0: never counts */
-        p[x] = cdf[x] = small ? ex : 1.0;
-        cnt[x] = 0.0;
+        at[x] = x;
+        pu[x] = small ? ux : 0.0; /* 0: never counts */
+        pp[x] = pc[x] = small ? ex : 1.0;
+        pn[x] = 0.0;
+        pm[x] = mx;
     }
     for (int x = n; x < MOMENTS_CHUNK; x++) { /* never read; set so that no compiler doubts it */
-        u[x] = 0.0;
-        p[x] = cdf[x] = 1.0;
-        cnt[x] = 0.0;
+        at[x] = x;
+        pu[x] = pn[x] = pm[x] = 0.0;
+        pp[x] = pc[x] = 1.0;
     }
-    int live;
-    int k = moments_passes(n, 1, n / 4 > 8 ? n / 4 : 8, u, p, cdf, cnt, mean, inv_k, &live);
-    /* pack the live ones (their next term is k) and go on with them alone, repacking as
-     * they thin out */
-    int m = 0;
-    if (live > 0 && k <= INV_K_MAX) {
-        for (int x = 0; x < n; x++)
-            if (u[x] > cdf[x]) {
-                at[m] = x;
-                pu[m] = u[x];
-                pp[m] = p[x];
-                pc[m] = cdf[x];
-                pn[m] = cnt[x];
-                pm[m] = mean[x];
-                m++;
-            }
-    }
+    /* all pixels until fewer than a quarter still count, then those alone, repacked as they
+     * thin out; every pixel leaves the pack, at the latest after term INV_K_MAX */
+    int m = n, k = 1;
     while (m > 0 && k <= INV_K_MAX) {
-        k = moments_passes(m, k, m / 4 > 8 ? m / 4 : 8, pu, pp, pc, pn, pm, inv_k, &live);
+        k = moments_passes(m, k, m / 4 > 8 ? m / 4 : 8, pu, pp, pc, pn, pm, inv_k);
         int j = 0;
         for (int i = 0; i < m; i++) {
             if (pu[i] > pc[i] && k <= INV_K_MAX) { /* still counting: keep it packed */
