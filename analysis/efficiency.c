@@ -12,6 +12,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "hal/file.h"
 #include "sim/fits/fitscheck.h"
 #include "sim/sn/sncat.h"
 #include "sim/survey/wcs.h"
@@ -951,8 +952,7 @@ static wf_status write_outputs(const wf_eff_options *o, const run *r, const bins
     }
     /* all whole: rename them into place together */
     for (int k = 0; k < NOUT && !st; k++)
-        if (want[k] && rename(out.tmp[k], out.path[k]))
-            st = wf_error(WF_ERR_IO, "%s: cannot rename to %s: %s", out.tmp[k], out.path[k], strerror(errno));
+        if (want[k]) st = wf_file_rename(out.tmp[k], out.path[k]);
     if (st)
         for (int k = 0; k < NOUT; k++)
             if (out.made[k]) unlink(out.tmp[k]);

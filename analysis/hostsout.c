@@ -228,8 +228,7 @@ wf_status hosts_finish(hosts_rows *rows, const wf_hosts_options *o, wf_hosts_sum
         have_tmp[F_PNG] = !st;
     }
     for (int i = 0; !st && i < NF; i++)
-        if (rename(tmp[i], path[i]) != 0) st = wf_error(WF_ERR_IO, "%s: cannot rename into place", path[i]);
-        else have_tmp[i] = 0;
+        if (!(st = wf_file_rename(tmp[i], path[i]))) have_tmp[i] = 0;
     for (int i = 0; i < NF; i++)
         if (have_tmp[i]) remove(tmp[i]);
     if (st && made[0]) wf_file_unmake_dir(out_dir, made);

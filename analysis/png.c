@@ -1,4 +1,5 @@
 #include "analysis/png.h"
+#include "hal/file.h"
 
 #include <errno.h>
 #include <stdint.h>
@@ -133,8 +134,8 @@ wf_status wf_png_write_rgb(const char *path, const unsigned char *rgb, int width
     }
     if (!ok)
         st = wf_error(WF_ERR_IO, "%s: cannot write %s: %s", path, tmp, strerror(err));
-    else if (rename(tmp, path) != 0)
-        st = wf_error(WF_ERR_IO, "%s: cannot rename %s into place: %s", path, tmp, strerror(errno));
+    else
+        st = wf_file_rename(tmp, path);
     if (st) remove(tmp);
 out:
     free(tmp);

@@ -72,9 +72,13 @@ wf_status wf_file_text_commit(FILE *out, const char *tmp, const char *path)
         remove(tmp);
         return wf_error(WF_ERR_IO, "%s: write failed", tmp);
     }
-    if (rename(tmp, path) != 0) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
-    }
-    return WF_OK;
+    return wf_file_rename(tmp, path);
+}
+
+wf_status wf_file_rename(const char *tmp, const char *path)
+{
+    if (rename(tmp, path) == 0) return WF_OK;
+    const int e = errno;
+    remove(tmp);
+    return wf_error(WF_ERR_IO, "%s: cannot rename %s into place: %s", path, tmp, strerror(e));
 }

@@ -19,6 +19,11 @@ wf_status wf_file_make_dir(const char *dir);
 wf_status wf_file_make_dir_noting(const char *dir, char *made);
 void wf_file_unmake_dir(const char *dir, const char *made);
 
+/* Renames the whole file tmp onto path (atomic within a file system); on failure removes
+ * tmp, so that neither a half-written product nor its temporary stays, and says why, naming
+ * both. Every writer of a product ends with this. */
+wf_status wf_file_rename(const char *tmp, const char *path);
+
 /* Opens a new temporary text file beside path, of a name no other process has (mkstemp: job
  * array tasks writing into one folder at once never share it), its name in tmp. */
 wf_status wf_file_text_open(const char *path, char *tmp, size_t cap, FILE **out);

@@ -1,4 +1,5 @@
 #include "hal/scene.h"
+#include "hal/file.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -155,7 +156,7 @@ wf_status wf_scene_record(const wf_scene_source *src, int ncols, int nrows, int 
         }
     }
     if (fclose(f) != 0 && !st) st = wf_error(WF_ERR_IO, "%s: close failed (disk full?)", tmp);
-    if (!st && rename(tmp, path) != 0) st = wf_error(WF_ERR_IO, "%s: cannot rename into place", path);
+    if (!st) st = wf_file_rename(tmp, path);
     if (st) remove(tmp);
     return st;
 }

@@ -13,6 +13,7 @@
 
 #include "hal/arena.h"
 #include "hal/dq.h"
+#include "hal/file.h"
 #include "hal/link.h"
 #include "hal/scene.h"
 #include "sim/optics/bandpass.h"
@@ -1265,11 +1266,7 @@ static wf_status write_atomic(const acc_run *run, const char *name, writer_fn fn
         remove(tmp);
         return wf_error(WF_ERR_IO, "%s: write failed", tmp);
     }
-    if (rename(tmp, path) != 0) {
-        remove(tmp);
-        return wf_error(WF_ERR_IO, "cannot rename %s to %s: %s", tmp, path, strerror(errno));
-    }
-    return WF_OK;
+    return wf_file_rename(tmp, path);
 }
 
 static void csv_num(FILE *f, double v)

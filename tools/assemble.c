@@ -15,6 +15,7 @@
 
 #include "hal/arena.h"
 #include "hal/clock.h"
+#include "hal/file.h"
 #include "hal/packet.h"
 #include "sim/fits/fitscomp.h"
 #include "sim/fits/fitsdisk.h"
@@ -1409,8 +1410,11 @@ static wf_status on_end(assembler *a, exposure *e, char *last_path, size_t last_
     fits_close_file(e->f, &status);
     e->f = NULL;
     if (status) return fail_fits(a, e, status, "closing (flushing) the FITS file");
-    if (rename(e->tmp, e->path))
-        return fail(a, WF_ERR_IO, "cannot rename %s to %s: %s", e->tmp, e->path, strerror(errno));
+    if ((st = wf_file_rename(e->tmp, e->path))) {
+        char why[900];
+        snprintf(why, sizeof why, "%s", wf_error_message());
+        return fail(a, st, "%s", why);
+    }
     e->tmp[0] = '\0';
     if (!(a->opt && a->opt->quiet)) fprintf(stderr, "wrote %s\n", e->path);
     if (last_path && last_path_len) snprintf(last_path, last_path_len, "%s", e->path);

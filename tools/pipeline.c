@@ -251,8 +251,7 @@ static wf_status stream_end(stream_out *so, wf_status st)
     if (so->file != stdout && fclose(so->file) != 0 && !st)
         st = wf_error(WF_ERR_IO, "%s: close failed: %s", so->path, strerror(errno));
     if (so->tmp[0]) {
-        if (!st && rename(so->tmp, so->path) != 0)
-            st = wf_error(WF_ERR_IO, "%s: cannot rename %s to it: %s", so->path, so->tmp, strerror(errno));
+        if (!st) st = wf_file_rename(so->tmp, so->path);
         if (st) remove(so->tmp);
     }
     if (st && why[0]) wf_error(st, "%s", why); /* the first failure's message, not a later one's */

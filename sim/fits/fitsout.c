@@ -1,6 +1,7 @@
 #include "sim/fits/fitsout.h"
 #include "sim/fits/fitsdisk.h"
 #include "hal/simd.h"
+#include "hal/file.h"
 
 #include <fitsio2.h>
 
@@ -313,8 +314,7 @@ wf_status wf_fits_finish(fitsfile *f, const char *tmp, const char *path, wf_stat
     if (!st) st = wf_fits_checksum_all(f, tmp, NULL, 0);
     fits_close_file(f, &status);
     if (!st) st = wf_fits_error(status, tmp, "closing");
-    if (!st && rename(tmp, path) != 0)
-        st = wf_error(WF_ERR_IO, "%s: cannot rename to %s: %s", tmp, path, strerror(errno));
+    if (!st) st = wf_file_rename(tmp, path);
     if (st) unlink(tmp);
     return st;
 }

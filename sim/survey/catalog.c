@@ -1,6 +1,7 @@
 #include "sim/survey/catalog.h"
 #include "sim/fits/fitscheck.h"
 #include "sim/fits/fitsdisk.h"
+#include "hal/file.h"
 
 #include <ctype.h>
 #include <errno.h>
@@ -966,16 +967,6 @@ static wf_status tmp_name(const char *path, char *tmp, size_t size)
     return WF_OK;
 }
 
-static wf_status finish_rename(const char *tmp, const char *path)
-{
-    if (rename(tmp, path) != 0) {
-        int e = errno;
-        unlink(tmp);
-        return wf_error(WF_ERR_IO, "%s: cannot rename from %s: %s", path, tmp, strerror(e));
-    }
-    return WF_OK;
-}
-
 wf_status wf_catalog_write_csv(const char *path, const wf_catalog *cat)
 {
     char tmp[4096];
@@ -1021,7 +1012,7 @@ wf_status wf_catalog_write_csv(const char *path, const wf_catalog *cat)
         unlink(tmp);
         return wf_error(WF_ERR_IO, "%s: write failed", tmp);
     }
-    return finish_rename(tmp, path);
+    return wf_file_rename(tmp, path);
 }
 
 wf_status wf_catalog_write_fits(const char *path, const wf_catalog *cat)
@@ -1103,5 +1094,5 @@ wf_status wf_catalog_write_fits(const char *path, const wf_catalog *cat)
         unlink(tmp);
         return wf_error(WF_ERR_IO, "%s: FITS write failed: %s", tmp, text);
     }
-    return finish_rename(tmp, path);
+    return wf_file_rename(tmp, path);
 }
