@@ -62,7 +62,9 @@ void wf_det_ipc_row(const double *above, const double *row, const double *below,
 
 /* Round half to even (the ADC's rounding, GalSim quantize): nearbyint in the default
  * rounding mode, which no code here changes; inline for the per-read loop, where it becomes
- * one vector rounding instruction (the build's -fno-math-errno -fno-trapping-math). */
+ * one vector rounding instruction (the build's -fno-math-errno -fno-trapping-math). (The
+ * magic-number rounding it replaced, still in detector.c's lanes, left 2^51 <= |x| < 2^52
+ * unrounded: far beyond any ADU, which the ADC clamps to 65535.) */
 static inline double wf_det_quantize(double adu) { return nearbyint(adu); }
 
 /* Index of the first value that is not finite (a scene's rates), -1 when all are. */

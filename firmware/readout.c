@@ -951,7 +951,7 @@ WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, c
         pu[x] = small ? ux : 0.0; /* 0: never counts */
         pp[x] = pc[x] = small ? ex : 1.0;
         pn[x] = 0.0;
-        pm[x] = mx;
+        pm[x] = small ? mx : 0.0; /* so a negative mean's sums stay at 1: it counts 0 */
     }
     for (int x = n; x < MOMENTS_CHUNK; x++) { /* never read; set so that no compiler doubts it */
         at[x] = x;

@@ -606,51 +606,75 @@ START_TEST(test_resultant_row)
 END_TEST
 
 /* A resultant drawn at once: the read noise of the mean of n reads, sigma / sqrt(n), then
- * as one read (gain, bias, half-to-even rounding, the ADC's range) into 16 bits; saturated
- * where its last read was: the charge q at the well or, after nonlinearity, its signal at
- * the ceiling, even when the resultant's own mean is below it. The flag keeps the first
- * resultant. */
+ * as one read (gain, bias, half-to-even rounding, the ADC's range) into 16 bits (NaN 0);
+ * saturated where its last read was: the charge q at the well or, after nonlinearity, its
+ * signal at the ceiling, even when the resultant's own mean is below it. The flag keeps the
+ * first resultant. Every switch on and off, exact halves, NaN and infinities. */
+static uint16_t word_by_hand(double adu)
+{
+    double v = nearbyint(adu);
+    if (!(v >= 0.0)) return 0; /* NaN too */
+    return v > 65535.0 ? 65535 : (uint16_t)v;
+}
+
 START_TEST(test_group_row)
 {
-    enum { N = 41 };
-    wf_detector det;
-    wf_detector_defaults(&det);
-    for (int g = 0; g < 2; g++) {
-        det.gain = g ? 1.0 : 1.7;
-        det.adc_max = g ? 65535.0 : 50000.0; /* 1.7: the ceiling below the well's signal */
+    enum { N = 48 };
+    int by_last = 0, low = 0, high = 0, ties = 0;
+    for (int sw = 0; sw < 32; sw++) {
+        wf_detector det;
+        wf_detector_defaults(&det);
+        det.on.read_noise = sw & 1;
+        det.on.quantize = (sw >> 1) & 1;
+        det.on.saturation = (sw >> 2) & 1;
+        det.on.nonlinearity = (sw >> 3) & 1;
+        const int unit = (sw >> 4) & 1;
+        det.gain = unit ? 1.0 : 1.7;
+        det.adc_max = unit ? 65535.0 : 50000.0; /* 1.7: the ceiling below the well's signal */
         double e[N], q[N];
         float z[N];
         uint8_t first[N], want_first[N];
         uint16_t out[N];
-        int by_last = 0, low = 0;
         for (int i = 0; i < N; i++) {
+            /* whole and half ADU (exact ties at unit gain without read noise), charges from
+             * below zero to past the well */
             e[i] = -2000.0 + 2300.0 * i * det.gain + (i % 3 ? 0.5 * det.gain : 0.0);
             q[i] = e[i] + det.full_well * 0.03 * (i % 7);
             z[i] = (float)(0.41 * (i % 5) - 0.9);
             first[i] = want_first[i] = i % 6 == 0 ? 1 : 255;
         }
+        e[N - 1] = NAN;
+        e[N - 2] = INFINITY;
+        e[N - 3] = -INFINITY;
+        q[N - 4] = NAN;
         for (uint8_t r = 2; r < 4; r++) {
             const int n = 2 * r; /* reads in the group */
             wf_det_group_row(&det, e, q, z, N, n, r, first, out);
             for (int i = 0; i < N; i++) {
-                double adu = (e[i] + det.read_noise_e / sqrt((double)n) * (double)z[i]) / det.gain + det.bias_adu;
-                adu = nearbyint(adu);
-                double last = q[i] < det.full_well ? q[i] : det.full_well;
-                last += det.nl_beta * last * last;
-                const int at_last = q[i] >= det.full_well || last / det.gain + det.bias_adu >= det.adc_max;
-                int clipped = at_last || adu >= det.adc_max;
-                by_last += at_last && adu < det.adc_max;
-                if (adu >= det.adc_max) adu = det.adc_max;
-                if (adu < 0.0) adu = 0.0, low++;
-                if (clipped && want_first[i] == 255) want_first[i] = r;
-                ck_assert_msg(out[i] == (uint16_t)adu, "gain %g, group %d, pixel %d: %u, want %.17g", det.gain,
-                              r, i, out[i], adu);
-                ck_assert_msg(first[i] == want_first[i], "pixel %d: first %u, want %u", i, first[i],
+                double v = e[i];
+                if (det.on.read_noise) v += det.read_noise_e / sqrt((double)n) * (double)z[i];
+                double adu = v / det.gain + det.bias_adu;
+                if (det.on.quantize) adu = nearbyint(adu);
+                ties += !det.on.quantize && adu - floor(adu) == 0.5;
+                if (det.on.saturation) {
+                    double last = q[i] < det.full_well ? q[i] : det.full_well;
+                    if (det.on.nonlinearity) last += det.nl_beta * last * last;
+                    const int at_last = q[i] >= det.full_well || last / det.gain + det.bias_adu >= det.adc_max;
+                    by_last += at_last && adu < det.adc_max;
+                    int clipped = at_last || adu >= det.adc_max;
+                    if (adu >= det.adc_max) adu = det.adc_max, high++;
+                    if (adu < 0.0) adu = 0.0, low++;
+                    if (clipped && want_first[i] == 255) want_first[i] = r;
+                }
+                ck_assert_msg(out[i] == word_by_hand(adu), "switches %d, group %d, pixel %d: %u, want %u (%.17g)", sw,
+                              r, i, out[i], word_by_hand(adu), adu);
+                ck_assert_msg(first[i] == want_first[i], "switches %d, pixel %d: first %u, want %u", sw, i, first[i],
                               want_first[i]);
             }
         }
-        ck_assert(by_last > 0 && low > 0); /* the last-read rule and both ends reached */
     }
+    /* the last-read rule, both ends of the ADC and exact halves all reached */
+    ck_assert(by_last > 0 && low > 0 && high > 0 && ties > 0);
 }
 END_TEST
 

@@ -20,7 +20,8 @@ static int exists(const char *path)
 START_TEST(text_commit_renames_whole)
 {
     char path[4200], tmp[4300];
-    snprintf(path, sizeof path, "%s/table.txt", wf_test_tmpdir());
+    const char *d = wf_test_tmpdir();
+    snprintf(path, sizeof path, "%s/table.txt", d);
     FILE *f;
     ck_assert_int_eq(wf_file_text_open(path, tmp, sizeof tmp, &f), WF_OK);
     ck_assert(strncmp(tmp, path, strlen(path)) == 0 && exists(tmp) && !exists(path));
@@ -39,9 +40,10 @@ END_TEST
 START_TEST(rename_failure_removes_tmp)
 {
     char dir[4200], inside[4300], tmp[4300];
-    snprintf(dir, sizeof dir, "%s/taken", wf_test_tmpdir());
+    const char *d = wf_test_tmpdir();
+    snprintf(dir, sizeof dir, "%s/taken", d);
     snprintf(inside, sizeof inside, "%s/keep", dir);
-    snprintf(tmp, sizeof tmp, "%s/product.tmp", wf_test_tmpdir());
+    snprintf(tmp, sizeof tmp, "%s/product.tmp", d);
     ck_assert_int_eq(wf_file_make_dir(dir), WF_OK);
     FILE *f = fopen(inside, "w");
     fputs("x", f);
@@ -58,7 +60,7 @@ START_TEST(rename_failure_removes_tmp)
     f = fopen(tmp, "w");
     fputs("whole", f);
     fclose(f);
-    snprintf(inside, sizeof inside, "%s/product.fits", wf_test_tmpdir());
+    snprintf(inside, sizeof inside, "%s/product.fits", d);
     ck_assert_int_eq(wf_file_rename(tmp, inside), WF_OK);
     ck_assert(!exists(tmp) && exists(inside));
 }

@@ -322,8 +322,9 @@ static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg
     if (!st && (have_gal || have_stars)) { /* else nothing bright: an empty list */
         wf_scene_setup ss;
         wf_pipeline_scene_setup(cfg, clock, 1, &ss);
+        /* drawn to the accuracy of the exposure's own product: at its sky noise, if it had a sky */
+        ss.sky_noise = ss.sky_on;
         ss.sky_on = 0;
-        ss.sky_noise = 1; /* drawn to the accuracy of the exposure's own product */
         wf_scene_source src;
         st = wf_scene_create(&ss, have_gal ? &gal : NULL, have_stars ? &stars : NULL, &scene);
         if (!st) st = wf_scene_source_for(scene, 0, &src);

@@ -196,14 +196,16 @@ static wf_status history_rows(const wf_config *base, const wf_survey_run_options
         if (st) return st;
         double t = scratch->ro.mode == WF_MODE_SINGLE ? scratch->ro.exptime : wf_clock_exposure_time(&clock);
         double dt = (x->mjd_start - plan[k].mjd_start) * 86400.0 - t;
-        if (dt > base->persist.window) break;
         /* An exposure cannot begin before the one before it was read out. Where the plan's
          * slot is shorter than the read pattern (F184's 900 s read by MA table 11 for 977 s,
          * 50 s of slew before the next: 27 s too short; or any --ma-table longer than the
          * exposures), the later one begins one frame (its reset) after the earlier's last read;
-         * its MJD stays the plan's. */
+         * its MJD stays the plan's. Each earlier row is moved on its own, not by the overruns
+         * of the rows after it: with slots far shorter than the table several of them end one
+         * frame before, an approximation of a schedule the plan does not describe. */
         const double gap = scratch->ro.mode == WF_MODE_SINGLE ? 0.0 : clock.frame_time;
         if (dt < gap) dt = gap;
+        if (dt > base->persist.window) break;
         h->row[h->n] = k;
         h->dt[h->n++] = dt;
     }
