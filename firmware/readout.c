@@ -599,31 +599,9 @@ static const double *ipc_row(wf_readout *ro, int y, int h0, int h1)
     return ro->row;
 }
 
-/* Read noise, gain, ADC. Returns ADU; sets *clipped when the ADC saturated. */
-static inline double digitise(const wf_detector *d, double e, double noise_sigma, double z,
-                              int *clipped)
-{
-    if (d->on.read_noise) e += noise_sigma * z;
-    double adu = e / d->gain + d->bias_adu;
-    if (d->on.quantize) adu = wf_det_quantize(adu);
-    if (d->on.saturation) {
-        if (adu >= d->adc_max) { adu = d->adc_max; *clipped = 1; }
-        if (adu < 0.0) adu = 0.0;
-    }
-    return adu;
-}
-
 static uint32_t pixel_id(const wf_readout *ro, int y, int x)
 {
     return (uint32_t)y * (uint32_t)ro->cfg.ncols + (uint32_t)x;
-}
-
-static uint16_t to_u16(double v)
-{
-    v = nearbyint(v);
-    if (v < 0.0) return 0;
-    if (v > 65535.0) return 65535;
-    return (uint16_t)v;
 }
 
 /* ---- correlated read noise and the reference border (firmware/corrnoise.h) ------------- */
@@ -675,14 +653,13 @@ static void side_read(wf_readout *ro, int y, int y0, int rows, uint32_t key, int
 static void side_direct(wf_readout *ro, int y, int y0, int rows, int r, int n)
 {
     enum { S = 2 * WF_CN_BORDER };
-    double e8[S];
+    double e8[S], q8[S] = {0};
     float z8[S];
+    uint8_t sat8[S]; /* no charge: never set, and not kept */
     side_pixels(ro, y, corr_key(r, 1), e8, z8);
+    memset(sat8, 255, sizeof sat8);
     uint16_t *out = ro->side_out + ((size_t)r * rows + (size_t)(y - y0)) * S;
-    for (int i = 0; i < S; i++) {
-        int clipped = 0;
-        out[i] = to_u16(digitise(&ro->cfg.det, e8[i], ro->cfg.det.read_noise_e / sqrt((double)n), z8[i], &clipped));
-    }
+    wf_det_group_row(&ro->cfg.det, e8, q8, z8, S, n, (uint8_t)r, sat8, out);
 }
 
 /* The eight reference rows (full-frame rows 0-3 and the last four) of every resultant, as
@@ -712,10 +689,8 @@ static wf_status send_refrows(wf_readout *ro)
             wf_corrnoise_row(ro->cn, key, Y, 1.0 / sqrt((double)n), ro->cn_row);
             wf_corrnoise_ref_normals(ro->cn, key, Y, 0, W, ro->ref_z);
             uint16_t *o = out + ((size_t)r * 2 * B + (size_t)i) * W;
-            for (int X = 0; X < W; X++) {
-                int clipped = 0;
-                o[X] = to_u16(digitise(d, ro->cn_row[X], d->read_noise_e / sqrt((double)n), ro->ref_z[X], &clipped));
-            }
+            memset(ro->ref_sat, 255, (size_t)W); /* no charge: the flags are not kept */
+            wf_det_group_row(d, ro->cn_row, ro->zero, ro->ref_z, W, n, (uint8_t)r, ro->ref_sat, o);
         }
         for (int k = 0; !direct && k < ro->total_reads; k++) {
             const int r = ro->resultant_of_read[k];
