@@ -11,6 +11,8 @@
 
 #include "sim/fits/fitscomp.h"
 #include "sim/fits/fitsout.h"
+#include "sim/fits/rice.h"
+#include <fitsio2.h>
 #include "tests/testutil.h"
 
 #define NX 512
@@ -39,6 +41,10 @@ static float *noisy_image(void)
     return img;
 }
 
+/* 1: write_product hands the rows to cfitsio's own fits_write_img (its own Rice coder)
+ * instead of wf_fits_part_write_rows */
+static int via_cfitsio;
+
 /* A product: empty primary plus one compressed image of bitpix, written `rows` rows at a
  * time from the bottom (reverse = 0) or top (1) down, then checksummed. */
 static void write_product(const char *path, int bitpix, int type, int naxis, long *naxes, const void *pix,
@@ -59,8 +65,9 @@ static void write_product(const char *path, int bitpix, int type, int naxis, lon
     for (long k = 0; k < nrows; k += rows) {
         long r0 = reverse ? (nrows - k - rows > 0 ? nrows - k - rows : 0) : k;
         long n = reverse ? (nrows - k) - r0 : (k + rows <= nrows ? rows : nrows - k);
-        wf_fits_part_write_rows(p, type, naxes[0], r0, n, (void *)((const char *)pix + (size_t)r0 * (size_t)naxes[0] * elem),
-                                &status);
+        void *at = (void *)((const char *)pix + (size_t)r0 * (size_t)naxes[0] * elem);
+        if (via_cfitsio) fits_write_img(p, type, (LONGLONG)r0 * naxes[0] + 1, (LONGLONG)n * naxes[0], at, &status);
+        else wf_fits_part_write_rows(p, type, naxes[0], r0, n, at, &status);
         ck_assert_int_eq(status, 0);
     }
     ck_assert_msg(wf_fits_part_append(f, tmp, p, part) == WF_OK, "%s", wf_error_message());
@@ -390,12 +397,114 @@ START_TEST(test_damage_detected)
 }
 END_TEST
 
+/* Pixels of one of several kinds: 0 zeros, 1 a constant, 2 noise of sigma around a level,
+ * 3 any value, 4 a constant with rare jumps across the whole range (long unary codes), 5 a
+ * ramp wrapping around. */
+static void pattern(int kind, double sigma, int bytepix, long n, uint64_t *s, void *out)
+{
+    const uint32_t top = bytepix == 2 ? 0xffffu : 0xffffffffu;
+    for (long i = 0; i < n; i++) {
+        double g = wf_test_gauss(s);
+        uint64_t r = wf_test_splitmix(s);
+        uint32_t v = kind == 0 ? 0u
+                     : kind == 1 ? 1234u
+                     : kind == 2 ? (uint32_t)(int64_t)llround(fmin(fmax(30000.0 + sigma * g, 0.0), (double)top))
+                     : kind == 3 ? (uint32_t)r
+                     : kind == 4 ? (r % 97 == 0 ? (uint32_t)(r >> 32) : 7u)
+                                 : (uint32_t)(i * 977u);
+        v &= top;
+        if (bytepix == 2) ((uint16_t *)out)[i] = (uint16_t)v;
+        else ((uint32_t *)out)[i] = v;
+    }
+}
+
+/* wfisim's Rice coder writes cfitsio's bytes: every length (short last blocks, one pixel),
+ * block size, pixel width and kind of data, unsigned pixels flipped to the stored signed
+ * ones as cfitsio flips them. */
+START_TEST(test_rice_matches_cfitsio)
+{
+    enum { MAXN = 4200 };
+    static uint32_t pix[MAXN];
+    static int ref_in[MAXN];
+    static short ref16[MAXN];
+    static unsigned char ours[8 * MAXN], theirs[8 * MAXN];
+    const long lens[] = {1, 2, 31, 32, 33, 300, 4088};
+    const int blocks[] = {32, 16, 7, 1};
+    const double sigmas[] = {0.5, 3, 40, 3000, 30000};
+    uint64_t s = 99;
+    long cases = 0, long_runs = 0;
+    for (int bp = 2; bp <= 4; bp += 2)
+        for (int li = 0; li < 7; li++)
+            for (int bi = 0; bi < 4; bi++)
+                for (int kind = 0; kind < 6; kind++)
+                    for (int si = 0; si < (kind == 2 ? 5 : 1); si++) {
+                        const long n = lens[li];
+                        const int block = blocks[bi];
+                        const uint32_t flip = (kind & 1) ? (bp == 2 ? 0x8000u : 0x80000000u) : 0u;
+                        pattern(kind, sigmas[si], bp, n, &s, pix);
+                        size_t len;
+                        ck_assert_msg(wf_fits_rice_code(pix, n, bp, flip, block, ours, sizeof ours, &len) == WF_OK,
+                                      "%s", wf_error_message());
+                        int nref;
+                        if (bp == 2) {
+                            for (long i = 0; i < n; i++) ref16[i] = (short)(((const uint16_t *)pix)[i] ^ flip);
+                            nref = fits_rcomp_short(ref16, (int)n, theirs, (int)sizeof theirs, block);
+                        } else {
+                            for (long i = 0; i < n; i++) ref_in[i] = (int)(pix[i] ^ flip);
+                            nref = fits_rcomp(ref_in, (int)n, theirs, (int)sizeof theirs, block);
+                        }
+                        ck_assert_msg(nref > 0 && (size_t)nref == len && !memcmp(ours, theirs, len),
+                                      "%d-byte pixels, n %ld, block %d, kind %d, sigma %g: %zu bytes against cfitsio's %d",
+                                      bp, n, block, kind, sigmas[si], len, nref);
+                        ck_assert_msg(len <= wf_fits_rice_bound(n, bp), "n %ld: %zu bytes over the bound", n, len);
+                        long_runs += kind == 4 && n >= 300 && block == 32;
+                        cases++;
+                    }
+    ck_assert(long_runs > 0);
+    printf("Rice coder: %ld cases byte-identical to cfitsio's\n", cases);
+}
+END_TEST
+
+/* Products whose integer HDUs wfisim codes are the bytes cfitsio writes when it codes them. */
+START_TEST(test_own_rice_same_product)
+{
+    const char *dir = wf_test_tmpdir();
+    enum { NR = 3, W = 333, H = 24 };
+    static uint16_t cube[NR * H * W];
+    static uint32_t dq[H * W];
+    uint64_t s = 5;
+    for (int k = 0; k < NR * H; k++) pattern(k % 6, 40.0, 2, W, &s, cube + (size_t)k * W);
+    for (int k = 0; k < H; k++) pattern(k % 6, 3000.0, 4, W, &s, dq + (size_t)k * W);
+    long ax3[3] = {W, H, NR}, ax2[2] = {W, H};
+    char a[4096], b[4096];
+    const struct { int bitpix, type, naxis; long *ax; void *pix; size_t elem; } hd[] = {
+        {USHORT_IMG, TUSHORT, 3, ax3, cube, 2}, {SHORT_IMG, TSHORT, 3, ax3, cube, 2},
+        {ULONG_IMG, TUINT, 2, ax2, dq, 4}, {LONG_IMG, TINT, 2, ax2, dq, 4}};
+    for (int k = 0; k < 4; k++) {
+        snprintf(a, sizeof a, "%s/own%d.fits", dir, k);
+        snprintf(b, sizeof b, "%s/cfitsio%d.fits", dir, k);
+        via_cfitsio = 0;
+        const long t0 = wf_fits_own_rice_tiles(), tiles = hd[k].ax[1] * (hd[k].naxis > 2 ? hd[k].ax[2] : 1);
+        write_product(a, hd[k].bitpix, hd[k].type, hd[k].naxis, hd[k].ax, hd[k].pix, hd[k].elem, 16, 1, 5, 0);
+        ck_assert_msg(wf_fits_own_rice_tiles() - t0 == tiles, "bitpix %d: %ld of %ld tiles coded by wfisim", hd[k].bitpix,
+                      wf_fits_own_rice_tiles() - t0, tiles);
+        via_cfitsio = 1;
+        write_product(b, hd[k].bitpix, hd[k].type, hd[k].naxis, hd[k].ax, hd[k].pix, hd[k].elem, 16, 1, 5, 0);
+        via_cfitsio = 0;
+        ck_assert_int_eq(wf_fits_own_rice_tiles() - t0, tiles); /* cfitsio's path left to cfitsio */
+        ck_assert_msg(same_file(a, b), "bitpix %d: the product differs from cfitsio's", hd[k].bitpix);
+    }
+}
+END_TEST
+
 static Suite *fitscomp_suite(void)
 {
     Suite *s = suite_create("fitscomp");
     TCase *tc = tcase_create("core");
     tcase_set_timeout(tc, 120);
     tcase_add_test(tc, test_integers_lossless);
+    tcase_add_test(tc, test_rice_matches_cfitsio);
+    tcase_add_test(tc, test_own_rice_same_product);
     tcase_add_test(tc, test_float_lossless_at_zero);
     tcase_add_test(tc, test_quantization_error);
     tcase_add_test(tc, test_same_bytes_any_order);

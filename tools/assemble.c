@@ -1025,7 +1025,12 @@ static wf_status on_resultants(const assembler *a, exposure *e, const void *payl
         long fp[3] = {1, (long)h->first_row + 1, 1};
         long lp[3] = {e->m.ncols, (long)(h->first_row + h->row_count), nres};
         fits_movabs_hdu(f, number, NULL, &status);
-        fits_write_subset(f, TUSHORT, fp, lp, (void *)(uintptr_t)cube, &status);
+        if (f != e->f) /* a compressed part: each resultant's rows are whole tiles */
+            for (int r = 0; r < nres && !status; r++)
+                wf_fits_part_write_rows(f, TUSHORT, (long)e->m.ncols, (LONGLONG)r * e->m.nrows + h->first_row,
+                                        (long)h->row_count, (void *)(uintptr_t)(cube + (size_t)r * plane), &status);
+        else
+            fits_write_subset(f, TUSHORT, fp, lp, (void *)(uintptr_t)cube, &status);
         if (status) return fail_fits(a, e, status, "writing RESULTANTS");
         for (int r = 0; f == e->f && r < nres; r++) /* TUSHORT is stored with BZERO 32768 */
             wf_fits_datasum_add16(&e->sum[HDU_RESULTANTS - 1], cube + (size_t)r * plane, plane,

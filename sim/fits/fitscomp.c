@@ -1,9 +1,11 @@
 #include "sim/fits/fitscomp.h"
 #include "sim/fits/fitsout.h"
+#include "sim/fits/rice.h"
 
 #include <fitsio2.h>
 
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -199,9 +201,62 @@ double wf_fits_row_noise(const float *row, long n, float *scratch)
     return 0.6052697 * select_kth(scratch, m, (m - 1) / 2);
 }
 
+/* The XOR that turns pixels of `type` into the integers a Rice-coded HDU of one-row tiles
+ * stores (flip 0 or the sign bit of the unsigned types' BZERO), when wfisim's coder can
+ * write its tiles: 1, else 0 (cfitsio codes them). */
+static _Atomic long own_tiles;
+
+long wf_fits_own_rice_tiles(void) { return own_tiles; }
+
+static int own_rice(const fitsfile *f, int type, long ncols, int *bytepix, uint32_t *flip)
+{
+    const FITSfile *F = f->Fptr;
+    if (!F->compressimg || F->compress_type != RICE_1 || F->cn_compressed < 1 || F->cn_zscale > 0 ||
+        F->cn_zblank > 0 || F->request_lossy_int_compress || F->cn_bscale != 1.0 || F->tilesize[0] != ncols)
+        return 0;
+    for (int k = 1; k < F->zndim; k++)
+        if (F->tilesize[k] != 1) return 0;
+    const double z = F->cn_actual_bzero;
+    if (F->zbitpix == SHORT_IMG && ((type == TUSHORT && z == 32768.0) || (type == TSHORT && z == 0.0))) {
+        *bytepix = 2;
+        *flip = type == TUSHORT ? 0x8000u : 0u;
+        return 1;
+    }
+    if (F->zbitpix == LONG_IMG && ((type == TUINT && z == 2147483648.0) || (type == TINT && z == 0.0))) {
+        *bytepix = 4;
+        *flip = type == TUINT ? 0x80000000u : 0u;
+        return 1;
+    }
+    return 0;
+}
+
 int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, long nrows, void *data, int *status)
 {
     if (*status) return *status;
+    int bytepix;
+    uint32_t flip;
+    /* (asking also has cfitsio read the compression keywords a new HDU's header now holds) */
+    const int compressed = fits_is_compressed_image(f, status);
+    if (*status) return *status;
+    if (compressed && ncols > 0 && own_rice(f, type, ncols, &bytepix, &flip)) {
+        /* each row is a tile: its code into the COMPRESSED_DATA cell of table row (row + 1),
+         * as cfitsio would have put it there */
+        const size_t cap = wf_fits_rice_bound(ncols, bytepix);
+        unsigned char *code = malloc(cap);
+        if (!code) return *status = MEMORY_ALLOCATION;
+        for (long r = 0; r < nrows && !*status; r++) {
+            size_t len;
+            const void *row = (const char *)data + (size_t)r * (size_t)ncols * (size_t)bytepix;
+            if (wf_fits_rice_code(row, ncols, bytepix, flip, f->Fptr->rice_blocksize, code, cap, &len)) {
+                *status = DATA_COMPRESSION_ERR;
+                break;
+            }
+            fits_write_col(f, TBYTE, f->Fptr->cn_compressed, row0 + r + 1, 1, (LONGLONG)len, code, status);
+        }
+        free(code);
+        own_tiles += nrows;
+        return *status;
+    }
     /* the part's q as fits_set_quantize_level stored it (0 as NO_QUANTIZE: exact floats);
      * cfitsio takes the requested level as each tile is compressed */
     const float q = f->Fptr->request_quantize_level;

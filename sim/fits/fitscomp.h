@@ -40,8 +40,12 @@ wf_status wf_fits_part_append(fitsfile *dst, const char *dst_path, fitsfile *par
 
 /* Writes nrows whole rows of ncols pixels from row row0 (0-based) of the part's image,
  * cfitsio's way (returns and sets *status). TFLOAT rows of a quantized part are written one
- * by one, each at a step of wf_fits_row_noise / q. */
+ * by one, each at a step of wf_fits_row_noise / q. Integer rows (TUSHORT, TSHORT, TUINT,
+ * TINT) are Rice coded by sim/fits/rice.h into the same bytes, several times faster. */
 int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, long nrows, void *data, int *status);
+
+/* Tiles sim/fits/rice.h has coded in this process (tests check that it is the coder used). */
+long wf_fits_own_rice_tiles(void);
 
 /* The noise of a row of n pixels: 0.6052697 x the median of |2 x_i - x_(i-2) - x_(i+2)|,
  * sigma for independent Gaussian pixels (cfitsio's "noise3" estimator, DER_SNR); 0 when
