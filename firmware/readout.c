@@ -1241,6 +1241,41 @@ static void single_photons(wf_readout *ro, int y, const double *e, double *q, ui
     }
 }
 
+/* Dark electrons of mean dark >= 10 for row y, each pixel's draw on from the block where
+ * its photon draw left the stream (next_block): wf_rng_poisson's PTRS attempts, one block
+ * each, a row batch at a time (as single_photons' retries). A pixel joins when the blocks
+ * reach its own; a rejected one tries the next block. The words of the row are spent. */
+static void single_dark(wf_readout *ro, int y, double dark, double *q)
+{
+    const int nc = ro->cfg.ncols;
+    const uint16_t *nb = ro->next_block;
+    uint32_t *rx = ro->retry_x, *rpx = ro->retry_px;
+    double *rm = ro->retry_mean, *rk = ro->retry_k;
+    uint32_t *b0 = ro->words, *b1 = b0 + nc, *b2 = b1 + nc, *b3 = b2 + nc;
+    uint32_t last = 0;
+    for (int x = 0; x < nc; x++) last = nb[x] > last ? nb[x] : last;
+    int n = 0; /* the pixels at block b */
+    for (uint32_t b = 1; b < 65536 && (n > 0 || b <= last); b++) {
+        for (int x = 0; b <= last && x < nc; x++) { /* those whose stream resumes here */
+            rx[n] = (uint32_t)x;
+            n += nb[x] == b;
+        }
+        for (int i = 0; i < n; i++) {
+            rpx[i] = pixel_id(ro, y, (int)rx[i]);
+            rm[i] = dark;
+        }
+        if (!n) continue;
+        wf_noise_block_list(&ro->noise, rpx, n, 0, WF_PURPOSE_PHOTON, b, b0, b1, b2, b3);
+        wf_poisson_ptrs_row53(rm, b0, b1, b2, b3, n, rk);
+        int left = 0;
+        for (int i = 0; i < n; i++) {
+            if (rk[i] >= 0.0) q[rx[i]] += rk[i];
+            else rx[left++] = rx[i];
+        }
+        n = left;
+    }
+}
+
 /* Row y (a halo row) up to its measured charge: Poisson of rate x t (negative rates set to
  * zero first), reciprocity failure on the counts, dark current (Poisson), full well,
  * nonlinearity. Tile rows also get their read-noise normals. */
@@ -1282,12 +1317,7 @@ static void single_charge_row(wf_readout *ro, int y, int y0, int y1, int h0)
         if (ro->dark_table) {
             for (int x = 0; x < nc; x++) q[x] += ro->dark_e[x];
         } else if (dark_more) {
-            for (int x = 0; x < nc; x++) {
-                wf_rng rng;
-                wf_rng_init(&rng, &ro->noise, pixel_id(ro, y, x), 0, WF_PURPOSE_PHOTON);
-                wf_rng_seek(&rng, ro->next_block[x]);
-                q[x] += wf_rng_poisson(&rng, dark);
-            }
+            single_dark(ro, y, dark, q);
         } else if (!photons) { /* with photons on, a dark mean of 0 draws no electrons */
             for (int x = 0; x < nc; x++) q[x] += dark;
         }
