@@ -4,12 +4,15 @@
  * (off: the stream's bytes unchanged) and independence of tile height and threads. */
 #include <fitsio.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "firmware/persistence.h"
 #include "firmware/readout.h"
 #include "hal/packet.h"
+#include "sim/draw/profile.h"
+#include "sim/draw/scene.h"
 #include "sim/survey/survey.h"
 #include "sim/survey/wcs.h"
 #include "tests/testutil.h"
@@ -446,6 +449,97 @@ START_TEST(history_threshold_exact)
 }
 END_TEST
 
+/* The bound that picks an earlier exposure's bright objects holds: no drawn pixel of any
+ * object, compact or extended, round or sheared, bulge, disk, knots or a star, exceeds its
+ * flux x wf_persist_peak_fraction at the scene PSF's own psf_pixel_max, at Y106 and F184
+ * (whose peaks differ by 2x); and it is close for the compact ones (not vacuous). */
+START_TEST(bright_bound_holds)
+{
+    enum { NG = 5 * 3 * 3 * 2 * 3 };
+    const char *filters[2] = {"Y106", "F184"};
+    for (int fi = 0; fi < 2; fi++) {
+        wf_scene_setup ss;
+        wf_scene_setup_default(&ss);
+        ss.ncols = ss.nrows = 512;
+        ss.sky_on = 0;
+        snprintf(ss.filter, sizeof ss.filter, "%s", filters[fi]);
+        const char *data = getenv("WFISIM_DATA");
+        if (data && data[0]) snprintf(ss.data_dir, sizeof ss.data_dir, "%s", data);
+        wf_focal_plane fp;
+        wf_wcs w;
+        ck_assert_int_eq(wf_wcs_focal_plane(NULL, &fp), WF_OK);
+        ck_assert_int_eq(wf_wcs_for_sca(&fp, ss.ra, ss.dec, ss.pa, ss.sca, &w), WF_OK);
+        char gpath[4200], spath[4200];
+        snprintf(gpath, sizeof gpath, "%s/bound_gal.csv", wf_test_tmpdir());
+        snprintf(spath, sizeof spath, "%s/bound_star.csv", wf_test_tmpdir());
+        FILE *f = fopen(gpath, "w");
+        ck_assert_ptr_nonnull(f);
+        fprintf(f, "id,ra,dec,z,mag_%s,hlr_disk,hlr_bulge,bulge_frac,knot_frac,e1,e2,pa\n", filters[fi]);
+        const double hd[5] = {0.02, 0.05, 0.1, 0.3, 1.0}, hb[3] = {0.01, 0.05, 0.2}, bf[3] = {0.0, 0.5, 1.0};
+        const double kf[2] = {0.0, WF_PROFILE_MAX_KNOT_FRAC}, e[3] = {0.0, 0.3, 0.7};
+        int id = 0;
+        for (int a = 0; a < 5; a++)
+            for (int b = 0; b < 3; b++)
+                for (int c = 0; c < 3; c++)
+                    for (int k = 0; k < 2; k++)
+                        for (int s = 0; s < 3; s++) {
+                            double ra, dec, x = 40.0 + 26.3 * (id % 18), y = 40.0 + 29.7 * (id / 18);
+                            ck_assert_int_eq(wf_wcs_pix2world(&w, x, y, &ra, &dec), WF_OK);
+                            id++;
+                            fprintf(f, "%d,%.12f,%.12f,0.5,20,%g,%g,%g,%g,%g,%g,%d\n", id, ra, dec, hd[a], hb[b], bf[c],
+                                    kf[k], e[s] * 0.6, e[s] * 0.8, 17 * id % 180);
+                        }
+        fclose(f);
+        f = fopen(spath, "w");
+        ck_assert_ptr_nonnull(f);
+        fprintf(f, "id,ra,dec,mag_%s\n", filters[fi]);
+        for (int i = 0; i < 16; i++) { /* every quarter-pixel phase */
+            double ra, dec;
+            ck_assert_int_eq(wf_wcs_pix2world(&w, 100.0 + 20 * i + 0.25 * (i % 4), 480.0 + 0.25 * (i / 4), &ra, &dec),
+                             WF_OK);
+            fprintf(f, "%d,%.12f,%.12f,20\n", 1000 + i, ra, dec);
+        }
+        fclose(f);
+        wf_catalog gal, stars;
+        ck_assert_msg(wf_catalog_read_galaxies(gpath, &gal) == WF_OK, "%s", wf_error_message());
+        ck_assert_msg(wf_catalog_read_stars(spath, &stars) == WF_OK, "%s", wf_error_message());
+        ck_assert_int_eq((int)gal.n, NG);
+        wf_scene *scene;
+        ck_assert_msg(wf_scene_create(&ss, &gal, &stars, &scene) == WF_OK, "%s", wf_error_message());
+        wf_scene_stats st;
+        wf_scene_get_stats(scene, &st);
+        ck_assert_msg(st.psf_pixel_max > 0.1 && st.psf_pixel_max < 0.6, "psf_pixel_max %g", st.psf_pixel_max);
+        double worst = 0.0, worst_star = 0.0;
+        const size_t nob = wf_scene_object_count(scene);
+        ck_assert_int_eq((int)nob, NG + 16);
+        for (size_t k = 0; k < nob; k++) {
+            wf_scene_object info;
+            int x0, y0, nx, ny;
+            double *pix;
+            ck_assert_msg(wf_scene_draw_object(scene, k, &info, &x0, &y0, &nx, &ny, &pix) == WF_OK, "%s",
+                          wf_error_message());
+            double peak = 0.0;
+            for (long q = 0; q < (long)nx * ny; q++) peak = fmax(peak, pix[q]);
+            free(pix);
+            const int star = info.kind == 1;
+            const size_t i = star ? (size_t)(info.id - 1000) : (size_t)(info.id - 1);
+            const double bound = wf_persist_peak_fraction(star ? &stars : &gal, i, st.psf_pixel_max);
+            const double ratio = peak / (info.flux * bound);
+            ck_assert_msg(ratio <= 1.0 + 1e-6, "%s: object %lld (kind %d): brightest pixel %.6g of its flux, bound %.6g",
+                          filters[fi], info.id, info.kind, peak / info.flux, bound);
+            if (star) worst_star = fmax(worst_star, ratio);
+            else worst = fmax(worst, ratio);
+        }
+        printf("%s: psf_pixel_max %.4f; brightest pixel / bound: galaxies %.3f, stars %.3f at most\n", filters[fi],
+               st.psf_pixel_max, worst, worst_star);
+        ck_assert_msg(worst > 0.5 && worst_star > 0.9, "the bound is loose: %g, %g", worst, worst_star);
+        wf_scene_destroy(scene);
+        wf_catalog_free(&gal);
+        wf_catalog_free(&stars);
+    }
+}
+END_TEST
+
 /* ---- survey run: the history from the plan ------------------------------------------- */
 
 #define SMALL "--set readout.ncols=128 --set readout.nrows=96 --set detector.cr_rate=0"
@@ -620,6 +714,7 @@ static Suite *suite(void)
     tcase_add_test(tc, independent_of_tiles_and_threads);
     tcase_add_test(tc, zero_gap_refused);
     tcase_add_test(tc, history_threshold_exact);
+    tcase_add_test(tc, bright_bound_holds);
     tcase_add_test(tc, survey_history_any_split);
     tcase_add_test(tc, survey_ramp_longer_than_slot);
     suite_add_tcase(s, tc);

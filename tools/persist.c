@@ -234,13 +234,15 @@ wf_status wf_persist_history_add_source(wf_persist_history *h, const wf_scene_so
     return st ? st : add_slot(h, list, 1, dt);
 }
 
-/* Most of an object's light one 0.11" pixel can hold. A point source: at most PSF_PEAK of it
- * (Roman's PSF with the pixel puts < 45% in one pixel even at Z087's lambda/D = 0.076"; 0.6
- * leaves room). A galaxy: no more than a point source, nor than its unconvolved profile puts
- * within the circle around a pixel (radius 0.0778"), stretched by 1/q along the minor axis
- * (q the axis ratio from its distortion), plus its knots as point sources. Only a bound: it
- * decides which objects are drawn, never what they give. */
-#define PSF_PEAK 0.6
+/* Most of an object's light one 0.11" pixel can hold: psf_peak of a point source (the PSF's
+ * own bound, pixel included, wherever the source sits: Y106 0.48, F184 0.22). A galaxy: no
+ * more than a point source, nor than its unconvolved profile puts within the circle around a
+ * pixel (radius 0.0778"), stretched by 1/q along the minor axis (q the axis ratio from its
+ * distortion), plus its knots as point sources. Only a bound: it decides which objects are
+ * drawn, never what they give. Point sources drawn with the wide PSF (mag < 15) pass any
+ * bound by orders of magnitude. */
+#define PSF_PEAK_ANY 1.0 /* before the PSF is built: no pixel holds more than the whole flux
+                            (R062 with the built-in pupil puts 60% in one, above the 0.6 this was) */
 #define PIXEL_R 0.0778
 
 /* Fraction of a Sersic-n = 1 (exponential) or n = 4 (de Vaucouleurs) profile of half-light
@@ -259,21 +261,21 @@ static double sersic_within(int n, double hlr, double r)
     return p < 1.0 ? p : 1.0;
 }
 
-static double peak_fraction(const wf_catalog *cat, size_t i)
+double wf_persist_peak_fraction(const wf_catalog *cat, size_t i, double psf_peak)
 {
-    if (!cat->hlr_disk) return PSF_PEAK;
+    if (!cat->hlr_disk) return psf_peak;
     double e = hypot(cat->e1[i], cat->e2[i]);
     double q = e < 1.0 ? sqrt((1.0 - e) / (1.0 + e)) : 0.0;
     double r = q > 0.0 ? PIXEL_R / q : INFINITY;
     double bf = cat->bulge_frac[i], kf = cat->knot_frac[i];
     double f = bf * sersic_within(4, cat->hlr_bulge[i], r) + (1.0 - bf) * (1.0 - kf) * sersic_within(1, cat->hlr_disk[i], r) +
-               (1.0 - bf) * kf * PSF_PEAK;
-    return f < PSF_PEAK ? f : PSF_PEAK;
+               (1.0 - bf) * kf * psf_peak;
+    return f < psf_peak ? f : psf_peak;
 }
 
 /* The objects one pixel of which could reach min_stimulus in the exposure. */
 static wf_status bright_subset(const wf_catalog *cat, const wf_bandpass *bp, const char *filter,
-                               double min_rate, wf_catalog *out, int *any)
+                               double min_rate, double psf_peak, wf_catalog *out, int *any)
 {
     int band;
     wf_status st = wf_catalog_band(cat, filter, &band);
@@ -282,12 +284,27 @@ static wf_status bright_subset(const wf_catalog *cat, const wf_bandpass *bp, con
     if (!idx) return wf_error(WF_ERR_NOMEM, "out of memory for the bright objects");
     size_t n = 0;
     for (size_t i = 0; i < cat->n; i++)
-        if (wf_bandpass_countrate_ab(bp, cat->mag[band][i]) * peak_fraction(cat, i) >= min_rate) idx[n++] = (uint32_t)i;
+        if (wf_bandpass_countrate_ab(bp, cat->mag[band][i]) * wf_persist_peak_fraction(cat, i, psf_peak) >= min_rate) idx[n++] = (uint32_t)i;
     st = wf_catalog_subset(cat, idx, n, out);
     free(idx);
     if (!st && n == 0) wf_catalog_free(out); /* held as not there */
     *any = !st && n > 0;
     return st;
+}
+
+/* The bright subset of *cat again at the PSF's own peak (a subset of the first). */
+static wf_status refine_subset(wf_catalog *cat, int *have, const wf_bandpass *bp, const char *filter,
+                               double min_rate, double psf_peak)
+{
+    if (!*have) return WF_OK;
+    wf_catalog finer;
+    int any;
+    wf_status st = bright_subset(cat, bp, filter, min_rate, psf_peak, &finer, &any);
+    if (st) return st;
+    wf_catalog_free(cat);
+    *have = any;
+    if (any) *cat = finer;
+    return WF_OK;
 }
 
 /* The kept pixels of the exposure cfg describes. */
@@ -317,18 +334,28 @@ static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg
     if (!st) st = wf_bandpass_load(f, cfg->data_dir[0] ? cfg->data_dir : NULL, bp);
     if (!st) st = wf_pipeline_load_catalogs(cfg, &in);
     const double min_rate = h->min_stimulus / t;
-    if (!st && in.have_gal) st = bright_subset(&in.gal, bp, cfg->filter, min_rate, &gal, &have_gal);
-    if (!st && in.have_stars) st = bright_subset(&in.stars, bp, cfg->filter, min_rate, &stars, &have_stars);
-    if (!st && (have_gal || have_stars)) { /* else nothing bright: an empty list */
+    if (!st && in.have_gal) st = bright_subset(&in.gal, bp, cfg->filter, min_rate, PSF_PEAK_ANY, &gal, &have_gal);
+    if (!st && in.have_stars)
+        st = bright_subset(&in.stars, bp, cfg->filter, min_rate, PSF_PEAK_ANY, &stars, &have_stars);
+    if (!st && (have_gal || have_stars)) { /* else nothing bright: an empty list, no PSF built */
         wf_scene_setup ss;
         wf_pipeline_scene_setup(cfg, clock, 1, &ss);
         /* drawn to the accuracy of the exposure's own product: at its sky noise, if it had a sky */
         ss.sky_noise = ss.sky_on;
         ss.sky_on = 0;
-        wf_scene_source src;
-        st = wf_scene_create(&ss, have_gal ? &gal : NULL, have_stars ? &stars : NULL, &scene);
-        if (!st) st = wf_scene_source_for(scene, 0, &src);
-        if (!st) st = scan(h, &src, t, out);
+        st = wf_scene_prepare(&ss, &scene);
+        if (!st) { /* the bound again with this PSF's own peak */
+            wf_scene_stats stats;
+            wf_scene_get_stats(scene, &stats);
+            st = refine_subset(&gal, &have_gal, bp, cfg->filter, min_rate, stats.psf_pixel_max);
+            if (!st) st = refine_subset(&stars, &have_stars, bp, cfg->filter, min_rate, stats.psf_pixel_max);
+        }
+        if (!st && (have_gal || have_stars)) { /* else nothing bright after all */
+            wf_scene_source src;
+            st = wf_scene_populate(scene, have_gal ? &gal : NULL, have_stars ? &stars : NULL, ss.sne, ss.nsne);
+            if (!st) st = wf_scene_source_for(scene, 0, &src);
+            if (!st) st = scan(h, &src, t, out);
+        }
     }
     wf_scene_destroy(scene);
     if (have_gal) wf_catalog_free(&gal);

@@ -13,6 +13,7 @@
 
 #include "hal/persist.h"
 #include "hal/scene.h"
+#include "sim/survey/catalog.h"
 #include "tools/config.h"
 
 typedef struct wf_persist_history wf_persist_history;
@@ -49,6 +50,12 @@ wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config
 
 /* The history as the firmware's source (valid while h lives); depth 0 when no slot kept a pixel. */
 void wf_persist_history_source(wf_persist_history *h, wf_persist_source *out);
+
+/* The most of object i's flux (of cat, stars or galaxies) one pixel can hold when drawn with a
+ * PSF that puts at most psf_peak of a point source's flux in a pixel (wf_scene_stats'
+ * psf_pixel_max): the bound that picks an earlier exposure's bright objects, those whose
+ * flux x this reaches min_stimulus. */
+double wf_persist_peak_fraction(const wf_catalog *cat, size_t i, double psf_peak);
 
 /* Pixels kept in slot j (for tests and the log). */
 size_t wf_persist_history_pixels(const wf_persist_history *h, int slot);

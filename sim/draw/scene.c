@@ -632,6 +632,7 @@ wf_status wf_scene_prepare(const wf_scene_setup *setup, wf_scene **out)
     if (!(s->psf_memory = wf_arena_host_alloc(pbytes))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF table"); goto bad; }
     wf_arena_init(&s->psf_arena, s->psf_memory, pbytes, "scene PSF arena");
     if ((st = wf_profile_psf_init(&s->ppsf, &s->psf_image, &s->acc, &s->psf_arena, pt))) goto bad;
+    s->stats.psf_pixel_max = s->ppsf.pixel_max;
     release_tail(&s->psf_arena);
     s->optics = optics;
     memcpy(s->lams, lams, sizeof lams);

@@ -81,6 +81,9 @@ typedef struct wf_scene_stats {
     double zodi;               /* e-/s/arcsec^2 at the SCA centre */
     double psf_lambda_nm;
     double psf_image_sum;      /* the PSF image's share of the light before normalising */
+    double psf_pixel_max;      /* no pixel of a point source (the PSF, pixel included) holds
+                                  more than this of its flux, wherever it sits (psf.pixel_max
+                                  of sim/draw/profile.h); known after wf_scene_prepare */
     long bright;               /* point sources drawn with the wide PSF */
     long knots_smooth;         /* galaxies whose knots are drawn as the smooth disk
                                   (noise_tolerance) */
