@@ -2,8 +2,9 @@
  * the earlier exposures themselves, never from what this process ran before: for each earlier
  * exposure (a slot, most recent first) the charge its bright objects put in each pixel,
  * rate x exposure time up to the full well, kept where it reaches min_stimulus. The objects
- * are those of the earlier exposure's own scene (its pointing, filter, catalogs, PSF) whose
- * whole flux could reach min_stimulus, drawn as the scene draws them, without sky (~0.4
+ * are those of the earlier exposure's own scene (its pointing, filter, catalogs, PSF) one pixel
+ * of which could reach min_stimulus (wf_persist_peak_fraction, with that PSF's own bound on a
+ * point source's brightest pixel), drawn as the scene draws them, without sky (~0.4
  * e-/s: < 400 e- in 900 s) or supernovae. So an item's history is a function of the plan,
  * the configuration and the catalogs: any split of a survey run gives the same bytes.
  * Memory: 8 bytes per pixel and slot kept (a saturated star keeps ~100 pixels); a run's
