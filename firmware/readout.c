@@ -49,7 +49,6 @@ struct wf_readout {
     double *row;                   /* one row after IPC */
     double *sum;                   /* tile rows, ADU summed over the resultant's reads */
     uint16_t *res_out;             /* [nres][tile_rows][ncols] */
-    double *counts;                /* ramp: one row's Poisson counts of a read */
     uint8_t *slow;                 /* ramp: one row, 1 where poisson_word draws the count */
     uint32_t *thr;                 /* ramp per read: [7][halo block] in the packet buffer
                                       (thresholds_bytes), wf_poisson_inversion_thresholds */
@@ -241,7 +240,6 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
     ADD(wf_size_mul(tile, sizeof(double)));
     if (cfg->mode == WF_MODE_RAMP) {
         ADD(wf_size_mul3(tile, sizeof(uint16_t), (size_t)clock->ma.nresultants));
-        ADD(wf_size_mul(nc, sizeof(double)));
         ADD(nc);
     } else {
         ADD(wf_size_mul(tile, sizeof(float)));
@@ -400,7 +398,6 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     TAKE(ro->sum, tile, "resultant sums");
     if (cfg->mode == WF_MODE_RAMP) {
         TAKE(ro->res_out, tile * (size_t)clock->ma.nresultants, "resultant tile");
-        TAKE(ro->counts, cfg->ncols, "Poisson counts row");
         TAKE(ro->slow, cfg->ncols, "Poisson slow-draw flags");
         ro->total_reads = wf_ma_total_reads(&clock->ma);
         for (int i = 0; i < WF_MA_MAX_READS; i++) ro->resultant_of_read[i] = -1;
@@ -558,19 +555,70 @@ static inline double poisson_word(uint32_t w, const uint32_t *w2, double mean, d
     return k;
 }
 
+/* Row loops in SIMD lanes (the callers are not cloned themselves). */
+WF_CLONES static void clamp_row(int n, double *restrict c, double top)
+{
+    for (int x = 0; x < n; x++) c[x] = c[x] > top ? top : c[x];
+}
+
+/* Moments: a group's nonlinearity spread, beta x E[S | T], added where the pixel is not at
+ * the full well (sat: the full well is on). */
+WF_CLONES static void spread_row(int n, double *restrict meas, const double *restrict spread,
+                                 const double *restrict charge, double beta, double fw, int sat)
+{
+    for (int x = 0; x < n; x++) meas[x] = sat && charge[x] >= fw ? meas[x] : meas[x] + beta * spread[x];
+}
+
+/* Moments: a row's lead and group means and the group's weights, for pixels of constant rate. */
+WF_CLONES static void moments_means(int n, const double *restrict m, double lead, double span, double abar,
+                                    double cvar, double *restrict lm, double *restrict mu, double *restrict ab,
+                                    double *restrict cv)
+{
+    for (int x = 0; x < n; x++) {
+        lm[x] = m[x] * lead;
+        mu[x] = m[x] * span;
+        ab[x] = abar;
+        cv[x] = cvar;
+    }
+}
+
+/* Columns of a[0 .. n) at or above v. */
+WF_CLONES static int count_at_least(int n, const double *restrict a, double v)
+{
+    int c = 0;
+    for (int x = 0; x < n; x++) c += a[x] >= v;
+    return c;
+}
+
+/* The first column at or after x whose flag is set (n when none): the few a row's batch
+ * left to draw, found eight flags at a time. */
+static int next_flag(const uint8_t *flag, int x, int n)
+{
+    for (; x + 8 <= n; x += 8) {
+        uint64_t v;
+        memcpy(&v, flag + x, sizeof v);
+        if (v) break;
+    }
+    for (; x < n && !flag[x]; x++) {
+    }
+    return x;
+}
+
 /* The counts of a row whose thresholds are thr[j][x] (stride apart) and slow[x], from the
- * words w: k[x] for poisson_word where flag[x] is 0, flag[x] = 1 where it must draw. */
+ * words w, added to q[x] where flag[x] is 0; flag[x] = 1 where the caller must draw with
+ * poisson_word (q[x] + 0.0 there: unchanged, q holds no -0). */
 WF_CLONES static void poisson_row_small(int n, const uint32_t *restrict w,
                                         const uint32_t *restrict thr, size_t stride,
-                                        const uint32_t *restrict slow, double *restrict k,
+                                        const uint32_t *restrict slow, double *restrict q,
                                         uint8_t *restrict flag)
 {
     for (int x = 0; x < n; x++) {
         const uint32_t v = w[x];
         int c = (v >= thr[x]) + (v >= thr[stride + x]) + (v >= thr[2 * stride + x]) +
                 (v >= thr[3 * stride + x]) + (v >= thr[4 * stride + x]) + (v >= thr[5 * stride + x]);
-        k[x] = (double)c;
-        flag[x] = (uint8_t)(v >= slow[x]);
+        const int more = v >= slow[x];
+        q[x] += more ? 0.0 : (double)c;
+        flag[x] = (uint8_t)more;
     }
 }
 
@@ -757,17 +805,13 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
             }
             const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
             if (frames == 1.0 && !ro->slope_any) { /* the common read: the tile's thresholds */
-                double *cnt = ro->counts;
                 uint8_t *slow = ro->slow;
-                poisson_row_small(nc, w1, ro->thr + row0, (size_t)hn, ro->thr + 6 * (size_t)hn + row0,
-                                  cnt, slow);
-                for (int x = 0; x < nc; x++) {
-                    if (slow[x]) {
-                        more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x),
-                                         .read = (uint32_t)k, .purpose = WF_PURPOSE_PHOTON};
-                        cnt[x] = poisson_word(w1[x], &w2[x], m[x], em[x], &mn);
-                    }
-                    q[x] += cnt[x];
+                poisson_row_small(nc, w1, ro->thr + row0, (size_t)hn, ro->thr + 6 * (size_t)hn + row0, q,
+                                  slow);
+                for (int x = next_flag(slow, 0, nc); x < nc; x = next_flag(slow, x + 1, nc)) {
+                    more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)k,
+                                     .purpose = WF_PURPOSE_PHOTON};
+                    q[x] += poisson_word(w1[x], &w2[x], m[x], em[x], &mn);
                 }
                 continue;
             }
@@ -787,11 +831,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
             for (; next_dep < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[next_dep].read <= k; next_dep++)
                 ro->charge[ro->cosmic.deposits[next_dep].pixel] += ro->cosmic.deposits[next_dep].electrons;
         wf_persist_release(&ro->persist, k, t1, t2, ro->charge, NULL, 0.0);
-        if (d->on.saturation) { /* a select, not a branch: the loop vectorises */
-            const double fw = d->full_well;
-            double *c = ro->charge;
-            for (int i = 0; i < hn; i++) c[i] = c[i] > fw ? fw : c[i];
-        }
+        if (d->on.saturation) clamp_row(hn, ro->charge, d->full_well);
         wf_det_measure_row(d, ro->charge, hn, ro->meas);
         int last_of_resultant = ro->clock.ma.read[ro->clock.ma.first[r + 1] - 1] == k;
         int nreads = ro->clock.ma.first[r + 1] - ro->clock.ma.first[r];
@@ -1012,12 +1052,7 @@ static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double 
     float *z1 = ro->mz, *z2 = z1 + nc, *z3 = z2 + nc;
     wf_norm_from_u32(w + 3 * (size_t)nc, nc, z3);
     const double abar = g->abar, cvar = g->cvar; /* copies: g could alias the stores */
-    for (int x = 0; x < nc; x++) {
-        lm[x] = m[x] * lead;
-        mu[x] = m[x] * span;
-        ab[x] = abar;
-        cv[x] = cvar;
-    }
+    moments_means(nc, m, lead, span, abar, cvar, lm, mu, ab, cv);
     moments_powers(nc, em, (int)lead, span, le, me);
     for (int x = 0; ro->slope_any && x < nc; x++) {
         if (ro->dmean[row0 + (size_t)x] == 0.0) continue;
@@ -1040,11 +1075,7 @@ static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double 
     for (int x0 = 0; x0 < nc; x0 += MOMENTS_CHUNK) {
         const int c = nc - x0 < MOMENTS_CHUNK ? nc - x0 : MOMENTS_CHUNK;
         /* the normals of the lead and T only where a mean reaches 10 (a bright pixel) */
-        int big1 = 0, big2 = 0;
-        for (int x = x0; x < x0 + c; x++) {
-            big1 |= lm[x] >= 10.0;
-            big2 |= mu[x] >= 10.0;
-        }
+        const int big1 = count_at_least(c, lm + x0, 10.0), big2 = count_at_least(c, mu + x0, 10.0);
         if (big1) wf_norm_from_u32(w + nc + x0, c, z1 + x0);
         if (big2) wf_norm_from_u32(w + 2 * (size_t)nc + x0, c, z2 + x0);
         moments_poisson_chunk(c, w + nc + x0, z1 + x0, lm + x0, le + x0, ro->inv_k, ld + x0);
@@ -1158,14 +1189,13 @@ static wf_status ramp_grouped(wf_readout *ro, int y0, int y1, int h0, int h1)
                 ro->charge[dp->pixel] += dp->electrons;
                 avg[dp->pixel] += dp->electrons * later / n;
             }
-        for (int i = 0; i < hn; i++) {
-            if (d->on.saturation && ro->charge[i] > d->full_well) ro->charge[i] = d->full_well;
-            if (d->on.saturation && avg[i] > d->full_well) avg[i] = d->full_well;
+        if (d->on.saturation) {
+            clamp_row(hn, ro->charge, d->full_well);
+            clamp_row(hn, avg, d->full_well);
         }
         wf_det_measure_row(d, avg, hn, ro->meas); /* in place: avg is ro->meas */
         if (moments && d->on.nonlinearity)
-            for (int i = 0; i < hn; i++)
-                if (!(d->on.saturation && ro->charge[i] >= d->full_well)) ro->meas[i] += d->nl_beta * ro->spread[i];
+            spread_row(hn, ro->meas, ro->spread, ro->charge, d->nl_beta, d->full_well, d->on.saturation);
         for (int y = y0; y < y1; y++) {
             const double *v = ipc_row(ro, y, h0, h1);
             if (ro->cn) {
