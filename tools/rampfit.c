@@ -483,9 +483,10 @@ wf_status wf_rampfit_pixels(const wf_rampfit_setup *setup, const double *resulta
     for (int p = 0; p <= n; p++) {
         if (p < n) {
             const double *R = resultants + (size_t)p * (size_t)stride;
+            /* finite and within 1e30 (NaN fails the comparison): no branch per resultant */
             int plain = lanes_ok && first_saturated[p] >= m;
-            for (int r = 0; plain && r < m; r++)
-                plain = isfinite(R[r]) && fabs(R[r]) <= 1e30;
+            for (int r = 0; r < m; r++)
+                plain &= fabs(R[r]) <= 1e30;
             if (plain) {
                 lane[L] = R;
                 idx[L++] = p;
