@@ -70,10 +70,20 @@ static void write_product(const char *path, int bitpix, int type, int naxis, lon
         else wf_fits_part_write_rows(p, type, naxes[0], r0, n, at, &status);
         ck_assert_int_eq(status, 0);
     }
-    ck_assert_msg(wf_fits_part_append(f, tmp, p, part) == WF_OK, "%s", wf_error_message());
+    wf_fits_datasum ds;
+    ck_assert_msg(wf_fits_part_append(f, tmp, p, part, &ds) == WF_OK, "%s", wf_error_message());
     ck_assert_int_ne(access(part, F_OK), 0); /* the part is gone */
     ck_assert_msg(wf_fits_finish(f, tmp, path, WF_OK) == WF_OK, "%s", wf_error_message());
     ck_assert_msg(wf_fits_verify_checksums(path, 2) == WF_OK, "%s", wf_error_message());
+    /* the data unit's sum taken while appending is the DATASUM cfitsio read back */
+    char value[FLEN_VALUE];
+    fits_open_diskfile(&f, path, READONLY, &status);
+    fits_movabs_hdu(f, 2, NULL, &status);
+    fits_read_key_str(f, "DATASUM", value, NULL, &status);
+    fits_close_file(f, &status);
+    ck_assert_int_eq(status, 0);
+    ck_assert_msg(ds.valid && strtoul(value, NULL, 10) == wf_fits_datasum_value(&ds), "DATASUM %s, summed %lu (valid %d)",
+                  value, wf_fits_datasum_value(&ds), ds.valid);
 }
 
 static void read_back(const char *path, int type, long n, void *out)

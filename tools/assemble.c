@@ -1395,7 +1395,7 @@ static wf_status on_end(assembler *a, exposure *e, char *last_path, size_t last_
     wf_status st;
     for (int k = 0; k < 4; k++) { /* compressed images, in HDU order, after the primary */
         if (!e->part[k]) continue;
-        st = wf_fits_part_append(e->f, e->tmp, e->part[k], e->part_path[k]);
+        st = wf_fits_part_append(e->f, e->tmp, e->part[k], e->part_path[k], &e->sum[HDU_SCI + k - 1]);
         e->part[k] = NULL;
         if (st) {
             char why[900];

@@ -17,6 +17,7 @@
 #include <fitsio.h>
 #include <stdint.h>
 #include "hal/status.h"
+#include "sim/fits/fitsout.h"
 
 typedef struct wf_fits_comp {
     double quantize;  /* float HDUs: cfitsio's q, >= 1; 0: lossless (GZIP_2, no quantization) */
@@ -35,8 +36,11 @@ wf_status wf_fits_part_create(const char *path, const wf_fits_comp *c, int bitpi
                               long *naxes, fitsfile **f);
 
 /* Appends the part's compressed HDU to dst as its new last HDU, heap in tile order, then
- * closes the part and removes its file (also on failure). dst_path names dst in messages. */
-wf_status wf_fits_part_append(fitsfile *dst, const char *dst_path, fitsfile *part, const char *part_path);
+ * closes the part and removes its file (also on failure). dst_path names dst in messages.
+ * sum (when not NULL) receives the new data unit's checksum, summed as it is written, so
+ * that closing the product need not read it back (invalid when that could not be done). */
+wf_status wf_fits_part_append(fitsfile *dst, const char *dst_path, fitsfile *part, const char *part_path,
+                              wf_fits_datasum *sum);
 
 /* Writes nrows whole rows of ncols pixels from row row0 (0-based) of the part's image,
  * cfitsio's way (returns and sets *status). TFLOAT rows of a quantized part are written one

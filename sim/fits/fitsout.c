@@ -60,6 +60,28 @@ static unsigned long fold(uint64_t hi, uint64_t lo)
     return (unsigned long)(hi << 16 | lo);
 }
 
+unsigned long wf_fits_datasum_value(const wf_fits_datasum *s) { return fold(s->hi, s->lo); }
+
+void wf_fits_datasum_add_bytes(wf_fits_datasum *s, const unsigned char *bytes, size_t n, uint64_t offset)
+{
+    /* byte k of a word (k = its offset mod 4) is bits 31-24, 23-16, 15-8, 7-0: the upper or
+     * lower byte of the word's upper or lower half */
+    uint64_t b[4] = {0, 0, 0, 0};
+    size_t i = 0;
+    for (; i < n && (offset + i) % 4; i++) b[(offset + i) % 4] += bytes[i];
+    uint64_t w0 = 0, w1 = 0, w2 = 0, w3 = 0;
+    for (; i + 4 <= n; i += 4) {
+        w0 += bytes[i];
+        w1 += bytes[i + 1];
+        w2 += bytes[i + 2];
+        w3 += bytes[i + 3];
+    }
+    b[0] += w0, b[1] += w1, b[2] += w2, b[3] += w3;
+    for (; i < n; i++) b[(offset + i) % 4] += bytes[i];
+    s->hi += (b[0] << 8) + b[1];
+    s->lo += (b[2] << 8) + b[3];
+}
+
 void wf_fits_datasum_add32(wf_fits_datasum *s, const void *values, size_t n, uint32_t flip)
 {
     const unsigned char *p = values;

@@ -49,6 +49,12 @@ int wf_fits_write32(fitsfile *f, LONGLONG first, void *values, size_t n, uint32_
 void wf_fits_datasum_add16(wf_fits_datasum *s, const uint16_t *values, size_t n, uint64_t first,
                            uint16_t flip);
 
+/* n bytes, the first at byte `offset` of the data unit (a byte's place in its 4-byte word). */
+void wf_fits_datasum_add_bytes(wf_fits_datasum *s, const unsigned char *bytes, size_t n, uint64_t offset);
+
+/* The DATASUM value (the folded one's complement sum) of s. */
+unsigned long wf_fits_datasum_value(const wf_fits_datasum *s);
+
 /* CHECKSUM and DATASUM of every HDU of the file, with fixed comments (no time stamp); leaves
  * the last HDU current. The DATASUM of HDU i (1-based) is sums[i - 1] when i <= nsums and that
  * sum is valid, and is read from the file otherwise (sums may be NULL). */
