@@ -7,10 +7,7 @@
 #include <math.h>
 #include <stdatomic.h>
 #include <stdlib.h>
-#include <fcntl.h>
 #include <string.h>
-#include <sys/mman.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 /* cfitsio stores a requested quantize level of 0 (floats kept exact) as this (imcompress.c) */
@@ -95,21 +92,6 @@ static wf_status append(fitsfile *dst, const char *dst_path, fitsfile *part, con
     size_t cap = (size_t)(fixed > 65536 ? fixed : 65536);
     unsigned char *buf = malloc(cap);
     if (!buf) return wf_error(WF_ERR_NOMEM, "%s: no memory to append a compressed image", dst_path);
-    /* the part file mapped (flushed above): its tiles go into dst straight from the page
-     * cache, not read() into cfitsio's buffer and copied out again (~5% of an up-the-ramp
-     * product's CPU); where it cannot be mapped, they are read as before */
-    const unsigned char *map = NULL;
-    size_t map_len = 0;
-    int fd = open(part_path, O_RDONLY);
-    struct stat sb;
-    if (fd >= 0 && fstat(fd, &sb) == 0 && sb.st_size > 0 && (LONGLONG)sb.st_size >= da + A->heapstart + A->heapsize) {
-        void *m = mmap(NULL, (size_t)sb.st_size, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd, 0);
-        if (m != MAP_FAILED) {
-            map = m;
-            map_len = (size_t)sb.st_size;
-        }
-    }
-    if (fd >= 0) close(fd);
     /* the table rows (descriptors, ZSCALE and ZZERO) as they are; the descriptors are
      * rewritten below */
     ffmbyt(part, da, REPORT_EOF, &status);
@@ -125,11 +107,7 @@ static wf_status append(fitsfile *dst, const char *dst_path, fitsfile *part, con
             long width = 1;
             if (ffgdesll(part, c, r, &len, &off, &status) || heap_width(part, c, &width, &status)) break;
             const LONGLONG nb = len * width, at = da + A->heapstart + off;
-            if (nb > 0 && map && at >= 0 && (size_t)(at + nb) <= map_len) {
-                ffmbyt(dst, db + B->heapstart + heap, IGNORE_EOF, &status);
-                ffpbyt(dst, nb, (void *)(uintptr_t)(map + at), &status);
-                wf_fits_datasum_add_bytes(&ds, map + at, (size_t)nb, (uint64_t)(B->heapstart + heap));
-            } else if (nb > 0) {
+            if (nb > 0) {
                 if ((size_t)nb > cap) {
                     unsigned char *p = realloc(buf, (size_t)nb);
                     if (!p) {
@@ -158,7 +136,6 @@ static wf_status append(fitsfile *dst, const char *dst_path, fitsfile *part, con
         ds.valid = !status;
     }
     free(buf);
-    if (map) munmap((void *)(uintptr_t)map, map_len);
     if (st) return st;
     if (status) return wf_fits_error(status, dst_path, "appending a compressed image");
     if (heap != A->heapsize) {
