@@ -1,6 +1,8 @@
 #include "tools/persist.h"
 
 #include <math.h>
+#include <pthread.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -173,12 +175,34 @@ void wf_persist_history_free(wf_persist_history *h)
 
 #define ROWS 64 /* rows asked of a source at once */
 
+/* Appends the kept pixels of rate[0 .. n) x exptime (pixel0 the first one's index) to *out
+ * (*cap entries allocated). */
+static wf_status keep_pixels(const float *rate, size_t n, uint32_t pixel0, double exptime, double min_stimulus,
+                             double full_well, slot_list *out, size_t *cap)
+{
+    /* a stimulus above 2^16 codes (131 ke-) is kept at the largest: the full well is below */
+    const double top = 65535.0 * WF_PERSIST_UNIT;
+    for (size_t i = 0; i < n; i++) {
+        double x = rate[i] > 0.0f ? rate[i] * exptime : 0.0;
+        if (x > full_well) x = full_well;
+        if (!(x >= min_stimulus)) continue;
+        if (x > top) x = top;
+        if (out->n == *cap) {
+            size_t nc2 = *cap ? 2 * *cap : 4096;
+            entry *e = realloc(out->e, nc2 * sizeof *e);
+            if (!e) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence history");
+            out->e = e;
+            *cap = nc2;
+        }
+        out->e[out->n++] = (entry){pixel0 + (uint32_t)i, (uint16_t)nearbyint(x / WF_PERSIST_UNIT)};
+    }
+    return WF_OK;
+}
+
 /* The kept pixels of rate x exptime from src, in pixel order. */
 static wf_status scan(const wf_persist_history *h, const wf_scene_source *src, double exptime, slot_list *out)
 {
     const int nc = h->ncols;
-    /* a stimulus above 2^16 codes (131 ke-) is kept at the largest: the full well is below */
-    const double top = 65535.0 * WF_PERSIST_UNIT;
     size_t cap = 0;
     out->e = NULL;
     out->n = 0;
@@ -188,20 +212,8 @@ static wf_status scan(const wf_persist_history *h, const wf_scene_source *src, d
     for (int y0 = 0; y0 < h->nrows && !st; y0 += ROWS) {
         int y1 = y0 + ROWS < h->nrows ? y0 + ROWS : h->nrows;
         if ((st = src->fill_rate(src->ctx, y0, y1, nc, rate))) break;
-        for (size_t i = 0; i < (size_t)(y1 - y0) * nc; i++) {
-            double x = rate[i] > 0.0f ? rate[i] * exptime : 0.0;
-            if (x > h->full_well) x = h->full_well;
-            if (!(x >= h->min_stimulus)) continue;
-            if (x > top) x = top;
-            if (out->n == cap) {
-                size_t nc2 = cap ? 2 * cap : 4096;
-                entry *e = realloc(out->e, nc2 * sizeof *e);
-                if (!e) { st = wf_error(WF_ERR_NOMEM, "out of memory for the persistence history"); break; }
-                out->e = e;
-                cap = nc2;
-            }
-            out->e[out->n++] = (entry){(uint32_t)((size_t)y0 * nc + i), (uint16_t)nearbyint(x / WF_PERSIST_UNIT)};
-        }
+        st = keep_pixels(rate, (size_t)(y1 - y0) * nc, (uint32_t)((size_t)y0 * nc), exptime, h->min_stimulus,
+                         h->full_well, out, &cap);
     }
     free(rate);
     if (st) { free(out->e); out->e = NULL; out->n = 0; }
@@ -425,4 +437,129 @@ void wf_persist_history_source(wf_persist_history *h, wf_persist_source *out)
 size_t wf_persist_history_pixels(const wf_persist_history *h, int slot)
 {
     return slot >= 0 && slot < h->depth ? h->slot[slot].n : 0;
+}
+
+/* ---- an exposure's own slot, from the drawing of its product ----------------------------- */
+
+struct wf_persist_layer {
+    int ncols, nrows;
+    double exptime, min_stimulus, full_well, min_rate;
+    char filter[16];
+    wf_bandpass *bp;
+    uint8_t *gflags, *sflags;
+    pthread_mutex_t lock;
+    unsigned char *done; /* per row: its pixels are in rows[y] */
+    slot_list *rows;
+    int failed;          /* out of memory in a row: nothing goes to the cache */
+};
+
+wf_status wf_persist_layer_new(const wf_config *cfg, const wf_clock *clock, double min_stimulus, double full_well,
+                               wf_persist_layer **out)
+{
+    *out = NULL;
+    if (!(min_stimulus >= WF_PERSIST_UNIT) || !(full_well > 0))
+        return wf_error(WF_ERR_RANGE, "persistence layer: min_stimulus %g e-, full well %g", min_stimulus, full_well);
+    wf_persist_layer *l = calloc(1, sizeof *l);
+    if (!l) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence layer");
+    l->ncols = cfg->ro.ncols;
+    l->nrows = cfg->ro.nrows;
+    l->exptime = wf_pipeline_exptime(cfg, clock);
+    l->min_stimulus = min_stimulus;
+    l->full_well = full_well;
+    l->min_rate = min_stimulus / l->exptime;
+    snprintf(l->filter, sizeof l->filter, "%s", cfg->filter);
+    pthread_mutex_init(&l->lock, NULL);
+    wf_filter f;
+    wf_status st = WF_OK;
+    l->done = calloc((size_t)l->nrows, 1);
+    l->rows = calloc((size_t)l->nrows, sizeof *l->rows);
+    l->bp = malloc(sizeof *l->bp);
+    if (!l->done || !l->rows || !l->bp) st = wf_error(WF_ERR_NOMEM, "out of memory for the persistence layer");
+    if (!st) st = wf_filter_parse(cfg->filter, &f);
+    if (!st) st = wf_bandpass_load(f, cfg->data_dir[0] ? cfg->data_dir : NULL, l->bp);
+    if (st) {
+        wf_persist_layer_free(l);
+        return st;
+    }
+    *out = l;
+    return WF_OK;
+}
+
+void wf_persist_layer_free(wf_persist_layer *l)
+{
+    if (!l) return;
+    for (int y = 0; l->rows && y < l->nrows; y++) free(l->rows[y].e);
+    free(l->rows);
+    free(l->done);
+    free(l->gflags);
+    free(l->sflags);
+    free(l->bp);
+    pthread_mutex_destroy(&l->lock);
+    free(l);
+}
+
+/* Flags of the objects bright_subset keeps at psf_peak. */
+static wf_status bright_flags(const wf_persist_layer *l, const wf_catalog *cat, double psf_peak, uint8_t **out)
+{
+    int band;
+    wf_status st = wf_catalog_band(cat, l->filter, &band);
+    if (st) return st;
+    uint8_t *f = calloc(cat->n ? cat->n : 1, 1);
+    if (!f) return wf_error(WF_ERR_NOMEM, "out of memory for the bright objects");
+    for (size_t i = 0; i < cat->n; i++)
+        f[i] = wf_bandpass_countrate_ab(l->bp, cat->mag[band][i]) * wf_persist_peak_fraction(cat, i, psf_peak) >= l->min_rate;
+    *out = f;
+    return WF_OK;
+}
+
+wf_status wf_persist_layer_flags(wf_persist_layer *l, const wf_catalog *gal, const wf_catalog *stars,
+                                 double psf_pixel_max, const uint8_t **gal_flags, const uint8_t **star_flags)
+{
+    *gal_flags = *star_flags = NULL;
+    wf_status st = WF_OK;
+    if (gal && (st = bright_flags(l, gal, psf_pixel_max, &l->gflags))) return st;
+    if (stars && (st = bright_flags(l, stars, psf_pixel_max, &l->sflags))) return st;
+    *gal_flags = l->gflags;
+    *star_flags = l->sflags;
+    return WF_OK;
+}
+
+void wf_persist_layer_row(void *ctx, int y, const float *rates, int ncols)
+{
+    wf_persist_layer *l = ctx;
+    if (y < 0 || y >= l->nrows || ncols != l->ncols) return;
+    slot_list row = {NULL, 0};
+    size_t cap = 0;
+    int bad = keep_pixels(rates, (size_t)ncols, (uint32_t)((size_t)y * ncols), l->exptime, l->min_stimulus,
+                          l->full_well, &row, &cap) != WF_OK;
+    pthread_mutex_lock(&l->lock);
+    if (bad) l->failed = 1;
+    if (!bad && !l->done[y]) {
+        l->rows[y] = row;
+        l->done[y] = 1;
+        row.e = NULL;
+    }
+    pthread_mutex_unlock(&l->lock);
+    free(row.e);
+}
+
+wf_status wf_persist_layer_finish(wf_persist_layer *l, wf_persist_cache *cache, long long expid, int sca)
+{
+    if (!cache || sca < 0 || sca >= CACHE_SCAS || l->failed) return WF_OK;
+    size_t n = 0;
+    for (int y = 0; y < l->nrows; y++) {
+        if (!l->done[y]) return WF_OK; /* not drawn whole (no layer, or a grid): nothing to keep */
+        n += l->rows[y].n;
+    }
+    cache_entry *slot;
+    if (cache_find(cache, expid, sca, &slot)) return WF_OK;
+    slot_list list = {malloc((n ? n : 1) * sizeof(entry)), n};
+    if (!list.e) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence history");
+    size_t k = 0;
+    for (int y = 0; y < l->nrows; y++) {
+        if (l->rows[y].n) memcpy(list.e + k, l->rows[y].e, l->rows[y].n * sizeof(entry));
+        k += l->rows[y].n;
+    }
+    cache_put(cache, slot, expid, list);
+    return WF_OK;
 }

@@ -49,6 +49,29 @@ wf_status wf_persist_cache_import(wf_persist_cache *c, const void *buf, size_t s
 wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config *cfg,
                                           const wf_clock *clock, double dt, wf_persist_cache *cache, int *drawn);
 
+/* An exposure's own slot, collected while that exposure is drawn for its product: its bright
+ * objects (those wf_persist_history_add_exposure would draw) form the scene's layer
+ * (wf_scene_set_layer), whose rows give exactly the pixels and codes a later item's history
+ * would draw from them, so a run in plan order draws no history of its own. */
+typedef struct wf_persist_layer wf_persist_layer;
+
+/* For the exposure cfg and clock describe; min_stimulus and full_well as the histories'
+ * (wf_persist_history_new). */
+wf_status wf_persist_layer_new(const wf_config *cfg, const wf_clock *clock, double min_stimulus, double full_well,
+                               wf_persist_layer **out);
+void wf_persist_layer_free(wf_persist_layer *l);
+
+/* The flags of the catalogs' bright objects at a PSF whose point-source pixel bound is
+ * psf_pixel_max (valid while l lives; NULL for an absent catalog). */
+wf_status wf_persist_layer_flags(wf_persist_layer *l, const wf_catalog *gal, const wf_catalog *stars,
+                                 double psf_pixel_max, const uint8_t **gal_flags, const uint8_t **star_flags);
+
+/* The layer's row callback (wf_scene_set_layer's fn, with l as ctx). */
+void wf_persist_layer_row(void *ctx, int y, const float *rates, int ncols);
+
+/* When every row came: the slot into cache as (expid, sca), unless the cache holds it. */
+wf_status wf_persist_layer_finish(wf_persist_layer *l, wf_persist_cache *cache, long long expid, int sca);
+
 /* The history as the firmware's source (valid while h lives); depth 0 when no slot kept a pixel. */
 void wf_persist_history_source(wf_persist_history *h, wf_persist_source *out);
 

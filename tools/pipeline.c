@@ -1,4 +1,5 @@
 #include "tools/pipeline.h"
+#include "tools/persist.h"
 
 #include <errno.h>
 #include <fitsio.h>
@@ -353,6 +354,15 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
         nsne = lj.nsne;
         if (lj.st) { st = wf_error(lj.st, "%s", lj.message); goto done; }
         if (pst) { st = wf_error(pst, "%s", prepare_msg); goto done; }
+        if (pj->layer) { /* the bright objects' layer, for later exposures' persistence */
+            wf_scene_stats pre;
+            wf_scene_get_stats(objscene, &pre);
+            const uint8_t *gf, *sf;
+            if ((st = wf_persist_layer_flags(pj->layer, inputs.have_gal ? &inputs.gal : NULL,
+                                             inputs.have_stars ? &inputs.stars : NULL, pre.psf_pixel_max, &gf, &sf)))
+                goto done;
+            wf_scene_set_layer(objscene, gf, sf, wf_persist_layer_row, pj->layer);
+        }
         if ((st = wf_scene_populate(objscene, inputs.have_gal ? &inputs.gal : NULL,
                                     inputs.have_stars ? &inputs.stars : NULL, sne, nsne)))
             goto done;

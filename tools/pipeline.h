@@ -46,6 +46,8 @@ typedef struct wf_pipeline_job {
     const char *version;         /* for the ORIGIN keyword and the version part of the digest */
     wf_digest_cache *digests;    /* file digests kept across a run's products, or NULL */
     const wf_persist_source *persist; /* earlier exposures' charge (tools/persist.h), or NULL: none */
+    struct wf_persist_layer *layer;   /* collects this exposure's own persistence slot while it
+                                       * is drawn (tools/persist.h), or NULL */
     /* out */
     char image_path[WF_PATH_MAX + 64];
     char truth_path[WF_PATH_MAX + 64];

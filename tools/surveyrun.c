@@ -705,7 +705,19 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         res->hist_used = h->n;
         res->hist_drawn = drawn;
         if (ph) job->persist = &src;
+        /* this exposure's own slot, for the later items of its SCA, taken from its drawing */
+        wf_persist_layer *layer = NULL;
+        if (ctx->pcache && p->cfg.ro.persist.on && p->cfg.persist.depth > 0 &&
+            (st = wf_persist_layer_new(&p->cfg, &p->clock, p->cfg.persist.min_stimulus,
+                                       p->cfg.ro.det.on.saturation ? p->cfg.ro.det.full_well : INFINITY, &layer))) {
+            wf_persist_history_free(ph);
+            return wf_error(st, "%s: %s", name, wf_error_message());
+        }
+        job->layer = layer;
         st = wf_pipeline_expose(job);
+        if (!st && layer) st = wf_persist_layer_finish(layer, ctx->pcache, p->cfg.ro.exposure, (int)p->cfg.ro.sca);
+        wf_persist_layer_free(layer);
+        job->layer = NULL;
         wf_persist_history_free(ph);
         if (st) {
             char msg[1024];

@@ -23,8 +23,9 @@ struct wf_renderer {
     size_t pool_used;
     size_t live_bytes;      /* bytes of the stamps still kept: pool_used - live_bytes is garbage */
     size_t *order;          /* compaction scratch: active objects by offset */
-    double *acc, *piece, *skyrow, *hbuf;
-    size_t acc_cap, piece_cap, hbuf_cap;
+    double *acc, *piece, *skyrow, *hbuf, *lacc;
+    size_t acc_cap, piece_cap, hbuf_cap, lacc_cap;
+    float *lrow; /* one row of the layer's rates */
     wf_renderer_stats stats;
 };
 
@@ -135,6 +136,8 @@ void wf_renderer_destroy(wf_renderer *r)
     free(r->piece);
     free(r->skyrow);
     free(r->hbuf);
+    free(r->lacc);
+    free(r->lrow);
     free(r);
 }
 
@@ -293,6 +296,12 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
     size_t rows = (size_t)(y1 - y0);
     wf_status st = grow(&r->acc, &r->acc_cap, rows * (size_t)ncols, "row accumulator");
     if (st) return st;
+    double *lacc = NULL; /* the layer's rows, from 0.0 as a scene without sky starts */
+    if (r->cfg.layer) {
+        if ((st = grow(&r->lacc, &r->lacc_cap, rows * (size_t)ncols, "layer accumulator"))) return st;
+        lacc = r->lacc;
+        for (size_t k = 0; k < rows * (size_t)ncols; k++) lacc[k] = 0.0;
+    }
     for (int y = y0; y < y1; y++) {
         double *acc = r->acc + (size_t)(y - y0) * ncols;
         if (r->cfg.sky_fn) {
@@ -314,6 +323,9 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
                 double *acc = r->acc + (size_t)(y - y0) * ncols + xa;
                 const float *box = y >= h.ba && y < h.bb ? h.src + (size_t)(y - h.ba) * o->bnx : NULL;
                 if ((st = r->cfg.halo(r->draw_ctx, o, y, xa, xb, box, h.ca, h.cb, acc))) return st;
+                if (lacc && o->layer &&
+                    (st = r->cfg.halo(r->draw_ctx, o, y, xa, xb, box, h.ca, h.cb, lacc + (size_t)(y - y0) * ncols + xa)))
+                    return st;
             }
             continue;
         }
@@ -323,11 +335,24 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
             const float *s = src + (size_t)(y - ya) * o->nx - o->x0;
             double *acc = r->acc + (size_t)(y - y0) * ncols;
             for (int x = xa; x < xb; x++) acc[x] += s[x];
+            if (lacc && o->layer) {
+                double *la = lacc + (size_t)(y - y0) * ncols;
+                for (int x = xa; x < xb; x++) la[x] += s[x];
+            }
         }
     }
     /* the objects' draws keep their negative ringing (so that none adds flux); the sum,
      * sky included, is clipped here */
     for (size_t k = 0; k < rows * (size_t)ncols; k++) rate[k] = r->acc[k] > 0.0 ? (float)r->acc[k] : 0.0f;
+    if (lacc) {
+        if (!r->lrow && !(r->lrow = malloc((size_t)ncols * sizeof *r->lrow)))
+            return wf_error(WF_ERR_NOMEM, "renderer: out of memory for a layer row");
+        for (int y = y0; y < y1; y++) {
+            const double *la = lacc + (size_t)(y - y0) * ncols;
+            for (int x = 0; x < ncols; x++) r->lrow[x] = la[x] > 0.0 ? (float)la[x] : 0.0f;
+            r->cfg.layer(r->cfg.layer_ctx, y, r->lrow, ncols);
+        }
+    }
     return WF_OK;
 }
 

@@ -28,6 +28,7 @@ typedef struct wf_render_object {
     int halo;           /* nonzero: the config's halo function adds light over the footprint
                          * (the value is the caller's, e.g. which halo) */
     int bx0, by0, bnx, bny; /* the drawn and kept box, within the footprint (bnx 0: all) */
+    int layer;          /* nonzero: also in the layer (wf_renderer_config.layer) */
 } wf_render_object;
 
 /* Draws rows [ya, yb) (absolute SCA rows inside the box) of the object's box, in e-/s per
@@ -55,6 +56,14 @@ typedef struct wf_renderer_config {
     size_t pool_bytes;      /* stamp pool; a stamp larger than it is drawn in pieces */
     size_t max_row_bytes;   /* piece buffer: the most rows x width a piece may hold [pool/4] */
     wf_halo_fn halo;        /* for objects with halo set [NULL: none may] */
+    /* The layer: when set, every row the source fills is also summed over the objects with
+     * `layer` alone, without sky, in the same order and clipped at zero the same way (the
+     * rates a scene of those objects alone, without sky, would give, bit for bit), and
+     * handed to layer(layer_ctx, y, rates, ncols). Rows in more than one request (tile
+     * halos) come more than once, the same each time; calls come from every thread that
+     * reads a renderer of the scene. [NULL] */
+    void (*layer)(void *ctx, int y, const float *rates, int ncols);
+    void *layer_ctx;
 } wf_renderer_config;
 
 typedef struct wf_renderer_stats {

@@ -97,6 +97,9 @@ struct wf_scene {
     wf_profile_accuracy acc_wide;
     object *obj;
     size_t nobj;
+    const uint8_t *layer_gal, *layer_star; /* wf_scene_set_layer */
+    void (*layer_fn)(void *, int, const float *, int);
+    void *layer_ctx;
     wf_render_object *robj;
     size_t nrobj;            /* objects the renderer draws (SNe of zero flux are not drawn) */
     int time_variable;       /* some drawn object has a flux slope */
@@ -749,8 +752,9 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
             st = wf_error(WF_ERR_RANGE, "scene: supernova %lld: flux slope is not finite", object_id(s, o));
             return st;
         }
+        const uint8_t *lf = o->kind == OBJ_GALAXY ? s->layer_gal : o->kind == OBJ_STAR ? s->layer_star : NULL;
         s->robj[kept++] = (wf_render_object){id * 4u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o, rel, pl->split,
-                                             box.x0, box.y0, box.nx, box.ny};
+                                             box.x0, box.y0, box.nx, box.ny, s->layer_fn && lf && lf[o->row]};
         if (rel != 0.0) s->time_variable = 1;
         if (b.x0 < setup->ncols && b.x0 + b.nx > 0 && b.y0 < setup->nrows && b.y0 + b.ny > 0) {
             if (o->kind == OBJ_GALAXY)
@@ -761,7 +765,8 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
     }
     free(s->plans);
     s->plans = NULL;
-    wf_renderer_config rc = {setup->ncols, setup->nrows, 0.0, sky_row, s, setup->pool_bytes, 0, halo_row};
+    wf_renderer_config rc = {setup->ncols, setup->nrows, 0.0, sky_row, s, setup->pool_bytes, 0, halo_row,
+                             s->layer_fn, s->layer_ctx};
     s->nrobj = (size_t)kept;
     for (int t = 0; t < setup->threads; t++)
         if ((st = wf_renderer_create(&rc, s->robj, (size_t)kept, draw_object, &s->ts[t], &s->ts[t].renderer))) return st;
@@ -817,6 +822,15 @@ wf_status wf_scene_source_for(wf_scene *s, int t, wf_scene_source *out)
         return wf_error(WF_ERR_RANGE, "scene: thread %d of %d", t, s->setup.threads);
     wf_renderer_source(s->ts[t].renderer, out);
     return WF_OK;
+}
+
+void wf_scene_set_layer(wf_scene *s, const uint8_t *gal_flags, const uint8_t *star_flags,
+                        void (*fn)(void *ctx, int y, const float *rates, int ncols), void *ctx)
+{
+    s->layer_gal = gal_flags;
+    s->layer_star = star_flags;
+    s->layer_fn = fn;
+    s->layer_ctx = ctx;
 }
 
 void wf_scene_get_stats(const wf_scene *s, wf_scene_stats *out) { *out = s->stats; }

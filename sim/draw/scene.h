@@ -108,6 +108,15 @@ wf_status wf_scene_create(const wf_scene_setup *setup, const wf_catalog *gal,
 wf_status wf_scene_prepare(const wf_scene_setup *setup, wf_scene **out);
 wf_status wf_scene_populate(wf_scene *scene, const wf_catalog *gal, const wf_catalog *stars,
                             const wf_scene_sn *sne, size_t nsne);
+
+/* Between prepare and populate: the catalog rows flagged nonzero (gal_flags[i] for row i of
+ * the galaxies populate gets, star_flags for the stars; either may be NULL: none) form the
+ * renderers' layer (sim/draw/render.h): every row the scene's sources fill is also summed
+ * over those objects alone, without sky, and handed to fn(ctx, y, rates, ncols), exactly the
+ * rates of a scene populated with those objects alone and the sky off (sky_noise set when
+ * this one has a sky). The flags must outlive populate. */
+void wf_scene_set_layer(wf_scene *scene, const uint8_t *gal_flags, const uint8_t *star_flags,
+                        void (*fn)(void *ctx, int y, const float *rates, int ncols), void *ctx);
 void wf_scene_destroy(wf_scene *scene);
 
 /* Scene source for readout thread t (0 <= t < setup.threads). */
