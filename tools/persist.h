@@ -1,12 +1,13 @@
 /* The persistence history of one exposure of one SCA (hal/persist.h), built on the host from
- * the earlier exposures themselves, never from what this process ran before: for each earlier
+ * the earlier exposures themselves, never from their noisy products: for each earlier
  * exposure (a slot, most recent first) the charge its bright objects put in each pixel,
  * rate x exposure time up to the full well, kept where it reaches min_stimulus. The objects
  * are those of the earlier exposure's own scene (its pointing, filter, catalogs, PSF) one pixel
  * of which could reach min_stimulus (wf_persist_peak_fraction, with that PSF's own bound on a
  * point source's brightest pixel), drawn as the scene draws them, without sky (~0.4
  * e-/s: < 400 e- in 900 s) or supernovae. So an item's history is a function of the plan,
- * the configuration and the catalogs: any split of a survey run gives the same bytes.
+ * the configuration and the catalogs: any split of a survey run gives the same bytes (a slot
+ * taken from the drawing of its own exposure, wf_persist_layer below, is the same list).
  * Memory: 8 bytes per pixel and slot kept (a saturated star keeps ~100 pixels); a run's
  * cache holds up to 8 exposures' lists per SCA. */
 #ifndef WF_TOOLS_PERSIST_H
