@@ -285,6 +285,15 @@ double wf_persist_peak_fraction(const wf_catalog *cat, size_t i, double psf_peak
     return f < psf_peak ? f : psf_peak;
 }
 
+/* Whether object i (its catalog's band column `band`) is one whose brightest pixel could
+ * reach min_rate: the one test behind both a history's scene and an exposure's own layer,
+ * which must pick the same objects. */
+static int is_bright(const wf_bandpass *bp, const wf_catalog *cat, int band, size_t i, double psf_peak,
+                     double min_rate)
+{
+    return wf_bandpass_countrate_ab(bp, cat->mag[band][i]) * wf_persist_peak_fraction(cat, i, psf_peak) >= min_rate;
+}
+
 /* The objects one pixel of which could reach min_stimulus in the exposure. */
 static wf_status bright_subset(const wf_catalog *cat, const wf_bandpass *bp, const char *filter,
                                double min_rate, double psf_peak, wf_catalog *out, int *any)
@@ -296,7 +305,7 @@ static wf_status bright_subset(const wf_catalog *cat, const wf_bandpass *bp, con
     if (!idx) return wf_error(WF_ERR_NOMEM, "out of memory for the bright objects");
     size_t n = 0;
     for (size_t i = 0; i < cat->n; i++)
-        if (wf_bandpass_countrate_ab(bp, cat->mag[band][i]) * wf_persist_peak_fraction(cat, i, psf_peak) >= min_rate) idx[n++] = (uint32_t)i;
+        if (is_bright(bp, cat, band, i, psf_peak, min_rate)) idx[n++] = (uint32_t)i;
     st = wf_catalog_subset(cat, idx, n, out);
     free(idx);
     if (!st && n == 0) wf_catalog_free(out); /* held as not there */
@@ -507,7 +516,7 @@ static wf_status bright_flags(const wf_persist_layer *l, const wf_catalog *cat, 
     uint8_t *f = calloc(cat->n ? cat->n : 1, 1);
     if (!f) return wf_error(WF_ERR_NOMEM, "out of memory for the bright objects");
     for (size_t i = 0; i < cat->n; i++)
-        f[i] = wf_bandpass_countrate_ab(l->bp, cat->mag[band][i]) * wf_persist_peak_fraction(cat, i, psf_peak) >= l->min_rate;
+        f[i] = (uint8_t)is_bright(l->bp, cat, band, i, psf_peak, l->min_rate);
     *out = f;
     return WF_OK;
 }
