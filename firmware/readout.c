@@ -1216,6 +1216,34 @@ static wf_status ramp_grouped(wf_readout *ro, int y0, int y1, int h0, int h1)
 
 /* ---- single frame (GalSim allDetectorEffects order) ------------------------------------ */
 
+/* One PTRS attempt for each of the n pixels listed in ro->retry_x (columns), retry_px (their
+ * streams' pixels) and retry_mean, from block b of its stream, as wf_rng_poisson makes them:
+ * an accepted draw is added to q[column] (and next_block, when given, set to b + 1), the
+ * rejected pixels are packed to the front of the lists for block b + 1. Returns how many are
+ * left. The row's words are spent. */
+static int ptrs_round(wf_readout *ro, uint32_t b, int n, double *q, uint16_t *next_block)
+{
+    const int nc = ro->cfg.ncols;
+    uint32_t *rx = ro->retry_x, *rpx = ro->retry_px;
+    double *rm = ro->retry_mean, *rk = ro->retry_k;
+    uint32_t *b0 = ro->words, *b1 = b0 + nc, *b2 = b1 + nc, *b3 = b2 + nc;
+    wf_noise_block_list(&ro->noise, rpx, n, 0, WF_PURPOSE_PHOTON, b, b0, b1, b2, b3);
+    wf_poisson_ptrs_row53(rm, b0, b1, b2, b3, n, rk);
+    int left = 0;
+    for (int i = 0; i < n; i++) {
+        if (rk[i] >= 0.0) {
+            q[rx[i]] += rk[i];
+            if (next_block) next_block[rx[i]] = (uint16_t)(b + 1);
+            continue;
+        }
+        rx[left] = rx[i];
+        rpx[left] = rpx[i];
+        rm[left] = rm[i];
+        left++;
+    }
+    return left;
+}
+
 /* Photon electrons of row y from their expectations e (>= 0), into q. Each pixel's stream
  * (pixel, read 0, photon) is used as before this path was batched: words 1 and 2 of its first
  * block give inversion below a mean of 10 or the first PTRS attempt above; a rejected attempt
@@ -1229,7 +1257,7 @@ static void single_photons(wf_readout *ro, int y, const double *e, double *q, ui
     const int nc = ro->cfg.ncols;
     const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
     uint32_t *rx = ro->retry_x, *rpx = ro->retry_px;
-    double *rm = ro->retry_mean, *rk = ro->retry_k;
+    double *rm = ro->retry_mean;
     wf_poisson_ptrs_row(e, w1, w2, nc, q);
     int nl = 0, nr = 0;
     for (int x = 0; x < nc; x++) { /* the columns left over, without a branch per column */
@@ -1251,24 +1279,8 @@ static void single_photons(wf_readout *ro, int y, const double *e, double *q, ui
     }
     if (next_block)
         for (int x = 0; x < nc; x++) next_block[x] = 1;
-    uint32_t *b0 = ro->words, *b1 = b0 + nc, *b2 = b1 + nc, *b3 = b2 + nc; /* row words are spent */
-    for (uint32_t b = 1; nr > 0; b++) {
-        wf_noise_block_list(&ro->noise, rpx, nr, 0, WF_PURPOSE_PHOTON, b, b0, b1, b2, b3);
-        wf_poisson_ptrs_row53(rm, b0, b1, b2, b3, nr, rk);
-        int left = 0;
-        for (int i = 0; i < nr; i++) {
-            if (rk[i] >= 0.0) {
-                q[rx[i]] = rk[i];
-                if (next_block) next_block[rx[i]] = (uint16_t)(b + 1);
-                continue;
-            }
-            rx[left] = rx[i];
-            rpx[left] = rpx[i];
-            rm[left] = rm[i];
-            left++;
-        }
-        nr = left;
-    }
+    for (int i = 0; i < nr; i++) q[rx[i]] = 0.0; /* the retries' draws are added to it */
+    for (uint32_t b = 1; nr > 0; b++) nr = ptrs_round(ro, b, nr, q, next_block);
 }
 
 /* Dark electrons of mean dark >= 10 for row y, each pixel's draw on from the block where
@@ -1280,29 +1292,21 @@ static void single_dark(wf_readout *ro, int y, double dark, double *q)
     const int nc = ro->cfg.ncols;
     const uint16_t *nb = ro->next_block;
     uint32_t *rx = ro->retry_x, *rpx = ro->retry_px;
-    double *rm = ro->retry_mean, *rk = ro->retry_k;
-    uint32_t *b0 = ro->words, *b1 = b0 + nc, *b2 = b1 + nc, *b3 = b2 + nc;
+    double *rm = ro->retry_mean;
     uint32_t last = 0;
     for (int x = 0; x < nc; x++) last = nb[x] > last ? nb[x] : last;
     int n = 0; /* the pixels at block b */
     for (uint32_t b = 1; b < 65536 && (n > 0 || b <= last); b++) {
-        for (int x = 0; b <= last && x < nc; x++) { /* those whose stream resumes here */
+        const int had = n;
+        for (int x = 0; b <= last && x < nc; x++) { /* those whose stream resumes here join */
             rx[n] = (uint32_t)x;
             n += nb[x] == b;
         }
-        for (int i = 0; i < n; i++) {
+        for (int i = had; i < n; i++) {
             rpx[i] = pixel_id(ro, y, (int)rx[i]);
             rm[i] = dark;
         }
-        if (!n) continue;
-        wf_noise_block_list(&ro->noise, rpx, n, 0, WF_PURPOSE_PHOTON, b, b0, b1, b2, b3);
-        wf_poisson_ptrs_row53(rm, b0, b1, b2, b3, n, rk);
-        int left = 0;
-        for (int i = 0; i < n; i++) {
-            if (rk[i] >= 0.0) q[rx[i]] += rk[i];
-            else rx[left++] = rx[i];
-        }
-        n = left;
+        if (n) n = ptrs_round(ro, b, n, q, NULL);
     }
 }
 

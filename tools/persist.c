@@ -285,47 +285,56 @@ double wf_persist_peak_fraction(const wf_catalog *cat, size_t i, double psf_peak
     return f < psf_peak ? f : psf_peak;
 }
 
-/* Whether object i (its catalog's band column `band`) is one whose brightest pixel could
- * reach min_rate: the one test behind both a history's scene and an exposure's own layer,
- * which must pick the same objects. */
-static int is_bright(const wf_bandpass *bp, const wf_catalog *cat, int band, size_t i, double psf_peak,
-                     double min_rate)
-{
-    return wf_bandpass_countrate_ab(bp, cat->mag[band][i]) * wf_persist_peak_fraction(cat, i, psf_peak) >= min_rate;
-}
-
-/* The objects one pixel of which could reach min_stimulus in the exposure. */
-static wf_status bright_subset(const wf_catalog *cat, const wf_bandpass *bp, const char *filter,
-                               double min_rate, double psf_peak, wf_catalog *out, int *any)
+/* The objects of cat one pixel of which could reach min_rate (e-/s) with a PSF whose
+ * point-source pixel bound is psf_peak: *n of them, their rows into idx and a 0/1 flag per
+ * row into flags (either may be NULL). The one test behind both a history's scene and an
+ * exposure's own layer, which must pick the same objects. */
+static wf_status pick_bright(const wf_catalog *cat, const wf_bandpass *bp, const char *filter, double psf_peak,
+                             double min_rate, uint32_t *idx, uint8_t *flags, size_t *n)
 {
     int band;
     wf_status st = wf_catalog_band(cat, filter, &band);
     if (st) return st;
+    *n = 0;
+    for (size_t i = 0; i < cat->n; i++) {
+        const int bright =
+            wf_bandpass_countrate_ab(bp, cat->mag[band][i]) * wf_persist_peak_fraction(cat, i, psf_peak) >= min_rate;
+        if (flags) flags[i] = (uint8_t)bright;
+        if (bright && idx) idx[*n] = (uint32_t)i;
+        *n += (size_t)bright;
+    }
+    return WF_OK;
+}
+
+/* The subset of cat pick_bright picks (*any 0, nothing held, when none). */
+static wf_status bright_subset(const wf_catalog *cat, const wf_bandpass *bp, const char *filter,
+                               double min_rate, double psf_peak, wf_catalog *out, int *any)
+{
+    *any = 0;
     uint32_t *idx = malloc((cat->n ? cat->n : 1) * sizeof *idx);
     if (!idx) return wf_error(WF_ERR_NOMEM, "out of memory for the bright objects");
-    size_t n = 0;
-    for (size_t i = 0; i < cat->n; i++)
-        if (is_bright(bp, cat, band, i, psf_peak, min_rate)) idx[n++] = (uint32_t)i;
-    st = wf_catalog_subset(cat, idx, n, out);
+    size_t n;
+    wf_status st = pick_bright(cat, bp, filter, psf_peak, min_rate, idx, NULL, &n);
+    if (!st && n) {
+        st = wf_catalog_subset(cat, idx, n, out);
+        *any = !st;
+    }
     free(idx);
-    if (!st && n == 0) wf_catalog_free(out); /* held as not there */
-    *any = !st && n > 0;
     return st;
 }
 
-/* The bright subset of *cat again at the PSF's own peak (a subset of the first). */
-static wf_status refine_subset(wf_catalog *cat, int *have, const wf_bandpass *bp, const char *filter,
-                               double min_rate, double psf_peak)
+/* The exposure's bandpass (malloc'd), for the objects' count rates. */
+static wf_status load_bandpass(const wf_config *cfg, wf_bandpass **out)
 {
-    if (!*have) return WF_OK;
-    wf_catalog finer;
-    int any;
-    wf_status st = bright_subset(cat, bp, filter, min_rate, psf_peak, &finer, &any);
+    wf_filter f;
+    wf_status st = wf_filter_parse(cfg->filter, &f);
     if (st) return st;
-    wf_catalog_free(cat);
-    *have = any;
-    if (any) *cat = finer;
-    return WF_OK;
+    if (!(*out = malloc(sizeof **out))) return wf_error(WF_ERR_NOMEM, "out of memory for a bandpass");
+    if ((st = wf_bandpass_load(f, cfg->data_dir[0] ? cfg->data_dir : NULL, *out))) {
+        free(*out);
+        *out = NULL;
+    }
+    return st;
 }
 
 /* The kept pixels of the exposure cfg describes. */
@@ -349,28 +358,27 @@ static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg
     memset(&stars, 0, sizeof stars);
     int have_gal = 0, have_stars = 0;
     wf_scene *scene = NULL;
-    wf_bandpass *bp = malloc(sizeof *bp);
-    wf_filter f;
-    wf_status st = bp ? wf_filter_parse(cfg->filter, &f) : wf_error(WF_ERR_NOMEM, "out of memory");
-    if (!st) st = wf_bandpass_load(f, cfg->data_dir[0] ? cfg->data_dir : NULL, bp);
+    wf_bandpass *bp = NULL;
+    wf_status st = load_bandpass(cfg, &bp);
     if (!st) st = wf_pipeline_load_catalogs(cfg, &in);
     const double min_rate = h->min_stimulus / t;
-    if (!st && in.have_gal) st = bright_subset(&in.gal, bp, cfg->filter, min_rate, PSF_PEAK_ANY, &gal, &have_gal);
-    if (!st && in.have_stars)
-        st = bright_subset(&in.stars, bp, cfg->filter, min_rate, PSF_PEAK_ANY, &stars, &have_stars);
-    if (!st && (have_gal || have_stars)) { /* else nothing bright: an empty list, no PSF built */
+    /* a PSF is built only when some object could be bright with any PSF (no pixel holds more
+     * than the whole flux); the objects are then picked with that PSF's own bound */
+    size_t ng = 0, ns = 0;
+    if (!st && in.have_gal) st = pick_bright(&in.gal, bp, cfg->filter, PSF_PEAK_ANY, min_rate, NULL, NULL, &ng);
+    if (!st && in.have_stars) st = pick_bright(&in.stars, bp, cfg->filter, PSF_PEAK_ANY, min_rate, NULL, NULL, &ns);
+    if (!st && ng + ns) {
         wf_scene_setup ss;
         wf_pipeline_scene_setup(cfg, clock, 1, &ss);
         /* drawn to the accuracy of the exposure's own product: at its sky noise, if it had a sky */
         ss.sky_noise = ss.sky_on;
         ss.sky_on = 0;
         st = wf_scene_prepare(&ss, &scene);
-        if (!st) { /* the bound again with this PSF's own peak */
-            wf_scene_stats stats;
-            wf_scene_get_stats(scene, &stats);
-            st = refine_subset(&gal, &have_gal, bp, cfg->filter, min_rate, stats.psf_pixel_max);
-            if (!st) st = refine_subset(&stars, &have_stars, bp, cfg->filter, min_rate, stats.psf_pixel_max);
-        }
+        wf_scene_stats stats;
+        if (!st) wf_scene_get_stats(scene, &stats);
+        if (!st && in.have_gal) st = bright_subset(&in.gal, bp, cfg->filter, min_rate, stats.psf_pixel_max, &gal, &have_gal);
+        if (!st && in.have_stars)
+            st = bright_subset(&in.stars, bp, cfg->filter, min_rate, stats.psf_pixel_max, &stars, &have_stars);
         if (!st && (have_gal || have_stars)) { /* else nothing bright after all */
             wf_scene_source src;
             st = wf_scene_populate(scene, have_gal ? &gal : NULL, have_stars ? &stars : NULL, ss.sne, ss.nsne);
@@ -478,14 +486,11 @@ wf_status wf_persist_layer_new(const wf_config *cfg, const wf_clock *clock, doub
     l->min_rate = min_stimulus / l->exptime;
     snprintf(l->filter, sizeof l->filter, "%s", cfg->filter);
     pthread_mutex_init(&l->lock, NULL);
-    wf_filter f;
     wf_status st = WF_OK;
     l->done = calloc((size_t)l->nrows, 1);
     l->rows = calloc((size_t)l->nrows, sizeof *l->rows);
-    l->bp = malloc(sizeof *l->bp);
-    if (!l->done || !l->rows || !l->bp) st = wf_error(WF_ERR_NOMEM, "out of memory for the persistence layer");
-    if (!st) st = wf_filter_parse(cfg->filter, &f);
-    if (!st) st = wf_bandpass_load(f, cfg->data_dir[0] ? cfg->data_dir : NULL, l->bp);
+    if (!l->done || !l->rows) st = wf_error(WF_ERR_NOMEM, "out of memory for the persistence layer");
+    if (!st) st = load_bandpass(cfg, &l->bp);
     if (st) {
         wf_persist_layer_free(l);
         return st;
@@ -507,18 +512,16 @@ void wf_persist_layer_free(wf_persist_layer *l)
     free(l);
 }
 
-/* Flags of the objects bright_subset keeps at psf_peak. */
+/* A flag per row of cat: the objects bright_subset keeps at psf_peak. */
 static wf_status bright_flags(const wf_persist_layer *l, const wf_catalog *cat, double psf_peak, uint8_t **out)
 {
-    int band;
-    wf_status st = wf_catalog_band(cat, l->filter, &band);
-    if (st) return st;
     uint8_t *f = calloc(cat->n ? cat->n : 1, 1);
     if (!f) return wf_error(WF_ERR_NOMEM, "out of memory for the bright objects");
-    for (size_t i = 0; i < cat->n; i++)
-        f[i] = (uint8_t)is_bright(l->bp, cat, band, i, psf_peak, l->min_rate);
-    *out = f;
-    return WF_OK;
+    size_t n;
+    wf_status st = pick_bright(cat, l->bp, l->filter, psf_peak, l->min_rate, NULL, f, &n);
+    if (st) free(f);
+    else *out = f;
+    return st;
 }
 
 wf_status wf_persist_layer_flags(wf_persist_layer *l, const wf_catalog *gal, const wf_catalog *stars,

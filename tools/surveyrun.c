@@ -649,6 +649,13 @@ const char *wf_survey_item_note(const wf_survey_item_result *res)
     return res->changed ? " (made from other inputs: redone)" : res->redone ? " (damaged product redone)" : "";
 }
 
+/* The charge a pixel's history is capped at: the full well, when the detector has one. Both
+ * a history and an exposure's own slot (the layer) keep what it says. */
+static double history_full_well(const wf_config *cfg)
+{
+    return cfg->ro.det.on.saturation ? cfg->ro.det.full_well : INFINITY;
+}
+
 /* The item's history, each earlier exposure drawn as its own product would be (tools/persist.h),
  * or taken from the process's cache; *drawn: how many were drawn. */
 static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, const wf_config *cfg,
@@ -657,7 +664,7 @@ static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, c
     wf_persist_history *ph;
     *drawn = 0;
     wf_status st = wf_persist_history_new(cfg->ro.ncols, cfg->ro.nrows, cfg->persist.min_stimulus,
-                                          cfg->ro.det.on.saturation ? cfg->ro.det.full_well : INFINITY, &ph);
+                                          history_full_well(cfg), &ph);
     for (int j = 0; j < h->n && !st; j++) {
         const wf_survey_row *r = &ctx->plan[h->row[j]];
         wf_clock clock;
@@ -708,8 +715,8 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         /* this exposure's own slot, for the later items of its SCA, taken from its drawing */
         wf_persist_layer *layer = NULL;
         if (ctx->pcache && p->cfg.ro.persist.on && p->cfg.persist.depth > 0 &&
-            (st = wf_persist_layer_new(&p->cfg, &p->clock, p->cfg.persist.min_stimulus,
-                                       p->cfg.ro.det.on.saturation ? p->cfg.ro.det.full_well : INFINITY, &layer))) {
+            (st = wf_persist_layer_new(&p->cfg, &p->clock, p->cfg.persist.min_stimulus, history_full_well(&p->cfg),
+                                       &layer))) {
             wf_persist_history_free(ph);
             return wf_error(st, "%s: %s", name, wf_error_message());
         }

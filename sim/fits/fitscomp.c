@@ -152,9 +152,9 @@ static wf_status append(fitsfile *dst, const char *dst_path, fitsfile *part, con
 wf_status wf_fits_part_append(fitsfile *dst, const char *dst_path, fitsfile *part, const char *part_path,
                               wf_fits_datasum *sum)
 {
-    wf_fits_datasum ds = {0, 0, 0};
+    wf_fits_datasum ds = {0, 0, 0}; /* append sets it only when it succeeds */
     wf_status st = append(dst, dst_path, part, part_path, &ds);
-    if (sum) *sum = st ? (wf_fits_datasum){0, 0, 0} : ds;
+    if (sum) *sum = ds;
     wf_fits_part_discard(part, part_path);
     return st;
 }
@@ -218,13 +218,13 @@ double wf_fits_row_noise(const float *row, long n, float *scratch)
     return 0.6052697 * select_kth(scratch, m, (m - 1) / 2);
 }
 
-/* The XOR that turns pixels of `type` into the integers a Rice-coded HDU of one-row tiles
- * stores (flip 0 or the sign bit of the unsigned types' BZERO), when wfisim's coder can
- * write its tiles: 1, else 0 (cfitsio codes them). */
-static _Atomic long own_tiles;
+static _Atomic long own_tiles; /* tiles coded by rice.c, for wf_fits_own_rice_tiles */
 
 long wf_fits_own_rice_tiles(void) { return own_tiles; }
 
+/* The XOR that turns pixels of `type` into the integers a Rice-coded HDU of one-row tiles
+ * stores (flip 0 or the sign bit of the unsigned types' BZERO), when wfisim's coder can
+ * write its tiles: 1, else 0 (cfitsio codes them). */
 static int own_rice(const fitsfile *f, int type, long ncols, int *bytepix, uint32_t *flip)
 {
     const FITSfile *F = f->Fptr;
