@@ -1568,6 +1568,7 @@ START_TEST(test_core_wing)
     const double hlr[] = {0.005, 0.2, 0.5};
     for (int h = 0; h < 3; h++) {
         wf_galaxy g = galaxy(1000.0, 0.3, hlr[h], 0.5 * hlr[h], 0.2, -0.1);
+        wf_profile_knot_method(&split.work, WF_KNOTS_AUTO);
         g.n_knots = h ? 30 : 0;
         g.knot_frac = h ? 0.2 : 0.0;
         g.knot_seed = 5;
@@ -1590,7 +1591,10 @@ START_TEST(test_core_wing)
                       "hlr %g: the split did not shrink the box (%d, %d)", hlr[h], c.fft,
                       fft_whole);
         int fft_split = c.fft;
-        /* tolerated, both with folding 1e-7 so that only the wing differs */
+        /* tolerated, both with folding 1e-7 so that only the wing differs (the knots summed
+         * in the box: a tolerance of 1e30 would also let them be read from the core's knot
+         * table at the shortest reach, test_real_knots_galaxy) */
+        wf_profile_knot_method(&split.work, WF_KNOTS_DIRECT);
         ck_assert(wf_profile_work_tune(&whole.work, acc.flux_fraction, 1e-7, 1e-7, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
         ck_assert(wf_profile_work_tune(&split.work, acc.flux_fraction, 1e-7, 1e-7, 1e30, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
         ck_assert(wf_profile_draw_galaxy(&whole.work, &g, &whole.psf, x, y, &a) == WF_OK);
@@ -2265,6 +2269,176 @@ START_TEST(test_simd_identical)
 }
 END_TEST
 
+/* The core at offsets (x0 + i - x, y0 + j - y) pixels from a point x, y, i, j < n, from its
+ * table by the direct sum (1 / N^2) sum_k T(k) e^{i k X} (the knot table's own definition,
+ * without the FFT), the phases by axis. */
+static void core_direct(const wf_profile_psf *psf, const wf_profile_core *co, int x0, int y0, int n, double x,
+                        double y, double *out)
+{
+    const int kr = psf->kr, nt = psf->table_fft;
+    const size_t side = 2 * (size_t)kr + 1;
+    double *cx = malloc(sizeof(double) * side * n * 4), *sx = cx + side * n, *cy = sx + side * n, *sy = cy + side * n;
+    ck_assert(cx != NULL);
+    for (int i = 0; i < n; i++)
+        for (int u = -kr; u <= kr; u++) {
+            double px = 2.0 * M_PI * u * (x0 + i - x) / nt, py = 2.0 * M_PI * u * (y0 + i - y) / nt;
+            cx[(size_t)i * side + (size_t)(u + kr)] = cos(px), sx[(size_t)i * side + (size_t)(u + kr)] = sin(px);
+            cy[(size_t)i * side + (size_t)(u + kr)] = cos(py), sy[(size_t)i * side + (size_t)(u + kr)] = sin(py);
+        }
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            double sum = 0.0;
+            for (int v = -kr; v <= kr; v++) {
+                const float *re = co->re + (size_t)(v + kr) * side, *im = co->im + (size_t)(v + kr) * side;
+                const double cv = cy[(size_t)j * side + (size_t)(v + kr)], sv = sy[(size_t)j * side + (size_t)(v + kr)];
+                const double *cu = cx + (size_t)i * side, *su = sx + (size_t)i * side;
+                double ar = 0.0, ai = 0.0; /* sum_u T e^{i u X} */
+                for (size_t u = 0; u < side; u++) {
+                    ar += re[u] * cu[u] - im[u] * su[u];
+                    ai += re[u] * su[u] + im[u] * cu[u];
+                }
+                sum += ar * cv - ai * sv;
+            }
+            out[(size_t)j * n + i] = sum / ((double)nt * nt);
+        }
+    free(cx);
+}
+
+/* Knots read from a core's real-space table (wf_profile_knots_stamp) against the core by the
+ * direct sum over its table at every pixel: no pixel is off by more than knot_interp +
+ * knot_out[lim] (the bilinear reading's bound from the table and the samples left out), at
+ * every core, several reach and sub-pixel positions; and a knot's pixels hold its flux times
+ * the core's (the pixel's transform vanishes at every other multiple of 2 pi: whole-pixel
+ * shifts of the core sum to its flux). */
+START_TEST(test_knot_table_bound)
+{
+    wf_psf_image img;
+    wf_profile_accuracy acc;
+    ctx c;
+    double *psfpix = open_split(&c, &img, &acc);
+    (void)wf_profile_simd(-1);
+    const wf_profile_psf *psf = &c.psf;
+    static const double pos[][2] = {{0.0, 0.0}, {0.37, -0.21}, {-0.49, 0.5}, {0.0625, 0.8125}};
+    for (int k = 0; k < psf->ncore; k++) {
+        const wf_profile_core *co = &psf->core[k];
+        const int h = co->knot_half;
+        ck_assert(co->knot != NULL && co->knot_out != NULL && co->knot_interp > 0.0);
+        /* the bound falls with the reach, and the whole table leaves out ~nothing */
+        for (int l = 1; l <= h; l++) ck_assert(co->knot_out[l] <= co->knot_out[l - 1]);
+        ck_assert_msg(co->knot_out[h] < 1e-4 * psf->pixel_max, "core %d leaves out %g", k + 1, co->knot_out[h]);
+        const int lims[] = {2, h / 2, h};
+        double worst_any[3] = {0.0, 0.0, 0.0}; /* of the bound */
+        for (int ip = 0; ip < 4; ip++) {
+            /* exact on the central 13 x 13 pixels (beyond the shortest reach too), the sum
+             * over all the knot covers */
+            const double x = 40.0 + pos[ip][0], y = 50.0 + pos[ip][1], xy[2] = {0.0, 0.0};
+            enum { NE = 13 };
+            double exact[NE * NE], peak = 0.0;
+            core_direct(psf, co, 34, 44, NE, x, y, exact);
+            for (int e = 0; e < NE * NE; e++) peak = fmax(peak, exact[e]);
+            for (int li = 0; li < 3; li++) {
+                wf_stamp s = stamp_new(40 - h - 3, 50 - h - 3, 2 * h + 7, 2 * h + 7);
+                wf_profile_knots_stamp(psf, k + 1, lims[li], 1.0, 1, xy, x, y, &s);
+                double worst = 0.0, sum = 0.0;
+                for (int j = 0; j < s.ny; j++)
+                    for (int i = 0; i < s.nx; i++) {
+                        double got = s.pix[(size_t)j * s.nx + i];
+                        int ie = s.x0 + i - 34, je = s.y0 + j - 44;
+                        if (ie >= 0 && ie < NE && je >= 0 && je < NE) worst = fmax(worst, fabs(got - exact[je * NE + ie]));
+                        sum += got;
+                    }
+                const double bound = co->knot_interp + co->knot_out[lims[li]];
+                printf("knot table, core %d (%g\"), reach %d: worst %.3g of the peak, bound %.3g, sum %.7f of %.7f\n",
+                           k + 1, co->radius, lims[li], worst / peak, bound / peak, sum, co->flux);
+                ck_assert_msg(worst <= bound, "core %d reach %d at (%g, %g): off by %g, bound %g", k + 1, lims[li], x, y,
+                              worst, bound);
+                worst_any[li] = fmax(worst_any[li], worst / bound);
+                if (lims[li] == h)
+                    ck_assert_msg(fabs(sum - co->flux) < 1e-5 * co->flux, "knot sums to %.8f of %.8f", sum, co->flux);
+                free(s.pix);
+            }
+        }
+        for (int li = 0; li < 3; li++)
+            ck_assert_msg(worst_any[li] > 1e-3, "core %d reach %d: off by %g of the bound at most: a bound that cannot fail",
+                          k + 1, lims[li], worst_any[li]);
+    }
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
+/* A split galaxy's knots read from the core's table (AUTO, where the bound is tolerated)
+ * against the same knots summed in its Fourier box (DIRECT): the smooth part is the same
+ * draw, so the stamps differ by the knots alone, by no more than the tolerance (the reading
+ * goes out only as far as it allows), plus the Fourier draw's own folding and dropped modes
+ * (1e-6 and 1e-9 of the flux here); the light differs by no more than the reading may leave
+ * out, (1 - flux_fraction) / 10 of the knots'. With a tolerance under every core's bound for
+ * the whole table, the knots stay in the box. */
+START_TEST(test_real_knots_galaxy)
+{
+    wf_psf_image img;
+    wf_profile_accuracy acc;
+    ctx c;
+    double *psfpix = open_split(&c, &img, &acc);
+    const wf_profile_psf *psf = &c.psf;
+    double least = INFINITY; /* the smallest whole-table bound of any core */
+    for (int k = 0; k < psf->ncore; k++)
+        least = fmin(least, psf->core[k].knot_interp + psf->core[k].knot_out[psf->core[k].knot_half]);
+    const double wing = psf->core[psf->ncore - 1].wing_max;
+    for (int h = 0; h < 3; h++)
+        for (int pass = 0; pass < 3; pass++) {
+            wf_galaxy g = galaxy(200.0, 0.2, 0.1 + 0.05 * h, 0.05, 0.3 - 0.2 * h, 0.1);
+            g.n_knots = 40 + 30 * h;
+            g.knot_frac = 0.25;
+            g.knot_seed = 11 + h;
+            const double x = 300.3 + 0.21 * h, y = 200.7 - 0.17 * h;
+            const double fk = g.flux * (1.0 - g.bulge_frac) * g.knot_frac;
+            /* pass 0: the smallest core just tolerated; 1: ten times more; 2: under every
+             * knot table's bound */
+            const double tol = pass == 2 ? 0.5 * fk * least : (pass ? 25.0 : 2.5) * g.flux * wing;
+            ck_assert(wf_profile_work_tune(&c.work, acc.flux_fraction, 1e-6, 1e-9, tol, acc.knot_accuracy) == WF_OK);
+            wf_stamp b, box;
+            int core;
+            ck_assert(wf_profile_galaxy_core(&c.work, &g, psf, x, y, &b, &box, &core) == WF_OK);
+            ck_assert_msg(pass == 2 || core == psf->ncore, "galaxy %d tolerance %g: core %d taken", h, tol, core);
+            wf_stamp a = stamp_new(b.x0, b.y0, b.nx, b.ny), d = stamp_new(b.x0, b.y0, b.nx, b.ny);
+            wf_profile_knot_method(&c.work, WF_KNOTS_AUTO);
+            ck_assert(wf_profile_draw_galaxy(&c.work, &g, psf, x, y, &a) == WF_OK);
+            const int nreal = c.work.knot_last[3], lat = c.work.knot_last[0], direct = c.work.knot_last[2];
+            if (pass == 2) {
+                ck_assert_msg(nreal == 0 && (lat > 0 || direct > 0), "galaxy %d: knots read from the table beyond their "
+                              "tolerance", h);
+                free(a.pix);
+                free(d.pix);
+                continue;
+            }
+            ck_assert_msg(nreal == g.n_knots, "%d of %d knots read from the table", nreal, g.n_knots);
+            wf_profile_knot_method(&c.work, WF_KNOTS_DIRECT);
+            ck_assert(wf_profile_draw_galaxy(&c.work, &g, psf, x, y, &d) == WF_OK);
+            ck_assert(c.work.knot_last[3] == 0 && c.work.knot_last[2] > 0);
+            double worst = 0.0, peak = 0.0, sa = 0.0, sd = 0.0;
+            for (int k = 0; k < b.nx * b.ny; k++) {
+                worst = fmax(worst, fabs(a.pix[k] - d.pix[k]));
+                peak = fmax(peak, d.pix[k]);
+                sa += a.pix[k], sd += d.pix[k];
+            }
+            const double fold = 2e-6 * g.flux, bound = tol + fold;
+            printf("real-space knots, galaxy %d, tolerance %.3g (core %d, box %d): worst pixel %.3g of the peak, %.3g of "
+                   "the tolerance; sums %.6f and %.6f\n", h, tol, core, d.fft, worst / peak, worst / tol, sa, sd);
+            ck_assert_msg(worst <= bound, "galaxy %d: knots off by %g, allowed %g", h, worst, bound);
+            ck_assert_msg(worst > 1e-6 * peak, "galaxy %d: knots off by only %g of the peak: not read from the table?", h,
+                          worst / peak);
+            ck_assert_msg(fabs(sa - sd) <= 0.1 * (1.0 - acc.flux_fraction) * fk + fold, "galaxy %d: sums %.8f and %.8f", h,
+                          sa, sd);
+            free(a.pix);
+            free(d.pix);
+        }
+    wf_profile_knot_method(&c.work, WF_KNOTS_AUTO);
+    ctx_close(&c);
+    free(psfpix);
+}
+END_TEST
+
 /* The split PSF's wing, added row by row, is the same bits with every kernel width. */
 START_TEST(test_simd_identical_wing)
 {
@@ -2826,6 +3000,8 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_sheared_ellipticity);
     tcase_add_test(ind, test_pieces_identical);
     tcase_add_test(ind, test_core_wing);
+    tcase_add_test(ind, test_knot_table_bound);
+    tcase_add_test(ind, test_real_knots_galaxy);
     tcase_add_test(ind, test_core_levels);
     tcase_add_test(ind, test_psf_tables_threads);
     tcase_add_test(ind, test_core_tables_from_the_whole_image);

@@ -248,9 +248,22 @@ static wf_status draw_job(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
     gd.half = gd.m / 2;
     gd.dk = 2.0 * M_PI / (gd.m * p);
 
-    /* knots: those inside the box (beyond it they would wrap) */
+    /* knots: each the core at its position, read from the core's knot table where the
+     * reading's error bound is tolerated (the box then holds the smooth light alone, whose
+     * transform ends far sooner); else in the box, those inside it (beyond it they would
+     * wrap) */
+    int klim = -1; /* the knot table read out to klim pixels, the least its bound allows */
+    if (split && !clamped && jb->nk > 0 && w->knot_method == WF_KNOTS_AUTO) {
+        const wf_profile_core *co = &psf->core[split - 1];
+        const double miss = 0.1 * (1.0 - w->acc.flux_fraction);
+        for (int l = 0; l <= co->knot_half && klim < 0; l++)
+            if (jb->fk * (co->knot_interp + co->knot_out[l]) <= w->acc.wing_tolerance && co->knot_miss[l] <= miss)
+                klim = l;
+    }
+    const int real_knots = klim >= 0;
+    w->knot_last[3] = real_knots ? jb->nk : 0;
     double kedge = (gd.half - 1) * p;
-    for (int j = 0; j < jb->nk; j++) {
+    for (int j = 0; j < (real_knots ? 0 : jb->nk); j++) {
         double kx = jb->knots[2 * j] + gd.dx, ky = jb->knots[2 * j + 1] + gd.dy;
         if (fabs(kx) <= kedge && fabs(ky) <= kedge) {
             w->knot_box[2 * gd.nk] = jb->knots[2 * j];
@@ -378,6 +391,7 @@ static wf_status draw_job(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
         for (long xx = xa; xx < xb; xx++) dst[xx - stamp->x0] = src[xx - xa] * norm;
         for (long xx = xb; xx < (long)stamp->x0 + stamp->nx; xx++) dst[xx - stamp->x0] = 0.0;
     }
+    if (real_knots) wf_profile_knots_stamp(psf, split, klim, jb->fknot, jb->nk, jb->knots, x, y, stamp);
     if (split && wing) wf_profile_wing_stamp(psf, split, jb->flux, x, y, stamp);
     if (clamped && jb->fpoint == 0.0 && (st = wf_profile_dewrap(w, jb, &gd, x, y, stamp, split)))
         return st;

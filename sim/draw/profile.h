@@ -63,7 +63,11 @@ typedef struct wf_profile_accuracy {
                                  wing tolerance allows [1] */
     double wing_tolerance;    /* with a split PSF, extended objects whose wing error bound
                                  2 flux wing_max (that core's) stays below this (flux per
-                                 pixel) take the smallest such core [0: none] */
+                                 pixel) take the smallest such core; their knots are drawn
+                                 in real space from that core's knot table where the
+                                 knots' flux x (knot_interp + knot_out[l]) stays below it
+                                 too, each read out to the least reach l that allows and
+                                 whose knot_miss is <= (1 - flux_fraction) / 10 [0: none] */
     double knot_accuracy;     /* the knot lattice's aliasing, e^-E: a pixel moves by ~10 e^-E
                                  of the knots' flux at most [e^-20 = 2.1e-9] */
     double cut_tolerance;     /* with a PSF, > 0 also ends the Fourier sum where the modes left
@@ -131,6 +135,20 @@ typedef struct wf_profile_core {
                                   wing_np^2: entry [n_y][n_x] is the wing's pixel value at
                                   offset (n_x - wing_half + a / wing_os, n_y - wing_half +
                                   b / wing_os) pixels from the object */
+    float *knot;               /* the core itself in real space, laid out as the wing but
+                                  with knot_os, knot_half and knot_np: where a knot's light
+                                  falls (a knot is a point, so knot x core is the core at its
+                                  position) */
+    int knot_half, knot_np;
+    double knot_interp;        /* bound on |core at any position - its bilinear reading from
+                                  knot|, per unit flux, from the table: sum |T(k)| (e(k_x) +
+                                  e(k_y)) / N^2 */
+    double *knot_out;          /* [l], l = 0 .. knot_half: the largest |sample| l - 1
+                                  pixels or more from the centre along x or y, per unit
+                                  flux: left out by a reading out to l pixels only (no pixel
+                                  is then off by more than knot_interp + knot_out[l]) */
+    double *knot_miss;         /* [l]: the most of the core's light (a fraction) a reading out
+                                  to l pixels leaves out, over the phase planes */
 } wf_profile_core;
 
 /* A PSF prepared for drawing: its Fourier transform times the pixel's, once. */
@@ -158,12 +176,16 @@ typedef struct wf_profile_psf {
      * than 2 flux wing_max: so an object takes a core only when that bound is below
      * acc.wing_tolerance, and of those the smallest (a scene sets the tolerance from the sky
      * noise, so faint galaxies take small boxes; errors and costs: docs/ACCURACY.md). Point
-     * sources gain nothing and never take one. */
+     * sources gain nothing and never take one. Such an object's knots, points, are each the
+     * core at its own position: read from the core's real-space table (bilinear, every
+     * 1 / wing_os pixel) where their error bound allows, so that the box holds only the
+     * smooth light, whose transform ends far sooner than a point's. */
     int ncore;                 /* cores, by radius halving from core[0] (acc.core_levels) */
     wf_profile_core core[WF_PROFILE_MAX_CORES];
     int wing_os, wing_half;    /* wing samples every 1 / wing_os pixel, offsets up to
                                   wing_half (+ 1) pixels each way */
     int wing_np;               /* samples per row of one phase plane */
+    int knot_os;               /* the cores' knot tables: samples every 1 / knot_os pixel */
 } wf_profile_psf;
 
 struct wf_sersic_table;
@@ -190,8 +212,9 @@ typedef struct wf_profile_work {
     double *ring;          /* its rows interpolated along u, and a mirrored row */
     int *rim;              /* per draw: the extent of each row of the fine grid */
     int knot_method;       /* WF_KNOTS_* (sim/draw/profile_int.h) */
-    int knot_last[3];      /* the last draw's knots: lattice step (0: none), its taps, and
-                              the knots summed directly */
+    int knot_last[4];      /* the last draw's knots: lattice step (0: none), its taps, the
+                              knots summed directly, and those read from a core's knot
+                              table instead (real space) */
     int cut_last[2];       /* the last draw's Fourier extent in fine-grid steps: the smooth
                               part's (or point source's) and the knots' (0: none) */
     int keep_negatives;    /* 1: draws leave negative ringing in (wf_profile_keep_negatives) */

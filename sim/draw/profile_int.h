@@ -250,9 +250,13 @@ wf_status wf_profile_dewrap(const wf_profile_work *w, const wf_draw_job *jb,
                             const wf_draw_grid *gd, double x, double y, wf_stamp *stamp,
                             int box_only);
 
-/* profile_wing.c: stamp += flux x that core's wing at (x, y). */
+/* profile_wing.c: stamp += flux x that core's wing at (x, y); stamp += fknot x that core at
+ * each of nk knots, (xy[2k], xy[2k + 1]) arcsec from (x, y), read from its knot table out to
+ * lim pixels (wf_profile_core.knot_out). */
 void wf_profile_wing_stamp(const wf_profile_psf *psf, int core, double flux, double x, double y,
                            wf_stamp *stamp);
+void wf_profile_knots_stamp(const wf_profile_psf *psf, int core, int lim, double fknot, int nk,
+                            const double *xy, double x, double y, wf_stamp *stamp);
 
 /* profile_real.c: surface brightness (flux / arcsec^2) of the smooth galaxy at (x, y) arcsec
  * from it; the stamp without a PSF. */

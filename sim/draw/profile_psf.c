@@ -116,6 +116,40 @@ static void split_layout(const wf_psf_image *img, const wf_profile_accuracy *acc
     g->nfft = WING_OS * g->lw;
 }
 
+/* The core's own real-space table (knots), KNOT_OS samples a pixel: its light ends at the
+ * radius (taper), widened by the pixel's half; one pixel more for the bilinear reading's
+ * second sample. Its transform needs only every q-th table step, as the wing's, with the
+ * period table_fft / q at least twice its half-width and 8 pixels more. */
+#define KNOT_OS 16
+typedef struct knot_geom {
+    int h, np, q, lk, nfft;
+} knot_geom;
+
+static void knot_layout(const wf_profile_accuracy *acc, double radius, knot_geom *g)
+{
+    g->h = (int)ceil(radius / acc->pixel_scale + 0.5) + 1;
+    g->np = 2 * g->h + 2;
+    g->q = 1;
+    for (int q = acc->psf_table_fft / 2; q > 1; q--)
+        if (acc->psf_table_fft % q == 0 && acc->psf_table_fft / q >= 2 * g->h + 8) {
+            g->q = q;
+            break;
+        }
+    g->lk = acc->psf_table_fft / g->q;
+    g->nfft = KNOT_OS * g->lk;
+}
+
+/* The bilinear reading of e^{i theta t} between t = 0 and 1 (samples 1 / KNOT_OS pixel apart)
+ * is off by at most theta^2 t (1 - t) / 2 <= theta^2 / 8: the error g has g(0) = g(1) = 0 and
+ * |g''| = theta^2 (the interpolation's Green's function is >= 0 and integrates to
+ * t (1 - t) / 2), which holds for complex values too. A 2-D reading of e^{i(a x + b y)} is off
+ * by at most e(a) + e(b), since each axis's reading has modulus <= 1. */
+static double bilinear_err(int u, int table_fft)
+{
+    double theta = 2.0 * M_PI * u / ((double)table_fft * KNOT_OS);
+    return fmin(theta * theta / 8.0, 2.0);
+}
+
 /* 1 within 2/3 of the core radius, a raised cosine to 0 at it: smooth, so the core's
  * transform spreads little beyond the PSF's band. */
 static double core_taper(double r, double rc)
@@ -204,10 +238,16 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
                    wf_arena_cost(((size_t)kr + 2) * sizeof(double)) +
                    wf_arena_cost((size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np *
                                  sizeof(float)));
+        knot_geom kg; /* the largest core's */
+        knot_layout(acc, acc->core_radius, &kg);
+        *bytes += (size_t)acc->core_levels *
+                  (wf_arena_cost((size_t)KNOT_OS * KNOT_OS * (size_t)kg.np * (size_t)kg.np * sizeof(float)) +
+                   2 * wf_arena_cost((size_t)kg.np * sizeof(double)));
         /* the tapered image while the core is transformed, the wing's FFT while the whole
          * is */
         size_t taper = wf_arena_cost((size_t)img->n * (size_t)img->n * sizeof(double));
-        size_t fft = wf_arena_cost((size_t)g.nfft * ((size_t)g.nfft + 2) * sizeof(double));
+        const size_t nf = (size_t)(g.nfft > kg.nfft ? g.nfft : kg.nfft);
+        size_t fft = wf_arena_cost(nf * (nf + 2) * sizeof(double));
         *scratch += taper > fft ? taper : fft;
     }
     int os = integer_oversampling(acc->pixel_scale, img->scale_arcsec);
@@ -526,59 +566,131 @@ static wf_status core_pass(void *ctx, int task, int slot)
     return st;
 }
 
-/* Core `task`'s wing: (whole - core table) at every q-th step, c2r. */
+/* The c2r's output (period nfl fine samples, K per pixel) as K^2 phase planes of np^2
+ * samples at offsets n - h + a / K pixels; the largest |sample| kept into *max and, when out
+ * is non-NULL, out[l] (l = 0 .. h) the largest at l - 1 pixels or more from the centre along
+ * x or y. */
+static void to_planes(const double *buf, long nfl, int K, double norm, int h, int np, float *planes,
+                      double *max, double *out)
+{
+    const size_t row_len = (size_t)nfl + 2;
+    for (int b = 0; b < K; b++)
+        for (int a = 0; a < K; a++) {
+            float *plane = planes + ((size_t)b * K + (size_t)a) * (size_t)np * np;
+            for (int ny = 0; ny < np; ny++) {
+                long J = (long)b + (long)K * (ny - h);
+                size_t row = (size_t)(((J % nfl) + nfl) % nfl) * row_len;
+                for (int nx = 0; nx < np; nx++) {
+                    long I = (long)a + (long)K * (nx - h);
+                    float v = (float)(norm * buf[row + (size_t)(((I % nfl) + nfl) % nfl)]);
+                    plane[(size_t)ny * np + nx] = v;
+                    if (fabs(v) > *max) *max = fabs(v);
+                }
+            }
+        }
+    if (!out) return;
+    /* by whole pixels of distance c = max(|ox|, |oy|) first, then out[l] = max over c >= l - 1 */
+    for (int l = 0; l <= h; l++) out[l] = 0.0;
+    for (long J = 0; J < nfl; J++) {
+        long oy = labs(J < nfl / 2 ? J : J - nfl);
+        for (long I = 0; I < nfl; I++) {
+            long ox = labs(I < nfl / 2 ? I : I - nfl);
+            long c = (ox > oy ? ox : oy) / K;
+            double v = fabs(norm * buf[(size_t)J * row_len + (size_t)I]);
+            if (c > h) c = h;
+            if (v > out[c]) out[c] = v;
+        }
+    }
+    for (int c = h - 1; c >= 0; c--) out[c] = fmax(out[c], out[c + 1]);
+    /* a reading out to l pixels reads every pixel within l of the point along both axes, so
+     * what it leaves out lies beyond l, between samples l - 1 / K or more away */
+    for (int l = h; l >= 1; l--) out[l] = out[l - 1];
+}
+
+/* buf = the table (minus the core's when whole) at every q-th step, as a c2r of side nfft
+ * wants it. */
+static void load_table(const init_job *j, const wf_profile_core *co, int whole, int q, int nfft, double *buf)
+{
+    const int kr = j->kr, kq = kr / q;
+    const size_t side = 2 * (size_t)kr + 1, nf = (size_t)nfft, half = nf / 2 + 1;
+    memset(buf, 0, nf * (nf + 2) * sizeof(double));
+    for (int vq = -kq; vq <= kq; vq++)
+        for (int uq = 0; uq <= kq; uq++) {
+            size_t at = (size_t)(vq * q + kr) * side + (size_t)(uq * q + kr);
+            double *bb = buf + 2 * ((size_t)((vq % nfft + nfft) % nfft) * half + (size_t)uq);
+            bb[0] = (whole ? (double)j->re[at] : 0.0) - (whole ? 1.0 : -1.0) * (double)co->re[at];
+            bb[1] = (whole ? (double)j->im[at] : 0.0) - (whole ? 1.0 : -1.0) * (double)co->im[at];
+        }
+}
+
+/* Core `task`'s wing: (whole - core table) at every q-th step, c2r; then the core alone, its
+ * knot table, and the bound on reading it. */
+/* One c2r of side nfft on buf (in place). */
+static wf_status c2r(int nfft, double *buf)
+{
+    wf_fftw_lock();
+    fftw_plan plan = fftw_plan_dft_c2r_2d(nfft, nfft, (fftw_complex *)buf, buf, FFTW_ESTIMATE | FFTW_NO_BUFFERING);
+    wf_fftw_unlock();
+    if (!plan) return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", nfft);
+    fftw_execute(plan);
+    wf_fftw_lock();
+    fftw_destroy_plan(plan);
+    wf_fftw_unlock();
+    return WF_OK;
+}
+
 static wf_status wing_pass(void *ctx, int task, int slot)
 {
     init_job *j = ctx;
     const split_geom *g = &j->g;
     wf_profile_core *co = &j->psf->core[task];
     wf_arena *arena = &j->slot[slot];
-    const int kr = j->kr;
-    const size_t side = 2 * (size_t)kr + 1;
     size_t mark = wf_arena_mark(arena);
-    const size_t nf = (size_t)g->nfft, half = nf / 2 + 1;
-    double *buf;
-    wf_status st = wf_arena_calloc(arena, nf * (nf + 2), sizeof(double), "PSF wing FFT", (void **)&buf);
+    knot_geom kg;
+    knot_layout(j->acc, co->radius, &kg);
+    const size_t nf = (size_t)(g->nfft > kg.nfft ? g->nfft : kg.nfft);
+    double *buf, kmax = 0.0;
+    wf_status st = wf_arena_reserve(arena, nf * (nf + 2) * sizeof(double), "PSF wing FFT", (void **)&buf);
+    /* e(X) = (1 / lw^2) sum_k T(k) e^{i k X} for the draws' convention (sim/draw/profile.c) */
+    if (!st) load_table(j, co, 1, g->q, g->nfft, buf);
+    if (!st && !(st = c2r(g->nfft, buf)))
+        to_planes(buf, (long)g->nfft, WING_OS, 1.0 / ((double)g->lw * g->lw), g->h, g->np, co->wing, &co->wing_max, NULL);
+    if (!st) load_table(j, co, 0, kg.q, kg.nfft, buf);
+    if (!st && !(st = c2r(kg.nfft, buf)))
+        to_planes(buf, (long)kg.nfft, KNOT_OS, 1.0 / ((double)kg.lk * kg.lk), co->knot_half, co->knot_np, co->knot, &kmax,
+                  co->knot_out);
     if (st) {
         wf_arena_release(arena, mark);
         return st;
     }
-    const int kq = kr / g->q;
-    for (int vq = -kq; vq <= kq; vq++)
-        for (int uq = 0; uq <= kq; uq++) {
-            size_t at = (size_t)(vq * g->q + kr) * side + (size_t)(uq * g->q + kr);
-            double *bb = buf + 2 * ((size_t)((vq % g->nfft + g->nfft) % g->nfft) * half + (size_t)uq);
-            bb[0] = (double)j->re[at] - (double)co->re[at];
-            bb[1] = (double)j->im[at] - (double)co->im[at];
+    /* the reading's bound from the whole table (N = table_fft), plus what is left out */
+    const int kr = j->kr, n = j->acc->psf_table_fft;
+    const size_t side = 2 * (size_t)kr + 1;
+    double interp = 0.0;
+    for (int v = -kr; v <= kr; v++) {
+        const double ev = bilinear_err(v, n);
+        for (int u = -kr; u <= kr; u++) {
+            size_t at = (size_t)(v + kr) * side + (size_t)(u + kr);
+            interp += rad(co->re[at], co->im[at]) * (bilinear_err(u, n) + ev);
         }
-    wf_fftw_lock();
-    fftw_plan plan = fftw_plan_dft_c2r_2d(g->nfft, g->nfft, (fftw_complex *)buf, buf, FFTW_ESTIMATE | FFTW_NO_BUFFERING);
-    wf_fftw_unlock();
-    if (!plan) {
-        wf_arena_release(arena, mark);
-        return wf_error(WF_ERR_INTERNAL, "profile: FFTW could not plan a %d^2 FFT", g->nfft);
     }
-    fftw_execute(plan);
-    wf_fftw_lock();
-    fftw_destroy_plan(plan);
-    wf_fftw_unlock();
-    /* e(X) = (1 / lw^2) sum_k T(k) e^{i k X} for the draws' convention (sim/draw/profile.c) */
-    const double norm = 1.0 / ((double)g->lw * g->lw);
-    const long nfl = (long)g->nfft;
-    for (int b = 0; b < WING_OS; b++)
-        for (int a = 0; a < WING_OS; a++) {
-            float *plane = co->wing + ((size_t)b * WING_OS + (size_t)a) * (size_t)g->np * g->np;
-            for (int ny = 0; ny < g->np; ny++) {
-                long J = (long)b + (long)WING_OS * (ny - g->h);
-                size_t row = (size_t)(((J % nfl) + nfl) % nfl) * (nf + 2);
-                for (int nx = 0; nx < g->np; nx++) {
-                    long I = (long)a + (long)WING_OS * (nx - g->h);
-                    float v = (float)(norm * buf[row + (size_t)(((I % nfl) + nfl) % nfl)]);
-                    plane[(size_t)ny * g->np + nx] = v;
-                    if (fabs(v) > co->wing_max) co->wing_max = fabs(v);
-                }
-            }
+    co->knot_interp = interp / ((double)n * n);
+    /* what a reading out to l leaves out: at a plane's own phase it reads the plane's
+     * samples h - l .. h + l each way (and one more row and column, not counted here); the
+     * core's flux is the table's centre */
+    const int h = co->knot_half, np = co->knot_np;
+    const double cflux = co->re[(size_t)kr * side + (size_t)kr];
+    for (int l = 0; l <= h; l++) {
+        double miss = 0.0;
+        for (int pl = 0; pl < KNOT_OS * KNOT_OS; pl++) {
+            const float *plane = co->knot + (size_t)pl * np * np;
+            double in = 0.0;
+            for (int ny = h - l; ny <= h + l; ny++)
+                for (int nx = h - l; nx <= h + l; nx++) in += plane[(size_t)ny * np + nx];
+            miss = fmax(miss, 1.0 - in / cflux);
         }
+        co->knot_miss[l] = miss;
+    }
     wf_arena_release(arena, mark);
     return WF_OK;
 }
@@ -684,9 +796,17 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         goto out;
     for (int l = 0; l < ncore; l++) {
         wf_profile_core *co = &psf->core[l];
+        knot_geom kg;
         co->radius = ldexp(acc->core_radius, -l);
         if ((st = wf_arena_reserve(arena, (size_t)WING_OS * WING_OS * (size_t)j.g.np * (size_t)j.g.np * sizeof(float),
                                    "PSF wing", (void **)&co->wing)) ||
+            (knot_layout(acc, co->radius, &kg), co->knot_half = kg.h, co->knot_np = kg.np,
+             st = wf_arena_reserve(arena, (size_t)KNOT_OS * KNOT_OS * (size_t)kg.np * (size_t)kg.np * sizeof(float),
+                                   "PSF core knot table", (void **)&co->knot)) ||
+            (st = wf_arena_reserve(arena, ((size_t)co->knot_half + 1) * sizeof(double), "PSF core knot bounds",
+                                   (void **)&co->knot_out)) ||
+            (st = wf_arena_reserve(arena, ((size_t)co->knot_half + 1) * sizeof(double), "PSF core knot bounds",
+                                   (void **)&co->knot_miss)) ||
             (st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF core table", (void **)&co->re)) ||
             (st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF core table", (void **)&co->im)) ||
             (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF core envelope",
@@ -717,6 +837,7 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
     psf->ncore = ncore;
     if (ncore) {
         psf->wing_os = WING_OS;
+        psf->knot_os = KNOT_OS;
         psf->wing_half = j.g.h;
         psf->wing_np = j.g.np;
     }

@@ -7,12 +7,12 @@
 #include "sim/draw/profile.h"
 #include "sim/draw/profile_int.h"
 
-/* Where flux x core's wing falls for an object at (x, y): the four phase planes around its
- * fine offset and the bilinear weights (wf_profile_wing_at). */
-static void wing_place(const wf_profile_psf *psf, int core, double flux, double x, double y,
-                       wf_profile_wing_at *at)
+/* Where flux x a phase-plane table (a core's wing, or the core itself for a knot) falls for
+ * a point at (x, y): the four phase planes around its fine offset and the bilinear weights
+ * (wf_profile_wing_at); the table holds offsets -h .. h + 1 pixels in np samples a row. */
+static void table_place(const float *planes, int K, int h, int np, double flux, double x, double y,
+                        wf_profile_wing_at *at)
 {
-    const int K = psf->wing_os, h = psf->wing_half, np = psf->wing_np;
     const long plane = (long)np * np;
     /* fine index of pixel i: K (i - x) + K h = K i + s */
     double sx = K * (h - x), sy = K * (h - y);
@@ -23,7 +23,7 @@ static void wing_place(const wf_profile_psf *psf, int core, double flux, double 
     int b0 = (int)(ay - wf_floor_div_l(ay, K) * K);
     int b1 = (int)(ay + 1 - wf_floor_div_l(ay + 1, K) * K);
     *at = (wf_profile_wing_at){
-        .wing = psf->core[core - 1].wing,
+        .wing = planes,
         .np = np,
         .plane = {(b0 * K + a0) * plane, (b0 * K + a1) * plane, (b1 * K + a0) * plane,
                   (b1 * K + a1) * plane},
@@ -34,30 +34,55 @@ static void wing_place(const wf_profile_psf *psf, int core, double flux, double 
     };
 }
 
-/* stamp += flux x wing at (x, y): bilinear between the table's 1 / wing_os pixel samples.
- * The fractional position is the same for every pixel, so each row reads four contiguous
- * runs of the phase planes. */
+static void wing_place(const wf_profile_psf *psf, int core, double flux, double x, double y,
+                       wf_profile_wing_at *at)
+{
+    table_place(psf->core[core - 1].wing, psf->wing_os, psf->wing_half, psf->wing_np, flux, x, y, at);
+}
+
+/* stamp += a placed table of half-width h, the rows and columns whose two samples each lie
+ * in the table's central 2 lim + 2 (lim <= h: all of it). The fractional position is the same
+ * for every pixel, so each row reads four contiguous runs of the phase planes. */
+static void table_stamp(const wf_profile_wing_at *at, int h, int lim, wf_stamp *stamp)
+{
+    const long lo = h - lim, hi = h + lim + 1; /* the samples read */
+    long i0 = (long)stamp->x0 > lo - at->ox[0] ? (long)stamp->x0 : lo - at->ox[0];
+    long i1 = (long)stamp->x0 + stamp->nx - 1 < hi - at->ox[1] ? (long)stamp->x0 + stamp->nx - 1 : hi - at->ox[1];
+    long j0 = (long)stamp->y0 > lo - at->oy[0] ? (long)stamp->y0 : lo - at->oy[0];
+    long j1 = (long)stamp->y0 + stamp->ny - 1 < hi - at->oy[1] ? (long)stamp->y0 + stamp->ny - 1 : hi - at->oy[1];
+    const long np = at->np;
+    if (i0 > i1) return;
+    for (long j = j0; j <= j1; j++) {
+        long ny0 = j + at->oy[0], ny1 = j + at->oy[1];
+        /* rows of the four phase planes from the column of pixel i0 on */
+        const float *r00 = at->wing + at->plane[0] + ny0 * np + (i0 + at->ox[0]);
+        const float *r01 = at->wing + at->plane[1] + ny0 * np + (i0 + at->ox[1]);
+        const float *r10 = at->wing + at->plane[2] + ny1 * np + (i0 + at->ox[0]);
+        const float *r11 = at->wing + at->plane[3] + ny1 * np + (i0 + at->ox[1]);
+        double *dst = stamp->pix + (size_t)(j - stamp->y0) * stamp->nx + (size_t)(i0 - stamp->x0);
+        wf_profile_fold_k.wing(i1 - i0 + 1, at->w[0], at->w[1], at->w[2], at->w[3], r00, r01, r10, r11,
+                               dst);
+    }
+}
+
 void wf_profile_wing_stamp(const wf_profile_psf *psf, int core, double flux, double x, double y,
                            wf_stamp *stamp)
 {
     wf_profile_wing_at at;
     wing_place(psf, core, flux, x, y, &at);
-    const long np = at.np;
-    long i0 = (long)stamp->x0 > -at.ox[0] ? (long)stamp->x0 : -at.ox[0];
-    long i1 = (long)stamp->x0 + stamp->nx - 1 < np - 1 - at.ox[1] ? (long)stamp->x0 + stamp->nx - 1
-                                                                 : np - 1 - at.ox[1];
-    if (i0 > i1) return;
-    for (int yy = 0; yy < stamp->ny; yy++) {
-        long j = (long)stamp->y0 + yy, ny0 = j + at.oy[0], ny1 = j + at.oy[1];
-        if (ny0 < 0 || ny1 > np - 1) continue;
-        /* rows of the four phase planes from the column of pixel i0 on */
-        const float *r00 = at.wing + at.plane[0] + ny0 * np + (i0 + at.ox[0]);
-        const float *r01 = at.wing + at.plane[1] + ny0 * np + (i0 + at.ox[1]);
-        const float *r10 = at.wing + at.plane[2] + ny1 * np + (i0 + at.ox[0]);
-        const float *r11 = at.wing + at.plane[3] + ny1 * np + (i0 + at.ox[1]);
-        double *dst = stamp->pix + (size_t)yy * stamp->nx + (size_t)(i0 - stamp->x0);
-        wf_profile_fold_k.wing(i1 - i0 + 1, at.w[0], at.w[1], at.w[2], at.w[3], r00, r01, r10, r11,
-                               dst);
+    table_stamp(&at, psf->wing_half, psf->wing_half, stamp);
+}
+
+void wf_profile_knots_stamp(const wf_profile_psf *psf, int core, int lim, double fknot, int nk,
+                            const double *xy, double x, double y, wf_stamp *stamp)
+{
+    const wf_profile_core *co = &psf->core[core - 1];
+    const double p = psf->pixel_scale;
+    for (int k = 0; k < nk; k++) {
+        wf_profile_wing_at at;
+        table_place(co->knot, psf->knot_os, co->knot_half, co->knot_np, fknot, x + xy[2 * k] / p,
+                    y + xy[2 * k + 1] / p, &at);
+        table_stamp(&at, co->knot_half, lim, stamp);
     }
 }
 
