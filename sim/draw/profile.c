@@ -262,6 +262,7 @@ static wf_status draw_job(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
     }
     const int real_knots = klim >= 0;
     w->knot_last[3] = real_knots ? jb->nk : 0;
+    w->knot_last[4] = real_knots ? klim : 0;
     double kedge = (gd.half - 1) * p;
     for (int j = 0; j < (real_knots ? 0 : jb->nk); j++) {
         double kx = jb->knots[2 * j] + gd.dx, ky = jb->knots[2 * j + 1] + gd.dy;

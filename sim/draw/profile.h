@@ -142,13 +142,17 @@ typedef struct wf_profile_core {
     int knot_half, knot_np;
     double knot_interp;        /* bound on |core at any position - its bilinear reading from
                                   knot|, per unit flux, from the table: sum |T(k)| (e(k_x) +
-                                  e(k_y)) / N^2 */
+                                  e(k_y)) / N^2, plus the floats' rounding and the largest
+                                  sample beyond knot_half + 2 (the table's period folds the
+                                  core's tail back by that much) */
     double *knot_out;          /* [l], l = 0 .. knot_half: the largest |sample| l - 1
                                   pixels or more from the centre along x or y, per unit
                                   flux: left out by a reading out to l pixels only (no pixel
                                   is then off by more than knot_interp + knot_out[l]) */
     double *knot_miss;         /* [l]: the most of the core's light (a fraction) a reading out
-                                  to l pixels leaves out, over the phase planes */
+                                  to l pixels leaves out, wherever the knot sits: the least
+                                  any plane holds in a window of 2 l + 1 samples each way
+                                  that a reading's windows contain */
 } wf_profile_core;
 
 /* A PSF prepared for drawing: its Fourier transform times the pixel's, once. */
@@ -178,7 +182,7 @@ typedef struct wf_profile_psf {
      * noise, so faint galaxies take small boxes; errors and costs: docs/ACCURACY.md). Point
      * sources gain nothing and never take one. Such an object's knots, points, are each the
      * core at its own position: read from the core's real-space table (bilinear, every
-     * 1 / wing_os pixel) where their error bound allows, so that the box holds only the
+     * 1 / knot_os pixel) where their error bound allows, so that the box holds only the
      * smooth light, whose transform ends far sooner than a point's. */
     int ncore;                 /* cores, by radius halving from core[0] (acc.core_levels) */
     wf_profile_core core[WF_PROFILE_MAX_CORES];
@@ -212,9 +216,9 @@ typedef struct wf_profile_work {
     double *ring;          /* its rows interpolated along u, and a mirrored row */
     int *rim;              /* per draw: the extent of each row of the fine grid */
     int knot_method;       /* WF_KNOTS_* (sim/draw/profile_int.h) */
-    int knot_last[4];      /* the last draw's knots: lattice step (0: none), its taps, the
-                              knots summed directly, and those read from a core's knot
-                              table instead (real space) */
+    int knot_last[5];      /* the last draw's knots: lattice step (0: none), its taps, the
+                              knots summed directly, those read from a core's knot table
+                              instead (real space), and that reading's reach in pixels */
     int cut_last[2];       /* the last draw's Fourier extent in fine-grid steps: the smooth
                               part's (or point source's) and the knots' (0: none) */
     int keep_negatives;    /* 1: draws leave negative ringing in (wf_profile_keep_negatives) */

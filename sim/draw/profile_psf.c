@@ -247,7 +247,8 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
          * is */
         size_t taper = wf_arena_cost((size_t)img->n * (size_t)img->n * sizeof(double));
         const size_t nf = (size_t)(g.nfft > kg.nfft ? g.nfft : kg.nfft);
-        size_t fft = wf_arena_cost(nf * (nf + 2) * sizeof(double));
+        size_t fft = wf_arena_cost(nf * (nf + 2) * sizeof(double)) +
+                     wf_arena_cost(((size_t)kg.np + 1) * ((size_t)kg.np + 1) * sizeof(double));
         *scratch += taper > fft ? taper : fft;
     }
     int os = integer_oversampling(acc->pixel_scale, img->scale_arcsec);
@@ -607,6 +608,22 @@ static void to_planes(const double *buf, long nfl, int K, double norm, int h, in
     for (int l = h; l >= 1; l--) out[l] = out[l - 1];
 }
 
+/* The largest |sample| of the c2r's output at `from` pixels or more from the centre along x
+ * or y. */
+static double far_max(const double *buf, long nfl, int K, double norm, int from)
+{
+    const size_t row_len = (size_t)nfl + 2;
+    double m = 0.0;
+    for (long J = 0; J < nfl; J++) {
+        long oy = labs(J < nfl / 2 ? J : J - nfl);
+        for (long I = 0; I < nfl; I++) {
+            long ox = labs(I < nfl / 2 ? I : I - nfl);
+            if ((ox > oy ? ox : oy) >= (long)from * K) m = fmax(m, fabs(norm * buf[(size_t)J * row_len + (size_t)I]));
+        }
+    }
+    return m;
+}
+
 /* buf = the table (minus the core's when whole) at every q-th step, as a c2r of side nfft
  * wants it. */
 static void load_table(const init_job *j, const wf_profile_core *co, int whole, int q, int nfft, double *buf)
@@ -623,8 +640,6 @@ static void load_table(const init_job *j, const wf_profile_core *co, int whole, 
         }
 }
 
-/* Core `task`'s wing: (whole - core table) at every q-th step, c2r; then the core alone, its
- * knot table, and the bound on reading it. */
 /* One c2r of side nfft on buf (in place). */
 static wf_status c2r(int nfft, double *buf)
 {
@@ -639,6 +654,8 @@ static wf_status c2r(int nfft, double *buf)
     return WF_OK;
 }
 
+/* Core `task`'s wing: (whole - core table) at every q-th step, c2r; then the core alone, its
+ * knot table, and the bounds on reading it. */
 static wf_status wing_pass(void *ctx, int task, int slot)
 {
     init_job *j = ctx;
@@ -649,16 +666,18 @@ static wf_status wing_pass(void *ctx, int task, int slot)
     knot_geom kg;
     knot_layout(j->acc, co->radius, &kg);
     const size_t nf = (size_t)(g->nfft > kg.nfft ? g->nfft : kg.nfft);
-    double *buf, kmax = 0.0;
+    double *buf, kmax = 0.0, knot_far = 0.0;
     wf_status st = wf_arena_reserve(arena, nf * (nf + 2) * sizeof(double), "PSF wing FFT", (void **)&buf);
     /* e(X) = (1 / lw^2) sum_k T(k) e^{i k X} for the draws' convention (sim/draw/profile.c) */
     if (!st) load_table(j, co, 1, g->q, g->nfft, buf);
     if (!st && !(st = c2r(g->nfft, buf)))
         to_planes(buf, (long)g->nfft, WING_OS, 1.0 / ((double)g->lw * g->lw), g->h, g->np, co->wing, &co->wing_max, NULL);
     if (!st) load_table(j, co, 0, kg.q, kg.nfft, buf);
-    if (!st && !(st = c2r(kg.nfft, buf)))
+    if (!st && !(st = c2r(kg.nfft, buf))) {
         to_planes(buf, (long)kg.nfft, KNOT_OS, 1.0 / ((double)kg.lk * kg.lk), co->knot_half, co->knot_np, co->knot, &kmax,
                   co->knot_out);
+        knot_far = far_max(buf, (long)kg.nfft, KNOT_OS, 1.0 / ((double)kg.lk * kg.lk), co->knot_half + 2);
+    }
     if (st) {
         wf_arena_release(arena, mark);
         return st;
@@ -674,22 +693,46 @@ static wf_status wing_pass(void *ctx, int task, int slot)
             interp += rad(co->re[at], co->im[at]) * (bilinear_err(u, n) + ev);
         }
     }
-    co->knot_interp = interp / ((double)n * n);
-    /* what a reading out to l leaves out: at a plane's own phase it reads the plane's
-     * samples h - l .. h + l each way (and one more row and column, not counted here); the
-     * core's flux is the table's centre */
+    /* plus the table's own errors: its floats (half an ulp of its largest sample) and the
+     * period lk it is folded with, whose copies reach a reading from beyond h + 2 pixels
+     * (taken as the largest sample there, which the taper makes ~1e-7 of the peak) */
+    co->knot_interp = interp / ((double)n * n) + kmax * 0x1p-24 + knot_far;
+    /* What a reading out to l leaves out. Along an axis a plane is read over samples
+     * h - l .. h + l + 1, but where the fine index wraps to the next pixel (the first plane
+     * read at the last phase, the second at phase 0 one sample on) the two planes' windows are
+     * h - l .. h + l and h - l + 1 .. h + l + 1: every window holds one of those two of
+     * 2 l + 1 samples, so the least light of those in any plane bounds what a reading keeps
+     * (the light it reads is the bilinear weights' mean of its planes' windows). The windows
+     * are summed from each plane's running sums; the core's flux is the table's centre. */
     const int h = co->knot_half, np = co->knot_np;
     const double cflux = co->re[(size_t)kr * side + (size_t)kr];
-    for (int l = 0; l <= h; l++) {
-        double miss = 0.0;
-        for (int pl = 0; pl < KNOT_OS * KNOT_OS; pl++) {
-            const float *plane = co->knot + (size_t)pl * np * np;
-            double in = 0.0;
-            for (int ny = h - l; ny <= h + l; ny++)
-                for (int nx = h - l; nx <= h + l; nx++) in += plane[(size_t)ny * np + nx];
-            miss = fmax(miss, 1.0 - in / cflux);
+    double *run = NULL;
+    if ((st = wf_arena_reserve(arena, (size_t)(np + 1) * (size_t)(np + 1) * sizeof(double), "PSF knot sums",
+                               (void **)&run))) {
+        wf_arena_release(arena, mark);
+        return st;
+    }
+    for (int l = 0; l <= h; l++) co->knot_miss[l] = 0.0;
+    const size_t w = (size_t)np + 1;
+    for (int pl = 0; pl < KNOT_OS * KNOT_OS; pl++) {
+        const float *plane = co->knot + (size_t)pl * np * np;
+        for (int i = 0; i <= np; i++) run[i] = 0.0;
+        for (int ny = 0; ny < np; ny++) { /* run[(y) w + x]: the samples below row y, left of column x */
+            double rowsum = 0.0;
+            run[(size_t)(ny + 1) * w] = 0.0;
+            for (int nx = 0; nx < np; nx++) {
+                rowsum += plane[(size_t)ny * np + nx];
+                run[(size_t)(ny + 1) * w + (size_t)(nx + 1)] = run[(size_t)ny * w + (size_t)(nx + 1)] + rowsum;
+            }
         }
-        co->knot_miss[l] = miss;
+        for (int l = 0; l <= h; l++)
+            for (int sy = 0; sy < 2 && h + l + sy < np; sy++)
+                for (int sx = 0; sx < 2 && h + l + sx < np; sx++) {
+                    const size_t y0 = (size_t)(h - l + sy), y1 = (size_t)(h + l + sy + 1);
+                    const size_t x0 = (size_t)(h - l + sx), x1 = (size_t)(h + l + sx + 1);
+                    const double in = run[y1 * w + x1] - run[y0 * w + x1] - run[y1 * w + x0] + run[y0 * w + x0];
+                    co->knot_miss[l] = fmax(co->knot_miss[l], 1.0 - in / cflux);
+                }
     }
     wf_arena_release(arena, mark);
     return WF_OK;
