@@ -101,42 +101,36 @@ typedef struct split_geom {
     int h, np, q, lw, nfft;
 } split_geom;
 
-static void split_layout(const wf_psf_image *img, const wf_profile_accuracy *acc, split_geom *g)
+/* A real-space table of half-width h pixels, os samples a pixel (the wing's or a core's
+ * knot table): np samples a row, and its c2r from every q-th table step, the largest q whose
+ * period lw = table_fft / q holds it twice and 8 pixels more. */
+static void table_layout(const wf_profile_accuracy *acc, int h, int os, split_geom *g)
 {
-    double p = acc->pixel_scale;
-    g->h = (int)ceil((0.5 * (img->n - 1) * img->scale_arcsec + 0.5 * p) / p) + 1;
-    g->np = 2 * g->h + 2;
+    g->h = h;
+    g->np = 2 * h + 2;
     g->q = 1;
     for (int q = acc->psf_table_fft / 2; q > 1; q--)
-        if (acc->psf_table_fft % q == 0 && acc->psf_table_fft / q >= 2 * g->h + 8) {
+        if (acc->psf_table_fft % q == 0 && acc->psf_table_fft / q >= 2 * h + 8) {
             g->q = q;
             break;
         }
     g->lw = acc->psf_table_fft / g->q;
-    g->nfft = WING_OS * g->lw;
+    g->nfft = os * g->lw;
+}
+
+static void split_layout(const wf_psf_image *img, const wf_profile_accuracy *acc, split_geom *g)
+{
+    double p = acc->pixel_scale;
+    table_layout(acc, (int)ceil((0.5 * (img->n - 1) * img->scale_arcsec + 0.5 * p) / p) + 1, WING_OS, g);
 }
 
 /* The core's own real-space table (knots), KNOT_OS samples a pixel: its light ends at the
  * radius (taper), widened by the pixel's half; one pixel more for the bilinear reading's
- * second sample. Its transform needs only every q-th table step, as the wing's, with the
- * period table_fft / q at least twice its half-width and 8 pixels more. */
+ * second sample. */
 #define KNOT_OS 16
-typedef struct knot_geom {
-    int h, np, q, lk, nfft;
-} knot_geom;
-
-static void knot_layout(const wf_profile_accuracy *acc, double radius, knot_geom *g)
+static void knot_layout(const wf_profile_accuracy *acc, double radius, split_geom *g)
 {
-    g->h = (int)ceil(radius / acc->pixel_scale + 0.5) + 1;
-    g->np = 2 * g->h + 2;
-    g->q = 1;
-    for (int q = acc->psf_table_fft / 2; q > 1; q--)
-        if (acc->psf_table_fft % q == 0 && acc->psf_table_fft / q >= 2 * g->h + 8) {
-            g->q = q;
-            break;
-        }
-    g->lk = acc->psf_table_fft / g->q;
-    g->nfft = KNOT_OS * g->lk;
+    table_layout(acc, (int)ceil(radius / acc->pixel_scale + 0.5) + 1, KNOT_OS, g);
 }
 
 /* The bilinear reading of e^{i theta t} between t = 0 and 1 (samples 1 / KNOT_OS pixel apart)
@@ -238,7 +232,7 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
                    wf_arena_cost(((size_t)kr + 2) * sizeof(double)) +
                    wf_arena_cost((size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np *
                                  sizeof(float)));
-        knot_geom kg; /* the largest core's */
+        split_geom kg; /* the largest core's */
         knot_layout(acc, acc->core_radius, &kg);
         *bytes += (size_t)acc->core_levels *
                   (wf_arena_cost((size_t)KNOT_OS * KNOT_OS * (size_t)kg.np * (size_t)kg.np * sizeof(float)) +
@@ -663,7 +657,7 @@ static wf_status wing_pass(void *ctx, int task, int slot)
     wf_profile_core *co = &j->psf->core[task];
     wf_arena *arena = &j->slot[slot];
     size_t mark = wf_arena_mark(arena);
-    knot_geom kg;
+    split_geom kg;
     knot_layout(j->acc, co->radius, &kg);
     const size_t nf = (size_t)(g->nfft > kg.nfft ? g->nfft : kg.nfft);
     double *buf, kmax = 0.0, knot_far = 0.0;
@@ -674,9 +668,9 @@ static wf_status wing_pass(void *ctx, int task, int slot)
         to_planes(buf, (long)g->nfft, WING_OS, 1.0 / ((double)g->lw * g->lw), g->h, g->np, co->wing, &co->wing_max, NULL);
     if (!st) load_table(j, co, 0, kg.q, kg.nfft, buf);
     if (!st && !(st = c2r(kg.nfft, buf))) {
-        to_planes(buf, (long)kg.nfft, KNOT_OS, 1.0 / ((double)kg.lk * kg.lk), co->knot_half, co->knot_np, co->knot, &kmax,
+        to_planes(buf, (long)kg.nfft, KNOT_OS, 1.0 / ((double)kg.lw * kg.lw), co->knot_half, co->knot_np, co->knot, &kmax,
                   co->knot_out);
-        knot_far = far_max(buf, (long)kg.nfft, KNOT_OS, 1.0 / ((double)kg.lk * kg.lk), co->knot_half + 2);
+        knot_far = far_max(buf, (long)kg.nfft, KNOT_OS, 1.0 / ((double)kg.lw * kg.lw), co->knot_half + 2);
     }
     if (st) {
         wf_arena_release(arena, mark);
@@ -839,7 +833,7 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         goto out;
     for (int l = 0; l < ncore; l++) {
         wf_profile_core *co = &psf->core[l];
-        knot_geom kg;
+        split_geom kg;
         co->radius = ldexp(acc->core_radius, -l);
         if ((st = wf_arena_reserve(arena, (size_t)WING_OS * WING_OS * (size_t)j.g.np * (size_t)j.g.np * sizeof(float),
                                    "PSF wing", (void **)&co->wing)) ||
