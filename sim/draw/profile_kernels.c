@@ -361,7 +361,7 @@ static void wingclip_scalar(long n, const double *w, const float *const *r, cons
     psfmul_scalar(n - i, fr + (size_t)i * st, fi + (size_t)i * st, st, runr + i, runi + i,  \
                   bins + 2 * i);
 
-#define WING_BODY(V, VF, NL, ZU)                                                           \
+#define WING_BODY(V, VF, NL, ZU, TAIL)                                                     \
     long k = 0;                                                                            \
     for (; k + (NL) <= n; k += (NL)) {                                                     \
         VF a, b, c, d;                                                                     \
@@ -376,7 +376,7 @@ static void wingclip_scalar(long n, const double *w, const float *const *r, cons
         VSTORE(dst + k, o);                                                                \
     }                                                                                      \
     ZU();                                                                                  \
-    wing_scalar(n - k, w00, w01, w10, w11, r00 + k, r01 + k, r10 + k, r11 + k, dst + k);
+    TAIL(n - k, w00, w01, w10, w11, r00 + k, r01 + k, r10 + k, r11 + k, dst + k);
 
 /* the clip as a mask, no branch: about half the far pixels of a faint object are slightly
  * negative */
@@ -453,7 +453,7 @@ static void psfmul_v2(int n, const float *fr, const float *fi, size_t st, const 
 static void wing_v2(long n, double w00, double w01, double w10, double w11, const float *r00,
                     const float *r01, const float *r10, const float *r11, double *dst)
 {
-    WING_BODY(fv2, ff2, 2, no_zeroupper)
+    WING_BODY(fv2, ff2, 2, no_zeroupper, wing_scalar)
 }
 static void wingclip_v2(long n, const double *w, const float *const *r,
                            const float *box, double *acc)
@@ -518,7 +518,7 @@ __attribute__((target("avx2"))) static void wing_v4(long n, double w00, double w
                                                     double w11, const float *r00, const float *r01,
                                                     const float *r10, const float *r11, double *dst)
 {
-    WING_BODY(fv4, ff4, 4, _mm256_zeroupper)
+    WING_BODY(fv4, ff4, 4, _mm256_zeroupper, wing_scalar)
 }
 __attribute__((target("avx2"))) static void wingclip_v4(long n, const double *w, const float *const *r,
                                                         const float *box, double *acc)
@@ -586,7 +586,9 @@ __attribute__((target("avx512f"))) static void wing_v8(long n, double w00, doubl
                                                        double w11, const float *r00, const float *r01,
                                                        const float *r10, const float *r11, double *dst)
 {
-    WING_BODY(fv8, ff8, 8, _mm256_zeroupper)
+    /* a split galaxy's knots read from its core are rows of ~2 reach + 2 pixels: their tails
+     * take four lanes, then the scalar code (the same bits, lane for lane) */
+    WING_BODY(fv8, ff8, 8, _mm256_zeroupper, wing_v4)
 }
 __attribute__((target("avx512f"))) static void wingclip_v8(long n, const double *w, const float *const *r,
                                                            const float *box, double *acc)
