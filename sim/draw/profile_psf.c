@@ -564,9 +564,9 @@ static wf_status core_pass(void *ctx, int task, int slot)
 /* The c2r's output (period nfl fine samples, K per pixel) as K^2 phase planes of np^2
  * samples at offsets n - h + a / K pixels; the largest |sample| kept into *max and, when out
  * is non-NULL, out[l] (l = 0 .. h) the largest at l - 1 pixels or more from the centre along
- * x or y. */
+ * x or y, and *far the largest at h + 2 or more. */
 static void to_planes(const double *buf, long nfl, int K, double norm, int h, int np, float *planes,
-                      double *max, double *out)
+                      double *max, double *out, double *far)
 {
     const size_t row_len = (size_t)nfl + 2;
     for (int b = 0; b < K; b++)
@@ -586,12 +586,14 @@ static void to_planes(const double *buf, long nfl, int K, double norm, int h, in
     if (!out) return;
     /* by whole pixels of distance c = max(|ox|, |oy|) first, then out[l] = max over c >= l - 1 */
     for (int l = 0; l <= h; l++) out[l] = 0.0;
+    *far = 0.0;
     for (long J = 0; J < nfl; J++) {
         long oy = labs(J < nfl / 2 ? J : J - nfl);
         for (long I = 0; I < nfl; I++) {
             long ox = labs(I < nfl / 2 ? I : I - nfl);
             long c = (ox > oy ? ox : oy) / K;
             double v = fabs(norm * buf[(size_t)J * row_len + (size_t)I]);
+            if (c >= h + 2 && v > *far) *far = v;
             if (c > h) c = h;
             if (v > out[c]) out[c] = v;
         }
@@ -600,22 +602,6 @@ static void to_planes(const double *buf, long nfl, int K, double norm, int h, in
     /* a reading out to l pixels reads every pixel within l of the point along both axes, so
      * what it leaves out lies beyond l, between samples l - 1 / K or more away */
     for (int l = h; l >= 1; l--) out[l] = out[l - 1];
-}
-
-/* The largest |sample| of the c2r's output at `from` pixels or more from the centre along x
- * or y. */
-static double far_max(const double *buf, long nfl, int K, double norm, int from)
-{
-    const size_t row_len = (size_t)nfl + 2;
-    double m = 0.0;
-    for (long J = 0; J < nfl; J++) {
-        long oy = labs(J < nfl / 2 ? J : J - nfl);
-        for (long I = 0; I < nfl; I++) {
-            long ox = labs(I < nfl / 2 ? I : I - nfl);
-            if ((ox > oy ? ox : oy) >= (long)from * K) m = fmax(m, fabs(norm * buf[(size_t)J * row_len + (size_t)I]));
-        }
-    }
-    return m;
 }
 
 /* buf = the table (minus the core's when whole) at every q-th step, as a c2r of side nfft
@@ -629,8 +615,8 @@ static void load_table(const init_job *j, const wf_profile_core *co, int whole, 
         for (int uq = 0; uq <= kq; uq++) {
             size_t at = (size_t)(vq * q + kr) * side + (size_t)(uq * q + kr);
             double *bb = buf + 2 * ((size_t)((vq % nfft + nfft) % nfft) * half + (size_t)uq);
-            bb[0] = (whole ? (double)j->re[at] : 0.0) - (whole ? 1.0 : -1.0) * (double)co->re[at];
-            bb[1] = (whole ? (double)j->im[at] : 0.0) - (whole ? 1.0 : -1.0) * (double)co->im[at];
+            bb[0] = whole ? (double)j->re[at] - (double)co->re[at] : (double)co->re[at];
+            bb[1] = whole ? (double)j->im[at] - (double)co->im[at] : (double)co->im[at];
         }
 }
 
@@ -665,13 +651,12 @@ static wf_status wing_pass(void *ctx, int task, int slot)
     /* e(X) = (1 / lw^2) sum_k T(k) e^{i k X} for the draws' convention (sim/draw/profile.c) */
     if (!st) load_table(j, co, 1, g->q, g->nfft, buf);
     if (!st && !(st = c2r(g->nfft, buf)))
-        to_planes(buf, (long)g->nfft, WING_OS, 1.0 / ((double)g->lw * g->lw), g->h, g->np, co->wing, &co->wing_max, NULL);
+        to_planes(buf, (long)g->nfft, WING_OS, 1.0 / ((double)g->lw * g->lw), g->h, g->np, co->wing, &co->wing_max, NULL,
+                  NULL);
     if (!st) load_table(j, co, 0, kg.q, kg.nfft, buf);
-    if (!st && !(st = c2r(kg.nfft, buf))) {
+    if (!st && !(st = c2r(kg.nfft, buf)))
         to_planes(buf, (long)kg.nfft, KNOT_OS, 1.0 / ((double)kg.lw * kg.lw), co->knot_half, co->knot_np, co->knot, &kmax,
-                  co->knot_out);
-        knot_far = far_max(buf, (long)kg.nfft, KNOT_OS, 1.0 / ((double)kg.lw * kg.lw), co->knot_half + 2);
-    }
+                  co->knot_out, &knot_far);
     if (st) {
         wf_arena_release(arena, mark);
         return st;
@@ -688,7 +673,7 @@ static wf_status wing_pass(void *ctx, int task, int slot)
         }
     }
     /* plus the table's own errors: its floats (half an ulp of its largest sample) and the
-     * period lk it is folded with, whose copies reach a reading from beyond h + 2 pixels
+     * period lw it is folded with, whose copies reach a reading from beyond h + 2 pixels
      * (taken as the largest sample there, which the taper makes ~1e-7 of the peak) */
     co->knot_interp = interp / ((double)n * n) + kmax * 0x1p-24 + knot_far;
     /* What a reading out to l leaves out. Along an axis a plane is read over samples
