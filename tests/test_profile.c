@@ -1685,6 +1685,17 @@ static void assert_same_psf(const wf_profile_psf *a, const wf_profile_psf *b, in
                   !memcmp(a->env, b->env, ((size_t)a->kr + 2) * sizeof(double)) &&
                   !memcmp(a->ee, b->ee, (size_t)a->nee * sizeof(double)), "%d threads: whole table differs", threads);
     ck_assert_msg(a->pixel_max == b->pixel_max && a->kmax == b->kmax, "%d threads: bounds differ", threads);
+    ck_assert_msg(a->nalt == b->nalt && a->nalt > 0, "%d threads: %d and %d tables at other periods", threads,
+                  a->nalt, b->nalt);
+    for (int l = 0; l <= a->ncore; l++) /* the tables at other periods, the whole's and each core's */
+        for (int i = 0; i < a->nalt; i++) {
+            const wf_profile_table *p = l ? &a->core[l - 1].alt[i] : &a->alt[i];
+            const wf_profile_table *q = l ? &b->core[l - 1].alt[i] : &b->alt[i];
+            const size_t n = (size_t)(2 * p->kr + 1) * (size_t)(2 * p->kr + 1);
+            ck_assert_msg(p->fft == q->fft && p->kr == q->kr && !memcmp(p->re, q->re, n * sizeof(float)) &&
+                              !memcmp(p->im, q->im, n * sizeof(float)) && p->steps.n == q->steps.n,
+                          "%d threads: pass %d's table at another period differs", threads, l);
+        }
     for (int l = 0; l < a->ncore; l++) {
         const wf_profile_core *p = &a->core[l], *q = &b->core[l];
         ck_assert_msg(!memcmp(p->re, q->re, tab * sizeof(float)) && !memcmp(p->im, q->im, tab * sizeof(float)) &&
@@ -2770,9 +2781,11 @@ START_TEST(test_psf_table_interpolation)
     free(s2.pix);
     ctx_close(&c1);
     ctx_close(&c2);
-    /* a largest side (128) below the table's that does not divide it: the table is read
-     * at 1.5 steps per sample, more columns per row than samples; against a 384 table */
+    /* a largest side (128) below the table's that does not divide it and has no table of
+     * its own (extra_tables 0): the table is read at 1.5 steps per sample, more columns per
+     * row than samples; against a 384 table */
     a1.max_fft = a2.max_fft = 128;
+    a1.extra_tables = 0;
     a2.psf_table_fft = 384;
     ctx_open(&c1, &a1, &img);
     ctx_open(&c2, &a2, &img);
@@ -2789,6 +2802,103 @@ START_TEST(test_psf_table_interpolation)
     free(s2.pix);
     ctx_close(&c1);
     ctx_close(&c2);
+    free(psfpix);
+}
+END_TEST
+
+/* Tables at other periods (acc.extra_tables): FFT sides below psf_table_fft that do not
+ * divide it (128, 160 and 80 with the default 192) read a table of their own, exactly. Each
+ * such table, the whole PSF's and every core's, against the main table where their
+ * frequencies meet (period 128 step 2t is period 192 step 3t; 160's 5t is 192's 6t): the
+ * same transform sampled by another FFT of the image folded onto another period, so equal
+ * to the floats' rounding; and within the envelope. Then whole draws at those sides against
+ * the same draws from a single table whose period they divide (384 for 128, 480 for 160 and
+ * 80, extra_tables 0). */
+START_TEST(test_psf_extra_tables)
+{
+    wf_psf_image img;
+    double *psfpix = halo_psf(256, 0.08, 0.4, &img);
+    wf_profile_accuracy acc;
+    wf_profile_accuracy_default(&acc);
+    acc.core_radius = 1.0;
+    acc.core_levels = 2;
+    int per[1 + WF_PROFILE_MAX_ALT];
+    ck_assert_int_eq(wf_profile_table_periods(&acc, per), 3);
+    ck_assert(per[0] == 192 && per[1] == 160 && per[2] == 128);
+    ctx c;
+    ctx_open(&c, &acc, &img);
+    const wf_profile_psf *ps = &c.psf;
+    ck_assert_int_eq(ps->nalt, 2);
+    const double dkt = 2.0 * M_PI / (192 * P);
+    for (int pass = 0; pass <= ps->ncore; pass++) {
+        const float *mre = pass ? ps->core[pass - 1].re : ps->re, *mim = pass ? ps->core[pass - 1].im : ps->im;
+        const wf_profile_table *alt = pass ? ps->core[pass - 1].alt : ps->alt;
+        const double *env = pass ? ps->core[pass - 1].env : ps->env;
+        const int side = 2 * ps->kr + 1;
+        const double t0 = mre[(size_t)ps->kr * side + ps->kr];
+        for (int i = 0; i < 2; i++) {
+            const wf_profile_table *t = &alt[i];
+            const int a = t->fft == 128 ? 2 : 5, b = t->fft == 128 ? 3 : 6, as = 2 * t->kr + 1;
+            ck_assert(t->fft == per[1 + i]);
+            double worst = 0.0;
+            int met = 0;
+            for (int v = -t->kr; v <= t->kr; v++)
+                for (int u = -t->kr; u <= t->kr; u++) {
+                    size_t at = (size_t)(v + t->kr) * as + (size_t)(u + t->kr);
+                    double mag = hypot(t->re[at], t->im[at]), k = hypot(u, v) * 2.0 * M_PI / (t->fft * P);
+                    int ring = (int)(k / dkt * (1.0 - 1e-12));
+                    if (ring <= ps->kr)
+                        ck_assert_msg(mag <= env[ring] * (1.0 + 1e-6) + 1e-30,
+                                      "pass %d period %d (%d, %d): %.3g above the envelope %.3g", pass, t->fft,
+                                      u, v, mag, env[ring]);
+                    if (u % a || v % a || abs(u / a * b) > ps->kr || abs(v / a * b) > ps->kr) continue;
+                    size_t m = (size_t)(v / a * b + ps->kr) * side + (size_t)(u / a * b + ps->kr);
+                    worst = fmax(worst, fmax(fabs(t->re[at] - mre[m]), fabs(t->im[at] - mim[m])));
+                    met++;
+                }
+            printf("PSF pass %d, table at period %d: %d frequencies shared with the 192 table, worst "
+                   "difference %.2e of T(0)\n", pass, t->fft, met, worst / t0);
+            ck_assert(met > 100);
+            ck_assert_msg(worst <= 3e-7 * t0, "pass %d period %d: %.3g of T(0)", pass, t->fft, worst / t0);
+        }
+    }
+    ctx_close(&c);
+
+    /* draws: a galaxy with knots whose stamp sets the side. The PSF band-limited and no mode
+     * cut (kvalue_accuracy 1e-15), so that both draws sum every nonzero sample: a cut
+     * found from the two tables' own envelopes may differ by a ring (~1e-6 of the peak) */
+    img.band_limit = 40.0; /* rad/arcsec: T ~ 6e-3 there, a raised cosine from 36 */
+    wf_galaxy g = galaxy(1, 0.3, 0.3, 0.15, 0.3, 0.1);
+    g.n_knots = 10;
+    g.knot_frac = 0.2;
+    const int sides[3] = {128, 160, 80}, single[3] = {384, 480, 480};
+    for (int i = 0; i < 3; i++) {
+        wf_profile_accuracy a1, a2;
+        wf_profile_accuracy_default(&a1);
+        a1.kvalue_accuracy = 1e-15;
+        a2 = a1;
+        a2.psf_table_fft = single[i];
+        a2.extra_tables = 0;
+        ctx c1, c2;
+        ctx_open(&c1, &a1, &img);
+        ctx_open(&c2, &a2, &img);
+        /* the stamp, not the light, sets the side: a loose flux fraction and folding */
+        ck_assert(wf_profile_work_tune(&c1.work, 0.9, 0.05, 1e-15, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
+        ck_assert(wf_profile_work_tune(&c2.work, 0.9, 0.05, 1e-15, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
+        const int n = sides[i] - 1, h = n / 2;
+        wf_stamp s1 = stamp_new(0, 0, n, n), s2 = stamp_new(0, 0, n, n);
+        ck_assert(wf_profile_draw_galaxy(&c1.work, &g, &c1.psf, h + 0.3, h - 0.2, &s1) == WF_OK);
+        ck_assert(wf_profile_draw_galaxy(&c2.work, &g, &c2.psf, h + 0.3, h - 0.2, &s2) == WF_OK);
+        ck_assert_msg(s1.fft == sides[i] && s2.fft == sides[i], "sides %d %d", s1.fft, s2.fft);
+        double rel = worst_of_peak(&s1, &s2);
+        printf("side %d from its own table against a %d table: worst pixel %.2e of the peak\n", sides[i],
+               single[i], rel);
+        ck_assert_msg(rel < 1e-9, "side %d: %.3g of the peak", sides[i], rel); /* floats: ~1e-16 */
+        free(s1.pix);
+        free(s2.pix);
+        ctx_close(&c1);
+        ctx_close(&c2);
+    }
     free(psfpix);
 }
 END_TEST
@@ -3043,6 +3153,7 @@ static Suite *profile_suite(void)
     tcase_add_test(ind, test_core_tables_from_the_whole_image);
     tcase_add_test(ind, test_psf_table_steps);
     tcase_add_test(ind, test_psf_table_interpolation);
+    tcase_add_test(ind, test_psf_extra_tables);
     tcase_add_test(ind, test_psf_any_sampling);
     tcase_add_test(ind, test_knot_lattice);
     tcase_add_test(ind, test_knot_accuracy);

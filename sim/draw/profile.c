@@ -228,6 +228,7 @@ static wf_status draw_job(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
         view.re = psf->core[split - 1].re;
         view.im = psf->core[split - 1].im;
         view.steps = psf->core[split - 1].steps;
+        memcpy(view.alt, psf->core[split - 1].alt, sizeof view.alt);
         view.env = psf->core[split - 1].env;
         psf = &view;
     }
@@ -281,11 +282,23 @@ static wf_status draw_job(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
     const double kck = gd.nk ? wf_profile_psf_kcut(jb, t, psf, w->acc.kvalue_accuracy, 1) : 0.0;
     double ksmooth = fmin(kband, kcs);
     double kknots = gd.nk ? fmin(kband, kck) : 0.0;
-    int lim;
-    if (psf->table_fft % gd.m == 0) {
+    int lim, tab = wf_profile_psf_period(psf, gd.m);
+    if (tab >= 0) { /* the table at a period the side divides, or its copy at the step */
+        const wf_profile_table *at = tab ? &psf->alt[tab - 1] : NULL;
+        const wf_profile_steps *sc = tab ? &at->steps : &psf->steps;
         gd.mode = WF_GRID_EXACT;
-        gd.st = psf->table_fft / gd.m;
-        lim = psf->kr / gd.st;
+        gd.st = (tab ? at->fft : psf->table_fft) / gd.m;
+        gd.tre = tab ? at->re : psf->re;
+        gd.tim = tab ? at->im : psf->im;
+        gd.tkr = tab ? at->kr : psf->kr;
+        lim = gd.tkr / gd.st;
+        for (int i = 0; i < sc->n && gd.st > 1; i++)
+            if (sc->st[i] == gd.st) {
+                gd.tre = sc->re[i];
+                gd.tim = sc->im[i];
+                gd.tkr = sc->kr[i];
+                gd.st = 1;
+            }
     } else {
         gd.mode = WF_GRID_INTERP;
         lim = (int)floor((psf->kr - 2) * (double)gd.m / psf->table_fft);

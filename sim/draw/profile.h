@@ -54,8 +54,12 @@ typedef struct wf_profile_accuracy {
     double kvalue_accuracy;   /* Fourier modes below this fraction of the flux are dropped [1e-5] */
     int min_fft;              /* smallest FFT side [16] */
     int max_fft;              /* largest FFT side: bounds memory and time per object [1024] */
-    int psf_table_fft;        /* FFT sides dividing this read the PSF table exactly, others
-                                 interpolate it (bicubic) [192] */
+    int psf_table_fft;        /* FFT sides dividing this read the PSF table exactly, larger
+                                 ones interpolate it (bicubic) [192] */
+    int extra_tables;         /* 1: every FFT side below psf_table_fft reads a table exactly,
+                                 those that do not divide it one more table at the largest
+                                 side they divide (wf_profile_table_periods; up to
+                                 WF_PROFILE_MAX_ALT of them); 0: such sides are skipped [1] */
     double core_radius;       /* arcsec; > 0 splits the PSF into core and wing ("Core and
                                  wing" below) [0: one PSF, the reference] */
     int core_levels;          /* core radii: core_radius halved at each level, up to
@@ -123,11 +127,22 @@ typedef struct wf_profile_steps {
     float *re[WF_PROFILE_MAX_STEPS], *im[WF_PROFILE_MAX_STEPS];
 } wf_profile_steps;
 
+/* The PSF x pixel transform sampled at another period P (k step 2 pi / (P pixel_scale)), for
+ * the FFT sides below table_fft that divide P but not table_fft: |u|, |v| <= kr, laid out as
+ * the main table, and its copies at those sides' steps. */
+#define WF_PROFILE_MAX_ALT 2
+typedef struct wf_profile_table {
+    int fft, kr;
+    float *re, *im;
+    wf_profile_steps steps;
+} wf_profile_table;
+
 /* One core of a split PSF (wf_profile_psf below). */
 typedef struct wf_profile_core {
     double radius;             /* arcsec */
     float *re, *im;            /* the core's table, laid out as the whole one */
     wf_profile_steps steps;    /* and its copies at the draws' steps */
+    wf_profile_table alt[WF_PROFILE_MAX_ALT]; /* at the other periods, as the whole one's */
     double *env;               /* its envelope, as env */
     double flux;               /* the core's share of the image's flux */
     double wing_max;           /* largest |wing| pixel value, per unit flux */
@@ -163,14 +178,18 @@ typedef struct wf_profile_psf {
     int kr;                    /* the table holds |kx|, |ky| <= kr steps */
     float *re, *im;            /* (2 kr + 1)^2, row (ky) major, k = 0 at [kr][kr] */
     wf_profile_steps steps;    /* its copies at the draws' steps */
+    int nalt;                  /* tables at other periods (acc.extra_tables) */
+    wf_profile_table alt[WF_PROFILE_MAX_ALT];
     double kmax;               /* rad/arcsec beyond which |PSF(k) pixel(k)| < 1e-7 flux */
     double pixel_max;          /* bound on any pixel of the image per unit flux, for any
-                                  position, whole or through any core: sum |table| / N^2 */
+                                  position, whole or through any core: sum |table| / N^2,
+                                  the largest over the periods N */
     int nee;                   /* encircled energy of the image, for stamp sizes: */
     double ee_dr;              /* radius step, arcsec */
     double *ee;                /* ee[i]: fraction of the image's flux within (i + 1) ee_dr */
-    double *env;               /* env[i]: max |PSF(k) pixel(k)| over |k| >= i table steps, for
-                                  cutting each draw where object x PSF < kvalue_accuracy */
+    double *env;               /* env[i]: max |PSF(k) pixel(k)| over |k| >= i table steps (the
+                                  samples of every period), for cutting each draw where
+                                  object x PSF < kvalue_accuracy */
     /* Core and wing (acc.core_radius > 0; else ncore 0). A core is the image times a taper
      * T(r) (1 within 2/3 of its radius, a raised cosine to 0 at it); its wing is the rest,
      * exactly: the inverse transform of (whole table - core table), in real space, pixel
@@ -229,8 +248,9 @@ typedef struct wf_profile_work {
 /* Bytes the work buffers take from an arena for these knobs (15.7 MB at the defaults,
  * most of it the max_fft^2 FFT buffer), and (dense, may be NULL) how many of them, from the
  * start of what wf_profile_work_init takes, it fills whole (~2 MB); the rest is touched only
- * as far as the draws reach. FFT sides are 2^a and 3 * 2^a from min_fft to max_fft; with a
- * PSF, sides up to psf_table_fft are used only if they divide it. */
+ * as far as the draws reach. FFT sides are 2^a, 3 * 2^a and 5 * 2^a from min_fft to max_fft;
+ * with a PSF, sides up to psf_table_fft are used only if they read one of its tables exactly
+ * (they divide its period: psf_table_fft, or with extra_tables one more). */
 wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes, size_t *dense);
 wf_status wf_profile_work_init(wf_profile_work *work, const wf_profile_accuracy *acc,
                                wf_arena *arena);

@@ -120,18 +120,9 @@ void wf_profile_fold_pass(wf_profile_work *w, const wf_draw_job *jb, const wf_pr
     const int pcap = wf_profile_ladder_max(w) / 2 + 8 + (wf_profile_ladder_max(w) / 2 - half);
     const size_t row_len = (size_t)m + 2; /* doubles per row of the in-place buffer */
     const size_t ks = gd->ks;
-    /* the table, or its copy at this grid's step, which reads it contiguously */
-    const float *tre = psf ? psf->re : NULL, *tim = psf ? psf->im : NULL;
-    int tkr = psf ? psf->kr : 0, tst = gd->st;
-    if (psf && gd->mode == WF_GRID_EXACT && tst > 1)
-        for (int i = 0; i < psf->steps.n; i++)
-            if (psf->steps.st[i] == tst) {
-                tre = psf->steps.re[i];
-                tim = psf->steps.im[i];
-                tkr = psf->steps.kr[i];
-                tst = 1;
-                break;
-            }
+    /* the table this side reads exactly (draw_job: at its period, or its copy at the step) */
+    const float *tre = gd->tre, *tim = gd->tim;
+    const int tkr = gd->tkr, tst = gd->st;
     const int side = psf ? 2 * tkr + 1 : 0;
     const int smooth = knot0 <= 0;
     double ckr[WF_PROFILE_MAX_KNOTS], cki[WF_PROFILE_MAX_KNOTS];

@@ -59,9 +59,19 @@ static inline double wf_sersic4_eval(const wf_sersic_table *t, double w)
 #define WF_PSF_BAND_NYQ 8.0
 
 struct wf_profile_accuracy;
-/* The FFT sides a drawing work uses (2^k and 3 2^k from min_fft to max_fft), ascending: up
- * to cap of them into sizes; returns the count. */
+/* The FFT sides a drawing work uses (2^k, 3 2^k and 5 2^k from min_fft to max_fft),
+ * ascending: up to cap of them into sizes; returns the count. */
 int wf_profile_fft_ladder(const struct wf_profile_accuracy *acc, int *sizes, int cap);
+
+/* The periods of a PSF's tables: per[0] = psf_table_fft, then (acc.extra_tables) each of the
+ * ladder's sides below it, largest first, that divides none of the periods before it, up to
+ * WF_PROFILE_MAX_ALT more. Returns how many. A side m <= psf_table_fft reads the first
+ * period it divides exactly, at every (P / m)-th sample; wf_profile_table_of says which (-1:
+ * none; such sides are skipped, sides above psf_table_fft interpolate the first). */
+int wf_profile_table_periods(const struct wf_profile_accuracy *acc, int *per);
+int wf_profile_table_of(const int *per, int n, int m);
+/* The same for a prepared PSF (its table_fft, then its alt[]): 0, i + 1 for alt[i], or -1. */
+int wf_profile_psf_period(const struct wf_profile_psf *psf, int m);
 
 /* WF_OK when the knobs are in range, else an error naming the first one out of range. */
 wf_status wf_profile_check_accuracy(const struct wf_profile_accuracy *acc);
@@ -141,6 +151,8 @@ enum { WF_GRID_EXACT, WF_GRID_INTERP };
 
 typedef struct wf_draw_grid {
     int m, half, mode, st, u;
+    const float *tre, *tim; /* WF_GRID_EXACT: the table this side reads (its copy at st when */
+    int tkr;                /* there is one, st then 1), |u|, |v| <= tkr */
     double dk;
     int ic, jc;
     double dx, dy;       /* arcsec from the centre of pixel (ic, jc) to the object */

@@ -154,21 +154,22 @@ static double core_taper(double r, double rc)
     return 0.5 * (1.0 + cos(M_PI * (r - r1) / (rc - r1)));
 }
 
-/* The steps st > 1 at which the draws read a table exactly: table_fft / M for the ladder's
- * sides M below table_fft that divide it, ascending. */
-static int table_steps(const wf_profile_accuracy *acc, int *st)
+/* The steps st > 1 at which the draws read table `which` (of wf_profile_table_periods) exactly:
+ * P / M for the ladder's sides M below its period P that read it, ascending. */
+static int table_steps(const wf_profile_accuracy *acc, int which, int *st)
 {
     int sizes[48], n = wf_profile_fft_ladder(acc, sizes, 48), k = 0;
+    int per[1 + WF_PROFILE_MAX_ALT], np = wf_profile_table_periods(acc, per);
     for (int i = n - 1; i >= 0 && k < WF_PROFILE_MAX_STEPS; i--)
-        if (sizes[i] < acc->psf_table_fft && acc->psf_table_fft % sizes[i] == 0)
-            st[k++] = acc->psf_table_fft / sizes[i];
+        if (sizes[i] < per[which] && wf_profile_table_of(per, np, sizes[i]) == which)
+            st[k++] = per[which] / sizes[i];
     return k;
 }
 
 /* Arena bytes of one table's copies at its steps, for a table of |k| <= kr steps. */
-static size_t steps_bytes(const wf_profile_accuracy *acc, int kr)
+static size_t steps_bytes(const wf_profile_accuracy *acc, int which, int kr)
 {
-    int st[WF_PROFILE_MAX_STEPS], n = table_steps(acc, st);
+    int st[WF_PROFILE_MAX_STEPS], n = table_steps(acc, which, st);
     size_t bytes = 0;
     for (int i = 0; i < n; i++) {
         size_t side = 2 * (size_t)(kr / st[i]) + 1;
@@ -177,15 +178,56 @@ static size_t steps_bytes(const wf_profile_accuracy *acc, int kr)
     return bytes;
 }
 
-static wf_status steps_alloc(wf_arena *arena, const wf_profile_accuracy *acc, int kr, wf_profile_steps *s)
+static wf_status steps_alloc(wf_arena *arena, const wf_profile_accuracy *acc, int which, int kr, wf_profile_steps *s)
 {
-    s->n = table_steps(acc, s->st);
+    s->n = table_steps(acc, which, s->st);
     for (int i = 0; i < s->n; i++) {
         s->kr[i] = kr / s->st[i];
         size_t side = 2 * (size_t)s->kr[i] + 1;
         wf_status st;
         if ((st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF table step copy", (void **)&s->re[i])) ||
             (st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF table step copy", (void **)&s->im[i])))
+            return st;
+    }
+    return WF_OK;
+}
+
+/* The half-width in its own steps of the table at period P that holds what the main one's
+ * kr steps (less its 2 steps of room for the bicubic taps) hold; within the sampling. */
+static int alt_kr(const wf_psf_image *img, const wf_profile_accuracy *acc, int P, int kr)
+{
+    wf_profile_accuracy a = *acc;
+    a.psf_table_fft = P;
+    int k = (int)ceil((kr - 2) * (double)P / acc->psf_table_fft) + 1, ks = sampling_kr(img, &a);
+    return k < ks ? k : ks;
+}
+
+/* Arena bytes of one pass's tables at the other periods, |k| <= kr main steps. */
+static size_t alt_bytes(const wf_psf_image *img, const wf_profile_accuracy *acc, int kr)
+{
+    int per[1 + WF_PROFILE_MAX_ALT], np = wf_profile_table_periods(acc, per);
+    size_t bytes = 0;
+    for (int i = 1; i < np; i++) {
+        int k = alt_kr(img, acc, per[i], kr);
+        size_t side = 2 * (size_t)k + 1;
+        bytes += 2 * wf_arena_cost(side * side * sizeof(float)) + steps_bytes(acc, i, k);
+    }
+    return bytes;
+}
+
+static wf_status alt_alloc(wf_arena *arena, const wf_psf_image *img, const wf_profile_accuracy *acc, int kr,
+                           wf_profile_table *alt)
+{
+    int per[1 + WF_PROFILE_MAX_ALT], np = wf_profile_table_periods(acc, per);
+    for (int i = 1; i < np; i++) {
+        wf_profile_table *t = &alt[i - 1];
+        t->fft = per[i];
+        t->kr = alt_kr(img, acc, per[i], kr);
+        size_t side = 2 * (size_t)t->kr + 1;
+        wf_status st;
+        if ((st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF table at another period", (void **)&t->re)) ||
+            (st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF table at another period", (void **)&t->im)) ||
+            (st = steps_alloc(arena, acc, i, t->kr, &t->steps)))
             return st;
     }
     return WF_OK;
@@ -219,7 +261,7 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
     int kr = sampling_kr(img, acc);
     size_t side = 2 * (size_t)kr + 1;
     /* an upper bound: the table is trimmed to the PSF's band once it is known */
-    *bytes = 2 * wf_arena_cost(side * side * sizeof(float)) + steps_bytes(acc, kr) +
+    *bytes = 2 * wf_arena_cost(side * side * sizeof(float)) + steps_bytes(acc, 0, kr) + alt_bytes(img, acc, kr) +
              wf_arena_cost(ee_count(img) * sizeof(double)) +
              wf_arena_cost(((size_t)kr + 2) * sizeof(double));
     /* the transform and the pixel's sinc line */
@@ -228,7 +270,7 @@ wf_status wf_profile_psf_need(const wf_psf_image *img, const wf_profile_accuracy
         split_geom g;
         split_layout(img, acc, &g);
         *bytes += (size_t)acc->core_levels *
-                  (2 * wf_arena_cost(side * side * sizeof(float)) + steps_bytes(acc, kr) +
+                  (2 * wf_arena_cost(side * side * sizeof(float)) + steps_bytes(acc, 0, kr) + alt_bytes(img, acc, kr) +
                    wf_arena_cost(((size_t)kr + 2) * sizeof(double)) +
                    wf_arena_cost((size_t)WING_OS * WING_OS * (size_t)g.np * (size_t)g.np *
                                  sizeof(float)));
@@ -481,7 +523,7 @@ typedef struct init_job {
     const wf_psf_image *img;
     const wf_profile_accuracy *acc;
     wf_arena *slot;             /* scratch arena per thread slot */
-    int kr_s, kr;
+    int kr_s, kr, nalt;
     double dkt, band, sum, c;
     split_geom g;
     float *re, *im;
@@ -494,37 +536,57 @@ typedef struct init_job {
  * do not need and which costs several times more. */
 static inline double rad(double a, double b) { return sqrt(a * a + b * b); }
 
-/* Table, envelope and pixel bound of one pass from its raw transform: (2 kr_s + 1)^2 complex,
- * kr_s >= the table's kr. */
-static void fill_table(init_job *j, int pass, const double *raw, int kr_s)
+/* Table `which` (0 the main one, i + 1 alt[i]), envelope and pixel bound of one pass from its
+ * raw transform at that table's period: (2 kr_s + 1)^2 complex, kr_s >= the table's kr. The
+ * envelope's rings are the main table's steps whatever the period, so that it bounds every
+ * sample a draw reads. */
+static void fill_table(init_job *j, int pass, int which, const double *raw, int kr_s)
 {
     wf_profile_psf *psf = j->psf;
     wf_profile_core *co = pass ? &psf->core[pass - 1] : NULL;
-    const int kr = j->kr;
+    wf_profile_table *at = which ? (pass ? &co->alt[which - 1] : &psf->alt[which - 1]) : NULL;
+    const int kr = which ? at->kr : j->kr, P = which ? at->fft : j->acc->psf_table_fft;
+    const double dk = 2.0 * M_PI / (P * j->acc->pixel_scale), to_ring = (double)j->acc->psf_table_fft / P;
     const size_t side = 2 * (size_t)kr + 1, side_s = 2 * (size_t)kr_s + 1;
-    float *tr = pass ? co->re : j->re, *ti = pass ? co->im : j->im;
+    float *tr = which ? at->re : pass ? co->re : j->re, *ti = which ? at->im : pass ? co->im : j->im;
     double *te = pass ? co->env : j->env, sabs = 0.0;
     for (int v = -kr; v <= kr; v++)
         for (int u = -kr; u <= kr; u++) {
             const double *o = raw + 2 * ((size_t)(v + kr_s) * side_s + (size_t)(u + kr_s));
-            size_t at = (size_t)(v + kr) * side + (size_t)(u + kr);
+            size_t idx = (size_t)(v + kr) * side + (size_t)(u + kr);
             double rk = rad(u, v);
-            double wt = band_taper(j->dkt * rk, j->band);
-            tr[at] = (float)(wt * o[0]);
-            ti[at] = (float)(wt * o[1]);
-            int ring = (int)rk;
+            double wt = band_taper(dk * rk, j->band);
+            tr[idx] = (float)(wt * o[0]);
+            ti[idx] = (float)(wt * o[1]);
+            int ring = (int)(rk * to_ring);
             double mag = wt * rad(o[0], o[1]);
-            if (ring <= kr) te[ring] = fmax(te[ring], mag);
+            if (ring <= j->kr) te[ring] = fmax(te[ring], mag);
             sabs += mag;
         }
-    /* the image (pixel included) periodised with the samples' period of N = table_fft
-     * pixels is (1 / N^2) sum_k T(k) e^{i k.X} at any X, and not below the image: no
-     * pixel exceeds sum |T| / N^2 (at Y106 0.477, 0.6% above the brightest pixel found
-     * by a 1/16-pixel search: the transform is nearly real and positive) */
-    const double nn = (double)j->acc->psf_table_fft * j->acc->psf_table_fft;
-    j->pixel_max[pass] = sabs / (nn * j->sum);
-    for (int i = kr; i > 0; i--) te[i - 1] = fmax(te[i - 1], te[i]);
-    steps_fill(tr, ti, kr, pass ? &co->steps : &psf->steps);
+    /* the image (pixel included) periodised with the samples' period of N = P pixels is
+     * (1 / N^2) sum_k T(k) e^{i k.X} at any X, and not below the image: no pixel exceeds
+     * sum |T| / N^2 (at Y106 0.477, 0.6% above the brightest pixel found by a 1/16-pixel
+     * search: the transform is nearly real and positive) */
+    j->pixel_max[pass] = fmax(j->pixel_max[pass], sabs / ((double)P * P * j->sum));
+    for (int i = j->kr; i > 0; i--) te[i - 1] = fmax(te[i - 1], te[i]);
+    steps_fill(tr, ti, kr, which ? &at->steps : pass ? &co->steps : &psf->steps);
+}
+
+/* Pass `pass`'s tables at the other periods: the (pass's) image transformed at each. */
+static wf_status fill_alt(init_job *j, int pass, const wf_psf_image *img, const support *sp, wf_arena *arena)
+{
+    const wf_profile_table *alt = pass ? j->psf->core[pass - 1].alt : j->psf->alt;
+    for (int i = 0; i < j->nalt; i++) {
+        wf_profile_accuracy a = *j->acc;
+        a.psf_table_fft = alt[i].fft;
+        size_t mark = wf_arena_mark(arena);
+        double *raw;
+        wf_status st = pixel_transform(img, sp, &a, alt[i].kr, arena, &raw);
+        if (st) return st;
+        fill_table(j, pass, i + 1, raw, alt[i].kr);
+        wf_arena_release(arena, mark);
+    }
+    return WF_OK;
 }
 
 /* Core `task`: the image times its taper, transformed. */
@@ -555,7 +617,12 @@ static wf_status core_pass(void *ctx, int task, int slot)
         src.pix = tapered;
         /* only the table's window: the band, found from the whole image's transform, is
          * known by now (each sample is computed as in the full plane, so the same bits) */
-        if (!(st = pixel_transform(&src, &sp, j->acc, j->kr, arena, &raw))) fill_table(j, task + 1, raw, j->kr);
+        size_t mark1 = wf_arena_mark(arena);
+        if (!(st = pixel_transform(&src, &sp, j->acc, j->kr, arena, &raw))) {
+            fill_table(j, task + 1, 0, raw, j->kr);
+            wf_arena_release(arena, mark1);
+            st = fill_alt(j, task + 1, &src, &sp, arena);
+        }
     }
     wf_arena_release(arena, mark);
     return st;
@@ -733,6 +800,10 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
                         img->scale_arcsec, acc->pixel_scale);
     init_job j = {.psf = psf, .img = img, .acc = acc, .sum = sum};
     j.kr_s = sampling_kr(img, acc);
+    {
+        int per[1 + WF_PROFILE_MAX_ALT];
+        j.nalt = wf_profile_table_periods(acc, per) - 1;
+    }
     const int kr_s = j.kr_s;
     j.dkt = 2.0 * M_PI / (acc->psf_table_fft * acc->pixel_scale);
     j.band = img->band_limit > 0.0 ? img->band_limit : INFINITY;
@@ -814,7 +885,7 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         (st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF table", (void **)&j.im)) ||
         (st = wf_arena_calloc(arena, nee, sizeof(double), "PSF encircled energy", (void **)&ee)) ||
         (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF envelope", (void **)&j.env)) ||
-        (st = steps_alloc(arena, acc, kr, &psf->steps)))
+        (st = steps_alloc(arena, acc, 0, kr, &psf->steps)) || (st = alt_alloc(arena, img, acc, kr, psf->alt)))
         goto out;
     for (int l = 0; l < ncore; l++) {
         wf_profile_core *co = &psf->core[l];
@@ -833,7 +904,7 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
             (st = wf_arena_reserve(arena, side * side * sizeof(float), "PSF core table", (void **)&co->im)) ||
             (st = wf_arena_calloc(arena, (size_t)kr + 2, sizeof(double), "PSF core envelope",
                                   (void **)&co->env)) ||
-            (st = steps_alloc(arena, acc, kr, &co->steps)))
+            (st = steps_alloc(arena, acc, 0, kr, &co->steps)) || (st = alt_alloc(arena, img, acc, kr, co->alt)))
             goto out;
     }
     /* encircled energy about the image centre, for stamp sizes */
@@ -845,8 +916,9 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
         }
     /* the whole image's table from the transform in hand; then each core's (the tapered
      * image), and each core's wing, which needs both tables */
-    fill_table(&j, 0, raw, kw);
+    fill_table(&j, 0, 0, raw, kw);
     wf_arena_release(&slots[0], mark0);
+    if ((st = fill_alt(&j, 0, img, NULL, &slots[0]))) goto out;
     if ((st = wf_parallel_for(ncore, T, core_pass, &j)) || (st = wf_parallel_for(ncore, T, wing_pass, &j)))
         goto out;
     for (int pass = 0; pass <= ncore; pass++) psf->pixel_max = fmax(psf->pixel_max, j.pixel_max[pass]);
@@ -868,6 +940,7 @@ wf_status wf_profile_psf_init(wf_profile_psf *psf, const wf_psf_image *img,
     psf->scale = img->scale_arcsec;
     psf->flux = sum;
     psf->table_fft = acc->psf_table_fft;
+    psf->nalt = j.nalt;
     psf->kr = kr;
     psf->re = j.re;
     psf->im = j.im;

@@ -350,7 +350,7 @@ int wf_profile_choose_size(const wf_profile_work *w, const wf_profile_psf *psf, 
     for (int i = 0; i < w->nsizes; i++) {
         int m = w->sizes[i];
         if (m < need) continue;
-        if (psf && m <= psf->table_fft && psf->table_fft % m) continue;
+        if (psf && m <= psf->table_fft && wf_profile_psf_period(psf, m) < 0) continue;
         return i;
     }
     return w->nsizes - 1;

@@ -19,6 +19,7 @@ void wf_profile_accuracy_default(wf_profile_accuracy *acc)
     acc->min_fft = 16;
     acc->max_fft = 1024;
     acc->psf_table_fft = 192;
+    acc->extra_tables = 1;
     acc->core_radius = 0.0;
     acc->core_levels = 1;
     acc->wing_tolerance = 0.0;
@@ -61,6 +62,8 @@ wf_status wf_profile_check_accuracy(const wf_profile_accuracy *acc)
                         acc->cut_tolerance);
     /* even also because the PSF tables' batched real transforms are planned without
      * buffering (sim/draw/profile_psf.c), which FFTW cannot do for odd lengths past 15 */
+    if (acc->extra_tables != 0 && acc->extra_tables != 1)
+        return wf_error(WF_ERR_RANGE, "profile: extra_tables %d is not 0 or 1", acc->extra_tables);
     if (acc->psf_table_fft < 16 || acc->psf_table_fft > 4096 || acc->psf_table_fft % 2)
         return wf_error(WF_ERR_RANGE, "profile: psf_table_fft %d not an even number in "
                         "[16, 4096]", acc->psf_table_fft);
@@ -75,10 +78,34 @@ int wf_profile_fft_ladder(const wf_profile_accuracy *acc, int *sizes, int cap)
     for (int m = 8; m <= acc->max_fft && n < cap; m += 2) {
         int r = m;
         while (r % 2 == 0) r /= 2;
-        if (r != 1 && r != 3) continue;
+        if (r != 1 && r != 3 && r != 5) continue;
         if (m < acc->min_fft) continue;
         sizes[n++] = m;
     }
+    return n;
+}
+
+int wf_profile_table_of(const int *per, int n, int m)
+{
+    for (int i = 0; i < n; i++)
+        if (m <= per[i] && per[i] % m == 0) return i;
+    return -1;
+}
+
+int wf_profile_psf_period(const wf_profile_psf *psf, int m)
+{
+    int per[1 + WF_PROFILE_MAX_ALT];
+    per[0] = psf->table_fft;
+    for (int i = 0; i < psf->nalt; i++) per[1 + i] = psf->alt[i].fft;
+    return wf_profile_table_of(per, 1 + psf->nalt, m);
+}
+
+int wf_profile_table_periods(const wf_profile_accuracy *acc, int *per)
+{
+    int sizes[48], ns = wf_profile_fft_ladder(acc, sizes, 48), n = 1;
+    per[0] = acc->psf_table_fft;
+    for (int i = ns - 1; i >= 0 && acc->extra_tables && n < 1 + WF_PROFILE_MAX_ALT; i--)
+        if (sizes[i] < per[0] && wf_profile_table_of(per, n, sizes[i]) < 0) per[n++] = sizes[i];
     return n;
 }
 
@@ -211,13 +238,13 @@ void wf_profile_work_free(wf_profile_work *w)
  * side even with FFTW_ESTIMATE (a 3 x 2^a side the most), per thread when each work made
  * its own for the whole ladder; a scene uses a few sides. FFTW_ESTIMATE reads no array, so
  * a plan may be made while the buffer holds a draw's input. Kept for the process's life. */
-static void *shared_plans[2 * 15];
+static void *shared_plans[3 * 15];
 
 static int side_index(int n)
 {
-    int odd = n % 3 == 0, m = odd ? n / 3 : n, a = 0;
+    int f = n % 3 == 0 ? 1 : n % 5 == 0 ? 2 : 0, m = n / (f == 1 ? 3 : f == 2 ? 5 : 1), a = 0;
     while (m > 1) m >>= 1, a++;
-    return 2 * a + odd;
+    return 3 * a + f;
 }
 
 /* From side 64 up, FFTW_ESTIMATE alone picks plans that copy the 3-point passes through

@@ -444,6 +444,7 @@ static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const 
     /* the table's period is the image's width: the image periodised onto it does not overlap
      * itself, and a wider period would only cost memory (the transform of os x period) */
     s->acc_wide.psf_table_fft = 2 * (int)ceil(n / (double)setup->psf_oversample / 2.0);
+    s->acc_wide.extra_tables = 0; /* a few stars, whose boxes are near that period anyway */
     size_t keep, scratch;
     if ((st = wf_profile_psf_need(&s->psf_wide_image, &s->acc_wide, &keep, &scratch))) return st;
     size_t bytes = keep + scratch + 4096;
