@@ -130,7 +130,7 @@ typedef struct wf_profile_steps {
 /* The PSF x pixel transform sampled at another period P (k step 2 pi / (P pixel_scale)), for
  * the FFT sides below table_fft that divide P but not table_fft: |u|, |v| <= kr, laid out as
  * the main table, and its copies at those sides' steps. */
-#define WF_PROFILE_MAX_ALT 2
+#define WF_PROFILE_MAX_ALT 3
 typedef struct wf_profile_table {
     int fft, kr;
     float *re, *im;
@@ -248,7 +248,7 @@ typedef struct wf_profile_work {
 /* Bytes the work buffers take from an arena for these knobs (15.7 MB at the defaults,
  * most of it the max_fft^2 FFT buffer), and (dense, may be NULL) how many of them, from the
  * start of what wf_profile_work_init takes, it fills whole (~2 MB); the rest is touched only
- * as far as the draws reach. FFT sides are 2^a, 3 * 2^a and 5 * 2^a from min_fft to max_fft;
+ * as far as the draws reach. FFT sides are 2^a, 3 * 2^a, 5 * 2^a and 7 * 2^a from min_fft to max_fft;
  * with a PSF, sides up to psf_table_fft are used only if they read one of its tables exactly
  * (they divide its period: psf_table_fft, or with extra_tables one more). */
 wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes, size_t *dense);

@@ -59,7 +59,7 @@ static inline double wf_sersic4_eval(const wf_sersic_table *t, double w)
 #define WF_PSF_BAND_NYQ 8.0
 
 struct wf_profile_accuracy;
-/* The FFT sides a drawing work uses (2^k, 3 2^k and 5 2^k from min_fft to max_fft),
+/* The FFT sides a drawing work uses (2^k, 3 2^k, 5 2^k and 7 2^k from min_fft to max_fft),
  * ascending: up to cap of them into sizes; returns the count. */
 int wf_profile_fft_ladder(const struct wf_profile_accuracy *acc, int *sizes, int cap);
 

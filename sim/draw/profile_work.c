@@ -78,7 +78,7 @@ int wf_profile_fft_ladder(const wf_profile_accuracy *acc, int *sizes, int cap)
     for (int m = 8; m <= acc->max_fft && n < cap; m += 2) {
         int r = m;
         while (r % 2 == 0) r /= 2;
-        if (r != 1 && r != 3 && r != 5) continue;
+        if (r != 1 && r != 3 && r != 5 && r != 7) continue;
         if (m < acc->min_fft) continue;
         sizes[n++] = m;
     }
@@ -238,13 +238,14 @@ void wf_profile_work_free(wf_profile_work *w)
  * side even with FFTW_ESTIMATE (a 3 x 2^a side the most), per thread when each work made
  * its own for the whole ladder; a scene uses a few sides. FFTW_ESTIMATE reads no array, so
  * a plan may be made while the buffer holds a draw's input. Kept for the process's life. */
-static void *shared_plans[3 * 15];
+static void *shared_plans[4 * 15];
 
 static int side_index(int n)
 {
-    int f = n % 3 == 0 ? 1 : n % 5 == 0 ? 2 : 0, m = n / (f == 1 ? 3 : f == 2 ? 5 : 1), a = 0;
+    static const int odd[4] = {1, 3, 5, 7};
+    int f = n % 3 == 0 ? 1 : n % 5 == 0 ? 2 : n % 7 == 0 ? 3 : 0, m = n / odd[f], a = 0;
     while (m > 1) m >>= 1, a++;
-    return 3 * a + f;
+    return 4 * a + f;
 }
 
 /* From side 64 up, FFTW_ESTIMATE alone picks plans that copy the 3-point passes through
