@@ -66,8 +66,22 @@ static void write_product(const char *path, int bitpix, int type, int naxis, lon
         long r0 = reverse ? (nrows - k - rows > 0 ? nrows - k - rows : 0) : k;
         long n = reverse ? (nrows - k) - r0 : (k + rows <= nrows ? rows : nrows - k);
         void *at = (void *)((const char *)pix + (size_t)r0 * (size_t)naxes[0] * elem);
-        if (via_cfitsio) fits_write_img(p, type, (LONGLONG)r0 * naxes[0] + 1, (LONGLONG)n * naxes[0], at, &status);
-        else wf_fits_part_write_rows(p, type, naxes[0], r0, n, at, &status);
+        if (via_cfitsio == 2) /* cfitsio quantizes and codes each row at the step wfisim measures */
+            for (long r = 0; r < n; r++) {
+                float *row = (float *)at + (size_t)r * (size_t)naxes[0], scratch[NX];
+                ck_assert(naxes[0] <= NX);
+                const double step = wf_fits_row_noise(row, naxes[0], scratch) / q;
+                const float level = step > 0 && isfinite(step) ? -(float)step : (float)q;
+                fits_set_quantize_level(p, level, &status);
+                p->Fptr->quantize_level = level;
+                fits_write_img(p, TFLOAT, (LONGLONG)(r0 + r) * naxes[0] + 1, naxes[0], row, &status);
+                fits_set_quantize_level(p, (float)q, &status);
+                p->Fptr->quantize_level = (float)q;
+            }
+        else if (via_cfitsio)
+            fits_write_img(p, type, (LONGLONG)r0 * naxes[0] + 1, (LONGLONG)n * naxes[0], at, &status);
+        else
+            wf_fits_part_write_rows(p, type, naxes[0], r0, n, at, &status);
         ck_assert_int_eq(status, 0);
     }
     wf_fits_datasum ds;
@@ -507,6 +521,36 @@ START_TEST(test_own_rice_same_product)
 }
 END_TEST
 
+/* Quantized float HDUs whose tiles wfisim writes (cfitsio's quantizer, wfisim's Rice coder,
+ * ZSCALE and ZZERO) are the bytes cfitsio writes given the same steps; rows it leaves to
+ * cfitsio (one without noise to measure, one with a NaN) too, and rows with exact zeros
+ * (SUBTRACTIVE_DITHER_2 keeps them) are its own. */
+START_TEST(test_own_quantized_same_product)
+{
+    const char *dir = wf_test_tmpdir();
+    float *img = noisy_image();
+    for (int x = 0; x < NX; x++) img[3 * NX + x] = 10.0f; /* nothing to measure: cfitsio's */
+    img[7 * NX + 100] = NAN;                             /* not finite: cfitsio's */
+    for (int x = 0; x < NX; x += 7) img[11 * NX + x] = 0.0f;
+    long ax[2] = {NX, NY};
+    char a[4096], b[4096];
+    for (int rows = 1; rows <= 40; rows += 39) {
+        snprintf(a, sizeof a, "%s/ownq%d.fits", dir, rows);
+        snprintf(b, sizeof b, "%s/cfitsioq%d.fits", dir, rows);
+        via_cfitsio = 0;
+        const long t0 = wf_fits_own_rice_tiles();
+        write_product(a, FLOAT_IMG, TFLOAT, 2, ax, img, sizeof(float), 4.0, 77, rows, 1);
+        ck_assert_msg(wf_fits_own_rice_tiles() - t0 == NY - 2, "%ld of %d rows coded by wfisim",
+                      wf_fits_own_rice_tiles() - t0, NY - 2);
+        via_cfitsio = 2;
+        write_product(b, FLOAT_IMG, TFLOAT, 2, ax, img, sizeof(float), 4.0, 77, rows, 1);
+        via_cfitsio = 0;
+        ck_assert_msg(same_file(a, b), "%d rows at a time: the product differs from cfitsio's", rows);
+    }
+    free(img);
+}
+END_TEST
+
 static Suite *fitscomp_suite(void)
 {
     Suite *s = suite_create("fitscomp");
@@ -515,6 +559,7 @@ static Suite *fitscomp_suite(void)
     tcase_add_test(tc, test_integers_lossless);
     tcase_add_test(tc, test_rice_matches_cfitsio);
     tcase_add_test(tc, test_own_rice_same_product);
+    tcase_add_test(tc, test_own_quantized_same_product);
     tcase_add_test(tc, test_float_lossless_at_zero);
     tcase_add_test(tc, test_quantization_error);
     tcase_add_test(tc, test_same_bytes_any_order);

@@ -247,6 +247,28 @@ static int own_rice(const fitsfile *f, int type, long ncols, int *bytepix, uint3
     return 0;
 }
 
+/* 1 when wfisim can write the tiles of this quantized float HDU of one-row tiles itself
+ * (as cfitsio would, Rice coded, subtractively dithered with a seed already fixed), else 0. */
+static int own_quantized(const fitsfile *f, long ncols)
+{
+    const FITSfile *F = f->Fptr;
+    if (!F->compressimg || F->compress_type != RICE_1 || F->cn_compressed < 1 || F->cn_zscale < 1 ||
+        F->cn_zzero < 1 || F->cn_zblank > 0 || F->zbitpix != FLOAT_IMG || F->tilesize[0] != ncols ||
+        F->cn_bscale != 1.0 || F->cn_bzero != 0.0 || F->dither_seed < 1 ||
+        (F->quantize_method != SUBTRACTIVE_DITHER_1 && F->quantize_method != SUBTRACTIVE_DITHER_2))
+        return 0;
+    for (int k = 1; k < F->zndim; k++)
+        if (F->tilesize[k] != 1) return 0;
+    return 1;
+}
+
+static int all_finite(const float *v, long n)
+{
+    int ok = 1;
+    for (long i = 0; i < n; i++) ok &= isfinite(v[i]) != 0;
+    return ok;
+}
+
 int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, long nrows, void *data, int *status)
 {
     if (*status) return *status;
@@ -280,7 +302,16 @@ int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, lo
     if (type != TFLOAT || !(q > 0) || q == CFITSIO_NO_QUANTIZE || ncols < 5)
         return fits_write_img(f, type, row0 * ncols + 1, (LONGLONG)nrows * ncols, data, status);
     float *scratch = malloc((size_t)ncols * sizeof *scratch);
-    if (!scratch) return *status = MEMORY_ALLOCATION;
+    const int own = own_quantized(f, ncols);
+    const size_t cap = wf_fits_rice_bound(ncols, 4);
+    int *idata = own ? malloc((size_t)ncols * sizeof *idata) : NULL;
+    unsigned char *code = own ? malloc(cap) : NULL;
+    if (!scratch || (own && (!idata || !code))) {
+        free(scratch);
+        free(idata);
+        free(code);
+        return *status = MEMORY_ALLOCATION;
+    }
     for (long r = 0; r < nrows && !*status; r++) {
         float *row = (float *)data + (size_t)r * (size_t)ncols;
         const double step = wf_fits_row_noise(row, ncols, scratch) / q;
@@ -291,8 +322,28 @@ int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, lo
          * at times of its own (a tile late, observed): both are set */
         fits_set_quantize_level(f, level, status);
         f->Fptr->quantize_level = level;
+        /* the tile as cfitsio's imcomp_compress_tile makes it, its Rice code ours: quantized
+         * by cfitsio's own fits_quantize_float (dither row = tile + ZDITHER0 - 1), coded,
+         * and its scale and zero in ZSCALE and ZZERO; rows with nonfinite pixels, or that do
+         * not quantize (flag 0: cfitsio then stores them losslessly), go through cfitsio */
+        const LONGLONG tile = row0 + r + 1;
+        double bscale = 1.0, bzero = 0.0;
+        int imin = 0, imax = 0, flag = 0;
+        size_t len = 0;
+        if (own && level < 0 && all_finite(row, ncols))
+            flag = fits_quantize_float((long)tile + f->Fptr->dither_seed - 1, row, ncols, 1, 0, FLOATNULLVALUE,
+                                       level, f->Fptr->quantize_method, idata, &bscale, &bzero, &imin, &imax);
+        if (flag == 1 && !wf_fits_rice_code(idata, ncols, 4, 0, f->Fptr->rice_blocksize, code, cap, &len)) {
+            fits_write_col(f, TBYTE, f->Fptr->cn_compressed, tile, 1, (LONGLONG)len, code, status);
+            fits_write_col(f, TDOUBLE, f->Fptr->cn_zscale, tile, 1, 1, &bscale, status);
+            fits_write_col(f, TDOUBLE, f->Fptr->cn_zzero, tile, 1, 1, &bzero, status);
+            own_tiles++;
+            continue;
+        }
         fits_write_img(f, TFLOAT, (row0 + r) * ncols + 1, ncols, row, status);
     }
+    free(idata);
+    free(code);
     int st = 0;
     fits_set_quantize_level(f, q, &st);
     f->Fptr->quantize_level = q;

@@ -44,8 +44,10 @@ wf_status wf_fits_part_append(fitsfile *dst, const char *dst_path, fitsfile *par
 
 /* Writes nrows whole rows of ncols pixels from row row0 (0-based) of the part's image,
  * cfitsio's way (returns and sets *status). TFLOAT rows of a quantized part are written one
- * by one, each at a step of wf_fits_row_noise / q. Integer rows (TUSHORT, TSHORT, TUINT,
- * TINT) are Rice coded by sim/fits/rice.h into the same bytes, several times faster. */
+ * by one, each at a step of wf_fits_row_noise / q: quantized by cfitsio's own
+ * fits_quantize_float and, as integer rows (TUSHORT, TSHORT, TUINT, TINT) are, Rice coded by
+ * sim/fits/rice.h into the same bytes cfitsio writes, several times faster (a float row with
+ * a nonfinite pixel, or that does not quantize, is left to cfitsio). */
 int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, long nrows, void *data, int *status);
 
 /* Tiles sim/fits/rice.h has coded in this process (tests check that it is the coder used). */
