@@ -2789,8 +2789,8 @@ START_TEST(test_psf_table_interpolation)
     wf_galaxy g = galaxy(1, 0.3, 1.6, 0.8, 0.3, 0.1);
     g.n_knots = 10;
     g.knot_frac = 0.2;
-    /* the side from the 201-pixel stamp: 224, above 192 (the 256 table reads it from its
-     * own table at that period) */
+    /* the side from the 201-pixel stamp: 224, above 192 (the PSF with a 256 table reads it
+     * exactly, from its extra table at period 224) */
     ck_assert(wf_profile_work_tune(&c1.work, 0.9, 0.05, 1e-5, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
     ck_assert(wf_profile_work_tune(&c2.work, 0.9, 0.05, 1e-5, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
     wf_stamp s1 = stamp_new(0, 0, 201, 201), s2 = stamp_new(0, 0, 201, 201);
@@ -2923,7 +2923,9 @@ START_TEST(test_psf_extra_tables)
         double rel = worst_of_peak(&s1, &s2);
         printf("side %d from its own table against a %d table: worst pixel %.2e of the peak\n", sides[i],
                single[i], rel);
-        ck_assert_msg(rel < 1e-9, "side %d: %.3g of the peak", sides[i], rel); /* floats: ~1e-16 */
+        /* the same doubles rounded to floats: equal here (~1e-16), and a float ulp (6e-8) of
+         * the largest sample at most where two FFTs' doubles round apart */
+        ck_assert_msg(rel < 1e-7, "side %d: %.3g of the peak", sides[i], rel);
         free(s1.pix);
         free(s2.pix);
         ctx_close(&c1);

@@ -182,8 +182,8 @@ typedef struct wf_profile_psf {
     wf_profile_table alt[WF_PROFILE_MAX_ALT];
     double kmax;               /* rad/arcsec beyond which |PSF(k) pixel(k)| < 1e-7 flux */
     double pixel_max;          /* bound on any pixel of the image per unit flux, for any
-                                  position, whole or through any core: sum |table| / N^2,
-                                  the largest over the periods N */
+                                  position, whole or through any core: sum |table| / N^2
+                                  (the main table's, N = table_fft) */
     int nee;                   /* encircled energy of the image, for stamp sizes: */
     double ee_dr;              /* radius step, arcsec */
     double *ee;                /* ee[i]: fraction of the image's flux within (i + 1) ee_dr */
@@ -225,7 +225,8 @@ typedef struct wf_profile_work {
                               imaginary ones cap_line further, ey complex interleaved */
     int cap_line;
     double *kx, *ky;       /* knot phase lines: WF_PROFILE_KNOT_BLOCK x cap_line entries */
-    int *ix, *iy;          /* bicubic taps for FFT sides that do not divide psf_table_fft */
+    int *ix, *iy;          /* bicubic taps for FFT sides above psf_table_fft (or, without
+                              extra_tables, a largest side that divides no period) */
     double *wx, *wy;       /* their weights, 4 per entry */
     double *run;           /* one alias run of a row: complex, max_fft / 2 + 1 entries */
     double *knot_pos;      /* 2 x WF_PROFILE_MAX_KNOTS, arcsec after shear and rotation */

@@ -193,7 +193,9 @@ static wf_status steps_alloc(wf_arena *arena, const wf_profile_accuracy *acc, in
 }
 
 /* The half-width in its own steps of the table at period P that holds what the main one's
- * kr steps (less its 2 steps of room for the bicubic taps) hold; within the sampling. */
+ * kr steps (less its 2 steps of room for the bicubic taps) hold; within the sampling. It may
+ * reach ~1.4 main steps past kr, beyond the envelope's last ring: samples there are below
+ * WF_PSF_KFLOOR (kr was found from where they end), which the cuts treat as zero. */
 static int alt_kr(const wf_psf_image *img, const wf_profile_accuracy *acc, int P, int kr)
 {
     wf_profile_accuracy a = *acc;
@@ -563,11 +565,12 @@ static void fill_table(init_job *j, int pass, int which, const double *raw, int 
             if (ring <= j->kr) te[ring] = fmax(te[ring], mag);
             sabs += mag;
         }
-    /* the image (pixel included) periodised with the samples' period of N = P pixels is
-     * (1 / N^2) sum_k T(k) e^{i k.X} at any X, and not below the image: no pixel exceeds
-     * sum |T| / N^2 (at Y106 0.477, 0.6% above the brightest pixel found by a 1/16-pixel
-     * search: the transform is nearly real and positive) */
-    j->pixel_max[pass] = fmax(j->pixel_max[pass], sabs / ((double)P * P * j->sum));
+    /* the image (pixel included) periodised with the samples' period of N = table_fft
+     * pixels is (1 / N^2) sum_k T(k) e^{i k.X} at any X, and not below the image: no pixel
+     * exceeds sum |T| / N^2 (at Y106 0.477, 0.6% above the brightest pixel found by a
+     * 1/16-pixel search: the transform is nearly real and positive). The other periods'
+     * sums bound their own (more folded) images, no tighter: the main one's is kept. */
+    if (!which) j->pixel_max[pass] = sabs / ((double)P * P * j->sum); /* the main period's: the draws' */
     for (int i = j->kr; i > 0; i--) te[i - 1] = fmax(te[i - 1], te[i]);
     steps_fill(tr, ti, kr, which ? &at->steps : pass ? &co->steps : &psf->steps);
 }

@@ -163,7 +163,7 @@ wf_status wf_profile_work_need(const wf_profile_accuracy *acc, size_t *bytes, si
     work_layout l;
     layout(acc, &l);
     if (!l.nsizes)
-        return wf_error(WF_ERR_RANGE, "profile: no FFT side of the form 2^a or 3 2^a in "
+        return wf_error(WF_ERR_RANGE, "profile: no FFT side of the form 2^a, 3 2^a, 5 2^a or 7 2^a in "
                         "[%d, %d]", acc->min_fft, acc->max_fft);
     *bytes = dense_bytes(&l) + sparse_bytes(&l);
     if (dense) *dense = dense_bytes(&l);
