@@ -2773,6 +2773,31 @@ START_TEST(test_wing_row_is_box_plus_wing)
 }
 END_TEST
 
+/* One galaxy drawn under two knob sets (works tuned to flux fraction ff, folding fold and
+ * kvalue kv) on an n x n stamp at (x, y), both at FFT side `side`: the first's worst pixel
+ * against the second's, of the peak, and (dflux) their flux difference. */
+static double table_pair(const wf_profile_accuracy *a1, const wf_profile_accuracy *a2, const wf_psf_image *img,
+                         const wf_galaxy *g, int n, double x, double y, double ff, double fold, double kv, int side,
+                         double *dflux)
+{
+    ctx c1, c2;
+    ctx_open(&c1, a1, img);
+    ctx_open(&c2, a2, img);
+    ck_assert(wf_profile_work_tune(&c1.work, ff, fold, kv, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
+    ck_assert(wf_profile_work_tune(&c2.work, ff, fold, kv, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
+    wf_stamp s1 = stamp_new(0, 0, n, n), s2 = stamp_new(0, 0, n, n);
+    ck_assert(wf_profile_draw_galaxy(&c1.work, g, &c1.psf, x, y, &s1) == WF_OK);
+    ck_assert(wf_profile_draw_galaxy(&c2.work, g, &c2.psf, x, y, &s2) == WF_OK);
+    ck_assert_msg(s1.fft == side && s2.fft == side, "sides %d %d, not %d", s1.fft, s2.fft, side);
+    const double rel = worst_of_peak(&s1, &s2);
+    if (dflux) *dflux = s1.sum - s2.sum;
+    free(s1.pix);
+    free(s2.pix);
+    ctx_close(&c1);
+    ctx_close(&c2);
+    return rel;
+}
+
 /* FFT sides that do not divide psf_table_fft read the PSF table through bicubic
  * interpolation: its error, against the same draw with an exact table. */
 START_TEST(test_psf_table_interpolation)
@@ -2783,49 +2808,27 @@ START_TEST(test_psf_table_interpolation)
     wf_profile_accuracy_default(&a1);
     a2 = a1;
     a2.psf_table_fft = 256;
-    ctx c1, c2;
-    ctx_open(&c1, &a1, &img);
-    ctx_open(&c2, &a2, &img);
     wf_galaxy g = galaxy(1, 0.3, 1.6, 0.8, 0.3, 0.1);
     g.n_knots = 10;
     g.knot_frac = 0.2;
     /* the side from the 201-pixel stamp: 224, above 192 (the PSF with a 256 table reads it
      * exactly, from its extra table at period 224) */
-    ck_assert(wf_profile_work_tune(&c1.work, 0.9, 0.05, 1e-5, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
-    ck_assert(wf_profile_work_tune(&c2.work, 0.9, 0.05, 1e-5, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
-    wf_stamp s1 = stamp_new(0, 0, 201, 201), s2 = stamp_new(0, 0, 201, 201);
-    ck_assert(wf_profile_draw_galaxy(&c1.work, &g, &c1.psf, 100.0, 100.0, &s1) == WF_OK);
-    ck_assert(wf_profile_draw_galaxy(&c2.work, &g, &c2.psf, 100.0, 100.0, &s2) == WF_OK);
-    ck_assert_msg(s1.fft == 224 && s2.fft == 224, "sides %d %d", s1.fft, s2.fft);
-    double rel = worst_of_peak(&s1, &s2);
+    double dflux;
+    double rel = table_pair(&a1, &a2, &img, &g, 201, 100.0, 100.0, 0.9, 0.05, 1e-5, 224, &dflux);
     printf("PSF table interpolation (side 224 from a 192 table): worst pixel %.2e of the "
-           "peak, flux %+.1e\n", rel, s1.sum - s2.sum);
+           "peak, flux %+.1e\n", rel, dflux);
     ck_assert_msg(rel < 1e-3, "interpolated table: %.3g of the peak", rel);
-    free(s1.pix);
-    free(s2.pix);
-    ctx_close(&c1);
-    ctx_close(&c2);
     /* a largest side (128) below the table's that does not divide it and has no table of
      * its own (extra_tables 0): the table is read at 1.5 steps per sample, more columns per
      * row than samples; against a 384 table */
     a1.max_fft = a2.max_fft = 128;
     a1.extra_tables = 0;
     a2.psf_table_fft = 384;
-    ctx_open(&c1, &a1, &img);
-    ctx_open(&c2, &a2, &img);
-    s1 = stamp_new(0, 0, 127, 127);
-    s2 = stamp_new(0, 0, 127, 127);
-    ck_assert(wf_profile_draw_galaxy(&c1.work, &g, &c1.psf, 63.0, 63.0, &s1) == WF_OK);
-    ck_assert(wf_profile_draw_galaxy(&c2.work, &g, &c2.psf, 63.0, 63.0, &s2) == WF_OK);
-    ck_assert_msg(s1.fft == 128 && s2.fft == 128, "sides %d %d", s1.fft, s2.fft);
-    rel = worst_of_peak(&s1, &s2);
+    rel = table_pair(&a1, &a2, &img, &g, 127, 63.0, 63.0, a1.flux_fraction, a1.folding_threshold, a1.kvalue_accuracy,
+                     128, NULL);
     printf("PSF table interpolation (side 128 from a 192 table): worst pixel %.2e of the "
            "peak\n", rel);
     ck_assert_msg(rel < 1e-3, "interpolated table: %.3g of the peak", rel);
-    free(s1.pix);
-    free(s2.pix);
-    ctx_close(&c1);
-    ctx_close(&c2);
     free(psfpix);
 }
 END_TEST
@@ -2909,27 +2912,14 @@ START_TEST(test_psf_extra_tables)
         a2 = a1;
         a2.psf_table_fft = single[i];
         a2.extra_tables = 0;
-        ctx c1, c2;
-        ctx_open(&c1, &a1, &img);
-        ctx_open(&c2, &a2, &img);
         /* the stamp, not the light, sets the side: a loose flux fraction and folding */
-        ck_assert(wf_profile_work_tune(&c1.work, 0.9, 0.05, 1e-15, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
-        ck_assert(wf_profile_work_tune(&c2.work, 0.9, 0.05, 1e-15, 0.0, WF_PROFILE_KNOT_ACCURACY) == WF_OK);
         const int n = sides[i] - 1, h = n / 2;
-        wf_stamp s1 = stamp_new(0, 0, n, n), s2 = stamp_new(0, 0, n, n);
-        ck_assert(wf_profile_draw_galaxy(&c1.work, &g, &c1.psf, h + 0.3, h - 0.2, &s1) == WF_OK);
-        ck_assert(wf_profile_draw_galaxy(&c2.work, &g, &c2.psf, h + 0.3, h - 0.2, &s2) == WF_OK);
-        ck_assert_msg(s1.fft == sides[i] && s2.fft == sides[i], "sides %d %d", s1.fft, s2.fft);
-        double rel = worst_of_peak(&s1, &s2);
+        const double rel = table_pair(&a1, &a2, &img, &g, n, h + 0.3, h - 0.2, 0.9, 0.05, 1e-15, sides[i], NULL);
         printf("side %d from its own table against a %d table: worst pixel %.2e of the peak\n", sides[i],
                single[i], rel);
         /* the same doubles rounded to floats: equal here (~1e-16), and a float ulp (6e-8) of
          * the largest sample at most where two FFTs' doubles round apart */
         ck_assert_msg(rel < 1e-7, "side %d: %.3g of the peak", sides[i], rel);
-        free(s1.pix);
-        free(s2.pix);
-        ctx_close(&c1);
-        ctx_close(&c2);
     }
     free(psfpix);
 }
