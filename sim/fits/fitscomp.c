@@ -225,14 +225,22 @@ long wf_fits_own_rice_tiles(void) { return own_tiles; }
 /* The XOR that turns pixels of `type` into the integers a Rice-coded HDU of one-row tiles
  * stores (flip 0 or the sign bit of the unsigned types' BZERO), when wfisim's coder can
  * write its tiles: 1, else 0 (cfitsio codes them). */
-static int own_rice(const fitsfile *f, int type, long ncols, int *bytepix, uint32_t *flip)
+/* What both of wfisim's own tile writers need: a Rice-coded HDU of one-row tiles, without
+ * null substitution or scaling. */
+static int rice_rows(const FITSfile *F, long ncols)
 {
-    const FITSfile *F = f->Fptr;
-    if (!F->compressimg || F->compress_type != RICE_1 || F->cn_compressed < 1 || F->cn_zscale > 0 ||
-        F->cn_zblank > 0 || F->request_lossy_int_compress || F->cn_bscale != 1.0 || F->tilesize[0] != ncols)
+    if (!F->compressimg || F->compress_type != RICE_1 || F->cn_compressed < 1 || F->cn_zblank > 0 ||
+        F->cn_bscale != 1.0 || F->tilesize[0] != ncols)
         return 0;
     for (int k = 1; k < F->zndim; k++)
         if (F->tilesize[k] != 1) return 0;
+    return 1;
+}
+
+static int own_rice(const fitsfile *f, int type, long ncols, int *bytepix, uint32_t *flip)
+{
+    const FITSfile *F = f->Fptr;
+    if (!rice_rows(F, ncols) || F->cn_zscale > 0 || F->request_lossy_int_compress) return 0;
     const double z = F->cn_actual_bzero;
     if (F->zbitpix == SHORT_IMG && ((type == TUSHORT && z == 32768.0) || (type == TSHORT && z == 0.0))) {
         *bytepix = 2;
@@ -252,14 +260,9 @@ static int own_rice(const fitsfile *f, int type, long ncols, int *bytepix, uint3
 static int own_quantized(const fitsfile *f, long ncols)
 {
     const FITSfile *F = f->Fptr;
-    if (!F->compressimg || F->compress_type != RICE_1 || F->cn_compressed < 1 || F->cn_zscale < 1 ||
-        F->cn_zzero < 1 || F->cn_zblank > 0 || F->zbitpix != FLOAT_IMG || F->tilesize[0] != ncols ||
-        F->cn_bscale != 1.0 || F->cn_bzero != 0.0 || F->dither_seed < 1 ||
-        (F->quantize_method != SUBTRACTIVE_DITHER_1 && F->quantize_method != SUBTRACTIVE_DITHER_2))
-        return 0;
-    for (int k = 1; k < F->zndim; k++)
-        if (F->tilesize[k] != 1) return 0;
-    return 1;
+    return rice_rows(F, ncols) && F->cn_zscale > 0 && F->cn_zzero > 0 && F->zbitpix == FLOAT_IMG &&
+           F->cn_bzero == 0.0 && F->dither_seed > 0 &&
+           (F->quantize_method == SUBTRACTIVE_DITHER_1 || F->quantize_method == SUBTRACTIVE_DITHER_2);
 }
 
 static int all_finite(const float *v, long n)
@@ -318,10 +321,6 @@ int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, lo
         /* a negative level is cfitsio's absolute step; a row without noise to measure (a
          * constant or integer row) is left to cfitsio's own rules */
         const float level = step > 0 && isfinite(step) ? -(float)step : q;
-        /* cfitsio compresses a tile with quantize_level and refreshes that from the request
-         * at times of its own (a tile late, observed): both are set */
-        fits_set_quantize_level(f, level, status);
-        f->Fptr->quantize_level = level;
         /* the tile as cfitsio's imcomp_compress_tile makes it, its Rice code ours: quantized
          * by cfitsio's own fits_quantize_float (dither row = tile + ZDITHER0 - 1), coded,
          * and its scale and zero in ZSCALE and ZZERO; rows with nonfinite pixels, or that do
@@ -340,6 +339,10 @@ int wf_fits_part_write_rows(fitsfile *f, int type, long ncols, LONGLONG row0, lo
             own_tiles++;
             continue;
         }
+        /* cfitsio compresses a tile with quantize_level and refreshes that from the request
+         * at times of its own (a tile late, observed): both are set */
+        fits_set_quantize_level(f, level, status);
+        f->Fptr->quantize_level = level;
         fits_write_img(f, TFLOAT, (row0 + r) * ncols + 1, ncols, row, status);
     }
     free(idata);
