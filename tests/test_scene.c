@@ -14,6 +14,7 @@
 #include "sim/optics/psf.h"
 #include "sim/optics/pupil.h"
 #include "sim/draw/scene.h"
+#include "sim/draw/scene_psf.h"
 #include "sim/survey/wcs.h"
 #include "tests/testutil.h"
 
@@ -556,6 +557,92 @@ START_TEST(bright_star_wide_psf)
 }
 END_TEST
 
+
+/* The PSF cache: scenes that share an SCA, filter and PSF knobs take one PSF, built once (its
+ * wide PSF too), and draw the same bits as scenes that build their own, at another pointing
+ * and date as well; a scene of other knobs builds its own and, the cache full, evicts the one
+ * a live scene still holds, which keeps drawing from it (the sanitizers' run checks it is
+ * freed once, by the last holder). */
+START_TEST(psf_cache_shares_the_same_bits)
+{
+    const double x[3] = {60, 128.3, 200}, y[3] = {70, 128.6, 190}, mag[3] = {19, 20, 21}, smag[1] = {10};
+    const double sx[1] = {150.2}, sy[1] = {90.7};
+    char gpath[4200], spath[4200];
+    wf_scene_setup ss;
+    setup_small(&ss);
+    ss.sky_on = 1;
+    snprintf(gpath, sizeof gpath, "%s/gal_cache.csv", wf_test_tmpdir());
+    snprintf(spath, sizeof spath, "%s/star_cache.csv", wf_test_tmpdir());
+    write_catalog(gpath, &ss, 1, 0.2, 3, x, y, mag);
+    write_catalog(spath, &ss, 0, 0.0, 1, sx, sy, smag);
+    wf_catalog gal, stars;
+    ck_assert_msg(wf_catalog_read_galaxies(gpath, &gal) == WF_OK, "%s", wf_error_message());
+    ck_assert_msg(wf_catalog_read_stars(spath, &stars) == WF_OK, "%s", wf_error_message());
+    wf_scene_psf_cache *cache;
+    ck_assert_int_eq(wf_scene_psf_cache_new(0, &cache), WF_ERR_RANGE);
+    ck_assert_int_eq(wf_scene_psf_cache_new(1, &cache), WF_OK);
+    wf_scene_psf_cache_stats cs;
+    /* two exposures: the catalog's pointing, then one 1" away a day later */
+    for (int e = 0; e < 2; e++) {
+        wf_scene_setup es = ss;
+        es.dec += e / 3600.0;
+        es.mjd += e;
+        float *img[2];
+        for (int c = 0; c < 2; c++) {
+            es.psf_cache = c ? cache : NULL;
+            es.threads = c ? 2 : 1; /* the tables are the same for any thread count */
+            wf_scene *scene;
+            ck_assert_msg(wf_scene_create(&es, &gal, &stars, &scene) == WF_OK, "%s", wf_error_message());
+            wf_scene_stats st;
+            wf_scene_get_stats(scene, &st);
+            ck_assert_int_eq(st.bright, 1);
+            ck_assert_int_eq(st.galaxies, 3);
+            wf_scene_source src;
+            ck_assert_int_eq(wf_scene_source_for(scene, c ? 1 : 0, &src), WF_OK);
+            img[c] = malloc(sizeof(float) * W * H);
+            for (int y0 = 0; y0 < H; y0 += 32)
+                ck_assert_int_eq(wf_scene_fill(&src, y0, y0 + 32, W, img[c] + (size_t)y0 * W), WF_OK);
+            wf_scene_destroy(scene);
+        }
+        ck_assert_msg(memcmp(img[0], img[1], (size_t)W * H * sizeof *img[0]) == 0, "exposure %d differs", e);
+        double total = 0;
+        for (int i = 0; i < W * H; i++) total += img[1][i];
+        ck_assert(total > 0);
+        free(img[0]);
+        free(img[1]);
+        wf_scene_psf_cache_get_stats(cache, &cs);
+        ck_assert_int_eq(cs.built, 1);
+        ck_assert_int_eq(cs.reused, e);
+        ck_assert_int_eq(cs.wide_built, 1);
+    }
+    /* a scene holds the kept PSF while another SCA's evicts it */
+    wf_scene *held, *other;
+    ss.psf_cache = cache;
+    ck_assert_msg(wf_scene_create(&ss, &gal, NULL, &held) == WF_OK, "%s", wf_error_message());
+    wf_scene_setup os = ss;
+    os.sca = 2;
+    ck_assert_msg(wf_scene_create(&os, NULL, NULL, &other) == WF_OK, "%s", wf_error_message());
+    wf_scene_psf_cache_get_stats(cache, &cs);
+    ck_assert_int_eq(cs.built, 2);
+    ck_assert_int_eq(cs.reused, 2);
+    float *a = render(held);
+    ss.psf_cache = NULL;
+    wf_scene *own;
+    ck_assert_msg(wf_scene_create(&ss, &gal, NULL, &own) == WF_OK, "%s", wf_error_message());
+    float *b = render(own);
+    ck_assert(memcmp(a, b, (size_t)W * H * sizeof *a) == 0);
+    free(a);
+    free(b);
+    wf_scene_destroy(own);
+    wf_scene_destroy(held);
+    wf_scene_psf_cache_free(cache); /* other's PSF outlives the cache until other goes */
+    free(render(other));
+    wf_scene_destroy(other);
+    wf_catalog_free(&gal);
+    wf_catalog_free(&stars);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("scene");
@@ -569,6 +656,7 @@ static Suite *suite(void)
     tcase_add_test(tc, empty_scene_is_sky);
     tcase_add_test(tc, setup_threads);
     tcase_add_test(tc, prepare_then_populate);
+    tcase_add_test(tc, psf_cache_shares_the_same_bits);
     tcase_add_test(tc, noise_tolerance_bounds);
     suite_add_tcase(s, tc);
     return s;

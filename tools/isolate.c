@@ -240,6 +240,7 @@ wf_status wf_survey_make_item_isolated(wf_survey_ctx *ctx, size_t i, wf_survey_i
     *crashed = 0;
     memset(res, 0, sizeof *res);
     wf_status st = wf_survey_item_digest(ctx, i);
+    if (!st) st = wf_survey_item_psf(ctx, i);
     if (st) return st;
     char name[64];
     wf_survey_item_name(ctx, i, name, sizeof name);

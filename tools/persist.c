@@ -339,7 +339,7 @@ static wf_status load_bandpass(const wf_config *cfg, wf_bandpass **out)
 
 /* The kept pixels of the exposure cfg describes. */
 static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg, const wf_clock *clock,
-                               slot_list *out)
+                               wf_scene_psf_cache *psfs, slot_list *out)
 {
     out->e = NULL;
     out->n = 0;
@@ -373,6 +373,7 @@ static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg
         /* drawn to the accuracy of the exposure's own product: at its sky noise, if it had a sky */
         ss.sky_noise = ss.sky_on;
         ss.sky_on = 0;
+        ss.psf_cache = psfs;
         st = wf_scene_prepare(&ss, &scene);
         wf_scene_stats stats;
         if (!st) wf_scene_get_stats(scene, &stats);
@@ -395,14 +396,15 @@ static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg
 }
 
 wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config *cfg,
-                                          const wf_clock *clock, double dt, wf_persist_cache *cache, int *drawn)
+                                          const wf_clock *clock, double dt, wf_persist_cache *cache,
+                                          wf_scene_psf_cache *psfs, int *drawn)
 {
     long long expid = cfg->ro.exposure;
     int sca = (int)cfg->ro.sca;
     *drawn = 1;
     if (!cache || sca < 0 || sca >= CACHE_SCAS) {
         slot_list list;
-        wf_status st = exposure_list(h, cfg, clock, &list);
+        wf_status st = exposure_list(h, cfg, clock, psfs, &list);
         return st ? st : add_slot(h, list, 1, dt);
     }
     cache_entry *slot, *e = cache_find(cache, expid, sca, &slot);
@@ -411,7 +413,7 @@ wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config
         e->used = ++cache->tick;
     } else {
         slot_list list;
-        wf_status st = exposure_list(h, cfg, clock, &list);
+        wf_status st = exposure_list(h, cfg, clock, psfs, &list);
         if (st) return st;
         cache_put(cache, slot, expid, list);
         e = slot;

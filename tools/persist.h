@@ -14,6 +14,7 @@
 #define WF_TOOLS_PERSIST_H
 
 #include "hal/persist.h"
+#include "sim/draw/scene.h"
 #include "hal/scene.h"
 #include "sim/survey/catalog.h"
 #include "tools/config.h"
@@ -46,9 +47,11 @@ wf_status wf_persist_cache_import(wf_persist_cache *c, const void *buf, size_t s
 
 /* The next slot from the exposure cfg describes (its scene as `wfisim expose` would draw it,
  * bright objects only; the grid scene whole), clock its read pattern; through cache when not
- * NULL (which must outlive h). *drawn: 1 when it was drawn, 0 when the cache held it. */
+ * NULL (which must outlive h); a scene drawn takes its PSF through psfs when not NULL.
+ * *drawn: 1 when it was drawn, 0 when the cache held it. */
 wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config *cfg,
-                                          const wf_clock *clock, double dt, wf_persist_cache *cache, int *drawn);
+                                          const wf_clock *clock, double dt, wf_persist_cache *cache,
+                                          wf_scene_psf_cache *psfs, int *drawn);
 
 /* An exposure's own slot, collected while that exposure is drawn for its product: its bright
  * objects (those wf_persist_history_add_exposure would draw) form the scene's layer

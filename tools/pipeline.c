@@ -339,6 +339,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
     if (objects) {
         wf_scene_setup ss;
         wf_pipeline_scene_setup(cfg, pj->clock, T, &ss);
+        ss.psf_cache = pj->psfs;
         /* one thread: the catalogs first, so that a bad one fails before any PSF work; either
          * way a catalog's failure is the one reported. Both sides may read FITS files (a FITS
          * catalog, the pupil), so only with a cfitsio built reentrant (Debian's is). */

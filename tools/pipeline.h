@@ -48,6 +48,7 @@ typedef struct wf_pipeline_job {
     const wf_persist_source *persist; /* earlier exposures' charge (tools/persist.h), or NULL: none */
     struct wf_persist_layer *layer;   /* collects this exposure's own persistence slot while it
                                        * is drawn (tools/persist.h), or NULL */
+    wf_scene_psf_cache *psfs;    /* PSFs kept from earlier exposures (sim/draw/scene_psf.h), or NULL */
     /* out */
     char image_path[WF_PATH_MAX + 64];
     char truth_path[WF_PATH_MAX + 64];

@@ -11,6 +11,7 @@
 
 #include "hal/file.h"
 #include "hal/clock.h"
+#include "sim/draw/scene_psf.h"
 #include "sim/fits/fitsout.h"
 #include "sim/survey/skyindex.h"
 #include "sim/survey/survey.h"
@@ -264,6 +265,7 @@ struct wf_survey_ctx {
     wf_config *scratch;       /* an earlier exposure's configuration */
     history *hist;            /* per item, its persistence history's rows (from the plan, once) */
     wf_persist_cache *pcache; /* earlier exposures' bright pixels, for the next items */
+    wf_scene_psf_cache *psfs; /* the last items' PSFs, for the next ones of their SCA and filter */
     unsigned char *state;     /* per item, P_* */
     size_t todo;              /* items the check found to make (0: nothing will be written) */
     product *p;               /* the item's configuration and names (large: on the heap) */
@@ -286,6 +288,7 @@ void wf_survey_free(wf_survey_ctx *ctx)
     free(ctx->hist);
     free(ctx->scratch);
     wf_persist_cache_free(ctx->pcache);
+    wf_scene_psf_cache_free(ctx->psfs);
     free(ctx->items);
     free(ctx->state);
     free(ctx->p);
@@ -492,7 +495,9 @@ wf_status wf_survey_begin(const wf_config *base, const wf_survey_run_options *op
     /* test hook: every history drawn whole (the products must not change) */
     const char *hook = getenv("WFISIM_TEST_PERSIST_CACHE");
     int cache_on = !(hook && !strcmp(hook, "off"));
-    if (!ctx->scratch || (cache_on && wf_persist_cache_new(&ctx->pcache))) {
+    /* one: the items of an SCA and filter follow one another (wf_survey_run's walks, the MPI
+     * ranks'), and a process holds no more PSFs than before */
+    if (!ctx->scratch || (cache_on && wf_persist_cache_new(&ctx->pcache)) || wf_scene_psf_cache_new(1, &ctx->psfs)) {
         wf_survey_free(ctx);
         return wf_error(WF_ERR_NOMEM, "out of memory");
     }
@@ -591,6 +596,20 @@ wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i)
     return prepare(ctx, i, ctx->cache, ctx->p);
 }
 
+wf_status wf_survey_item_psf(wf_survey_ctx *ctx, size_t i)
+{
+    if (ctx->state[i] == P_SAME) return WF_OK; /* most likely whole, and skipped */
+    wf_status st = prepare(ctx, i, NULL, ctx->p);
+    if (st || ctx->p->cfg.scene_kind == 2) return st; /* the grid draws no PSF */
+    wf_scene_setup ss;
+    const wf_config *cfg = &ctx->p->cfg;
+    wf_pipeline_scene_setup(cfg, &ctx->p->clock, cfg->threads < 1 ? 1 : cfg->threads, &ss);
+    ss.psf_cache = ctx->psfs;
+    /* the wide PSF too: nearly every SCA of the deep fields has a star it draws, and it is
+     * built once for the items of one SCA and filter */
+    return wf_scene_psf_prefetch(&ss, ss.bright_mag >= -50.0);
+}
+
 unsigned long wf_survey_history_mark(const wf_survey_ctx *ctx)
 {
     return wf_persist_cache_mark(ctx->pcache);
@@ -670,7 +689,7 @@ static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, c
         wf_clock clock;
         int d = 1;
         if (!(st = configure(ctx->base, ctx->opt, r, ctx->items[i].sca, ctx->scratch, &clock)))
-            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache, &d);
+            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache, ctx->psfs, &d);
         if (st) st = wf_error(st, "persistence history from exposure %d: %s", r->expid, wf_error_message());
         *drawn += d;
     }
@@ -703,6 +722,7 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         job->injector = ctx->opt->sne;
         job->version = ctx->opt->version;
         job->digests = ctx->cache;
+        job->psfs = ctx->psfs;
         p->cfg.quiet = 1;
         wf_persist_history *ph = NULL;
         wf_persist_source src;
@@ -824,9 +844,13 @@ wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt,
     }
     time_t t0 = time(NULL);
     unsigned char *lost = opt->isolate ? calloc(n, 1) : NULL;
-    size_t nlost = 0;
+    size_t nlost = 0, *order = NULL, *start = NULL, nwalks;
     if (opt->isolate && !lost) st = wf_error(WF_ERR_NOMEM, "out of memory");
-    for (size_t i = 0; i < n && !st; i++) {
+    /* SCA by SCA, each one's exposures in plan order (the walks of one worker): the items of
+     * an SCA and filter follow one another and share their PSF (ctx->psfs) */
+    if (!st) st = wf_survey_walks(ctx, 1, &order, &start, &nwalks);
+    for (size_t k = 0; k < n && !st; k++) {
+        size_t i = order[k];
         int crashed = 0;
         st = opt->isolate ? wf_survey_make_item_isolated(ctx, i, &res[i], &crashed) : wf_survey_make_item(ctx, i, &res[i]);
         if (st && crashed) { /* that item alone is lost: the run goes on, and fails at the end */
@@ -839,7 +863,7 @@ wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt,
         if (st) break;
         if (!base->quiet && res[i].made) {
             const wf_survey_row *x = &ctx->rows[ctx->items[i].row];
-            fprintf(stderr, "wfisim survey: [%zu/%zu] exposure %d SCA %d %s MJD %.5f%s (%.0f s)\n", i + 1, n,
+            fprintf(stderr, "wfisim survey: [%zu/%zu] exposure %d SCA %d %s MJD %.5f%s (%.0f s)\n", k + 1, n,
                     x->expid, ctx->items[i].sca, x->filter, x->mjd_mid, wf_survey_item_note(&res[i]),
                     difftime(time(NULL), t0));
         }
@@ -850,6 +874,8 @@ wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt,
         st = wf_survey_lost(ctx, lost, first);
     }
     st = st ? wf_survey_end_failed(ctx, res, st, stats) : wf_survey_end(ctx, res, stats);
+    free(order);
+    free(start);
     free(lost);
     free(res);
     wf_survey_free(ctx);

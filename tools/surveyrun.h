@@ -13,7 +13,9 @@
  *          truth carries the same WFDIGEST is skipped; anything else (missing, truncated,
  *          damaged, from other inputs) is rendered again, through temporary files, so an
  *          interrupted run leaves no half file. wf_survey_run makes the items one after
- *          another; the MPI program (tools/survey_mpi.c) hands them out to its ranks.
+ *          another, SCA by SCA (wf_survey_walks of one worker), so that the items of an SCA
+ *          and filter share one PSF (sim/draw/scene_psf.h); the MPI program
+ *          (tools/survey_mpi.c) hands them out to its ranks by the same walks.
  *   end    one process writes the index and survey_run.txt (and the release with an SN
  *          sample) from every item's result.
  * Each product depends only on the plan row, the SCA, the configuration and the seed (noise is
@@ -114,6 +116,10 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
 /* Computes item i's input digest in this process, so that its files' digests stay in the
  * run's cache (a child process that then makes the item finds them there). */
 wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i);
+/* Builds item i's PSF and wide PSF into this process's cache unless it holds them, for the
+ * same reason: a child's own build is lost with it, and the next items of the SCA and filter
+ * use the same. */
+wf_status wf_survey_item_psf(wf_survey_ctx *ctx, size_t i);
 /* The persistence histories this process's cache took in since mark (wf_survey_history_mark),
  * as bytes for another process's wf_survey_history_import (*buf malloc'd, NULL when none):
  * how an item's child gives what it drew back to the process that makes the next items. */

@@ -21,6 +21,7 @@
 #include "sim/draw/profile.h"
 #include "sim/optics/psf.h"
 #include "sim/draw/render.h"
+#include "sim/draw/scene_psf.h"
 #include "sim/optics/sky.h"
 #include "sim/survey/wcs.h"
 
@@ -80,21 +81,10 @@ struct wf_scene {
     double thermal;          /* e-/pixel/s */
     int gx, gy;              /* pixel-area grid */
     double *area;            /* arcsec^2, (gy x gx) */
-    wf_psf *psf;
-    double *psf_pix;
-    wf_psf_image psf_image;
-    void *psf_memory;
-    wf_arena psf_arena;
-    wf_profile_psf ppsf;
+    wf_scene_psf *psf;       /* the PSF and its tables, the setup's cache's or the scene's own */
+    wf_profile_psf ppsf;     /* psf's tables, and its wide PSF's once built */
     wf_profile_accuracy acc;
-    /* the wide PSF of bright point sources, built only when the scene has one */
-    wf_psf *psf_wide;
-    double *psf_wide_pix;
-    wf_psf_image psf_wide_image;
-    void *psf_wide_memory;
-    wf_arena psf_wide_arena;
     wf_profile_psf ppsf_wide;
-    wf_profile_accuracy acc_wide;
     object *obj;
     size_t nobj;
     const uint8_t *layer_gal, *layer_star; /* wf_scene_set_layer */
@@ -106,12 +96,7 @@ struct wf_scene {
     thread_state *ts;
     const wf_catalog *gal, *stars;
     wf_scene_stats stats;
-    /* from wf_scene_prepare to wf_scene_populate: the optics (the wide PSF is built from
-     * them only once the objects say it is needed) and the helper making the works */
-    wf_psf_optics optics;
-    double lams[WF_PSF_MAX_LAMBDAS], ws[WF_PSF_MAX_LAMBDAS];
-    int nl;
-    double band_limit;
+    /* from wf_scene_prepare to wf_scene_populate: the helper making the works */
     works_job works;
     pthread_t works_thread;
     int works_running, prepared;
@@ -391,74 +376,6 @@ static wf_status add_objects(wf_scene *s, const wf_catalog *cat, obj_kind kind, 
     return WF_OK;
 }
 
-/* The PSF tables sit at the bottom of their block; the transforms that computed them used
- * the rest, which nothing reads again: hand those pages back so they do not stay resident
- * while the scene renders. */
-static void release_tail(const wf_arena *a)
-{
-    long page = sysconf(_SC_PAGESIZE);
-    if (page <= 0) return;
-    uintptr_t start = ((uintptr_t)a->base + a->used + (uintptr_t)page - 1) & ~((uintptr_t)page - 1);
-    uintptr_t end = ((uintptr_t)a->base + a->capacity) & ~((uintptr_t)page - 1);
-    if (end > start) (void)madvise((void *)start, end - start, MADV_DONTNEED);
-}
-
-/* The wide PSF of bright point sources: four times the image side (28" at the default
- * sampling), from a pupil binned no coarser than 4 so that its period (46" at Y106) holds the
- * image, with a PSF table whose period is the image's width (the halo does not fold).
- * Normalised like the narrow one. Built once, and only when a bright source is drawn. */
-static wf_status build_wide_psf(wf_scene *s, const wf_psf_optics *narrow, const double *lams, const double *ws,
-                                int nl, double band_limit)
-{
-    double t0 = now();
-    const wf_scene_setup *setup = &s->setup;
-    wf_psf_optics optics = *narrow;
-    if (optics.pupil_bin > 4) optics.pupil_bin = 4;
-    wf_status st = wf_psf_build_optics(&optics, lams, ws, nl, &s->psf_wide);
-    if (st) return st;
-    int n = 4 * setup->psf_size;
-    if (!(s->psf_wide_pix = malloc((size_t)n * n * sizeof *s->psf_wide_pix)))
-        return wf_error(WF_ERR_NOMEM, "scene: wide PSF image of %d x %d", n, n);
-    wf_psf_draw_opts d;
-    wf_psf_draw_opts_default(&d);
-    d.nx = d.ny = n;
-    d.scale = WF_PSF_PIXEL_SCALE / setup->psf_oversample;
-    d.cx = d.cy = (n - 1) / 2.0;
-    d.pixel = 0;
-    d.jitter = setup->jitter;
-    d.diffusion = setup->diffusion;
-    d.threads = setup->threads;
-    /* by chirp-z transforms: only the image's samples, at its scale (~0.5 -> ~0.03 CPU-s);
-     * ~4e-15 of the peak from the direct sum, which left every product pixel the same
-     * (docs/BENCHMARKS.md) */
-    d.czt = 1;
-    if ((st = wf_psf_draw(s->psf_wide, &d, s->psf_wide_pix))) return st;
-    wf_psf_free(s->psf_wide); /* the image is all the drawer needs: its coefficients go now */
-    s->psf_wide = NULL;
-    double psum = 0.0;
-    for (size_t k = 0; k < (size_t)n * n; k++) psum += s->psf_wide_pix[k];
-    for (size_t k = 0; k < (size_t)n * n; k++) s->psf_wide_pix[k] /= psum;
-    s->psf_wide_image = (wf_psf_image){n, d.scale, s->psf_wide_pix, band_limit};
-    s->acc_wide = s->acc;
-    s->acc_wide.core_radius = 0.0; /* few objects; their halo is what they are drawn for */
-    /* the table's period is the image's width: the image periodised onto it does not overlap
-     * itself, and a wider period would only cost memory (the transform of os x period) */
-    s->acc_wide.psf_table_fft = 2 * (int)ceil(n / (double)setup->psf_oversample / 2.0);
-    s->acc_wide.extra_tables = 0; /* a few stars, whose boxes are near that period anyway */
-    size_t keep, scratch;
-    if ((st = wf_profile_psf_need(&s->psf_wide_image, &s->acc_wide, &keep, &scratch))) return st;
-    size_t bytes = keep + scratch + 4096;
-    if (!(s->psf_wide_memory = wf_arena_host_alloc(bytes))) return wf_error(WF_ERR_NOMEM, "scene: wide PSF table");
-    wf_arena_init(&s->psf_wide_arena, s->psf_wide_memory, bytes, "scene wide PSF arena");
-    if ((st = wf_profile_psf_init(&s->ppsf_wide, &s->psf_wide_image, &s->acc_wide, &s->psf_wide_arena, 1))) return st;
-    release_tail(&s->psf_wide_arena);
-    free(s->psf_wide_pix); /* the table is all the drawer reads from now on */
-    s->psf_wide_pix = NULL;
-    s->psf_wide_image.pix = NULL;
-    s->stats.wide_psf_seconds = now() - t0;
-    return WF_OK;
-}
-
 /* Planning of the objects of range `task` (of s->setup.threads ranges) with the drawing work
  * of the thread that runs it (see wf_scene_create). */
 static wf_status plan_range(void *ctx, int task, int slot)
@@ -573,76 +490,11 @@ wf_status wf_scene_prepare(const wf_scene_setup *setup, wf_scene **out)
             if (v > s->stats.sky_max) s->stats.sky_max = v;
         }
     s->stats.zodi = s->zodi;
-    /* PSF: this SCA and filter only; achromatic at the band's effective wavelength, or the
-     * photon-weighted sum over slices of the band for a flat-f_nu source */
-    wf_psf_optics optics;
-    wf_psf_optics_default(&optics);
-    optics.sca = setup->sca;
-    optics.pupil_bin = setup->pupil_bin;
-    if ((st = wf_pupil_group_of_filter(setup->filter, &optics.group))) goto bad;
-    snprintf(optics.data_dir, sizeof optics.data_dir, "%s", data ? data : "");
-    double lams[WF_PSF_MAX_LAMBDAS], ws[WF_PSF_MAX_LAMBDAS];
-    int nl = setup->psf_nlambda;
-    if (nl < 1 || nl > WF_PSF_MAX_LAMBDAS) {
-        st = wf_error(WF_ERR_RANGE, "scene: psf nlambda %d outside 1..%d", nl, WF_PSF_MAX_LAMBDAS);
-        goto bad;
-    }
-    if (!(setup->jitter >= 0) || !(setup->diffusion >= 0)) {
-        st = wf_error(WF_ERR_RANGE, "scene: jitter %g arcsec and diffusion %g pixels must be >= 0", setup->jitter,
-                      setup->diffusion);
-        goto bad;
-    }
-    if (nl == 1) {
-        lams[0] = s->bp->lambda_eff_nm, ws[0] = 1.0;
-    } else if ((st = wf_bandpass_flat_slices(s->bp, nl, lams, ws))) {
-        goto bad;
-    }
-    if ((st = wf_psf_build_optics(&optics, lams, ws, nl, &s->psf))) goto bad;
-    double lam = lams[0], lam_mean = 0.0;
-    for (int k = 0; k < nl; k++) {
-        lam_mean += ws[k] * lams[k];
-        if (lams[k] < lam) lam = lams[k]; /* the bluest slice sets the band limit */
-    }
-    s->stats.psf_lambda_nm = lam_mean;
-    int n = setup->psf_size;
-    if (!(s->psf_pix = wf_arena_host_realloc(NULL, 0, (size_t)n * n * sizeof *s->psf_pix))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF image"); goto bad; }
-    wf_psf_draw_opts d;
-    wf_psf_draw_opts_default(&d);
-    d.nx = d.ny = n;
-    d.scale = WF_PSF_PIXEL_SCALE / setup->psf_oversample;
-    d.cx = d.cy = (n - 1) / 2.0;
-    d.pixel = 0; /* the drawer applies the pixel */
-    d.jitter = setup->jitter;
-    d.diffusion = setup->diffusion;
-    d.threads = setup->threads;
-    if ((st = wf_psf_draw(s->psf, &d, s->psf_pix))) goto bad;
-    wf_psf_free(s->psf); /* as the wide PSF's: the image is what the tables are made from */
-    s->psf = NULL;
-    /* The image holds ~99% of the light within its 7" (the rest is far wings and spikes);
-     * normalised, every object keeps its whole flux, the wings' share moved inside. */
-    double psum = 0.0;
-    for (size_t k = 0; k < (size_t)n * n; k++) psum += s->psf_pix[k];
-    s->stats.psf_image_sum = psum;
-    for (size_t k = 0; k < (size_t)n * n; k++) s->psf_pix[k] /= psum;
-    /* the pupil's cut-off 2 pi D / lambda in rad/arcsec: D = 2.36 m (SPEC §2) */
-    double band_limit = 2.0 * M_PI * 2.36 / (lam * 1e-9) * (M_PI / (180.0 * 3600.0));
-    s->psf_image = (wf_psf_image){n, d.scale, s->psf_pix, band_limit};
-    size_t keep, scratch;
-    if ((st = wf_profile_psf_need(&s->psf_image, &s->acc, &keep, &scratch))) goto bad;
-    /* the cores' tables on up to one thread each (scratch for each, given back at once) */
-    const int cores = s->acc.core_radius > 0.0 ? s->acc.core_levels : 1;
-    const int pt = setup->threads < cores ? setup->threads : cores;
-    size_t pbytes = keep + (size_t)pt * (scratch + 64) + 4096;
-    if (!(s->psf_memory = wf_arena_host_alloc(pbytes))) { st = wf_error(WF_ERR_NOMEM, "scene: PSF table"); goto bad; }
-    wf_arena_init(&s->psf_arena, s->psf_memory, pbytes, "scene PSF arena");
-    if ((st = wf_profile_psf_init(&s->ppsf, &s->psf_image, &s->acc, &s->psf_arena, pt))) goto bad;
+    if ((st = wf_scene_psf_get(setup->psf_cache, setup, s->bp, &s->psf))) goto bad;
+    s->ppsf = s->psf->ppsf;
+    s->stats.psf_lambda_nm = s->psf->lambda_nm;
+    s->stats.psf_image_sum = s->psf->image_sum;
     s->stats.psf_pixel_max = s->ppsf.pixel_max;
-    release_tail(&s->psf_arena);
-    s->optics = optics;
-    memcpy(s->lams, lams, sizeof lams);
-    memcpy(s->ws, ws, sizeof ws);
-    s->nl = nl;
-    s->band_limit = band_limit;
     free(sky);
     s->prepared = 1;
     *out = s;
@@ -722,7 +574,12 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
             s->stats.bright++;
         }
     }
-    if (s->stats.bright && (st = build_wide_psf(s, &s->optics, s->lams, s->ws, s->nl, s->band_limit))) return st;
+    if (s->stats.bright) { /* built once, and only when a bright source is drawn */
+        int had = s->psf->wide_built;
+        if ((st = wf_scene_psf_wide(s->psf))) return st;
+        s->ppsf_wide = s->psf->ppsf_wide;
+        s->stats.wide_psf_seconds = had ? 0.0 : s->psf->wide_seconds;
+    }
     if (!(s->robj = malloc((s->nobj ? s->nobj : 1) * sizeof *s->robj))) {
         st = wf_error(WF_ERR_NOMEM, "scene: out of memory");
         return st;
@@ -806,12 +663,7 @@ void wf_scene_destroy(wf_scene *s)
     free(s->robj);
     free(s->plans);
     free(s->obj);
-    free(s->psf_memory);
-    free(s->psf_pix);
-    wf_psf_free(s->psf);
-    free(s->psf_wide_memory);
-    free(s->psf_wide_pix);
-    wf_psf_free(s->psf_wide);
+    wf_scene_psf_release(s->psf);
     free(s->area);
     free(s->bp);
     free(s);

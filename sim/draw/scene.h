@@ -28,6 +28,10 @@ typedef struct wf_scene_sn {
     unsigned flags;         /* WF_SALT_* flags of the light-curve evaluation */
 } wf_scene_sn;
 
+/* The PSFs of earlier scenes, for the later ones of the same SCA, filter and PSF knobs
+ * (sim/draw/scene_psf.h). */
+typedef struct wf_scene_psf_cache wf_scene_psf_cache;
+
 typedef struct wf_scene_setup {
     double ra, dec, pa;     /* boresight and observatory position angle, degrees */
     int sca;                /* 1..18 */
@@ -66,6 +70,9 @@ typedef struct wf_scene_setup {
                              * [15; below -50: never] */
     const wf_scene_sn *sne; /* supernovae (must outlive the scene) [none] */
     size_t nsne;
+    wf_scene_psf_cache *psf_cache; /* take the PSF from here and keep it there
+                                    * (sim/draw/scene_psf.h; must outlive the scene)
+                                    * [NULL: the scene's own] */
 } wf_scene_setup;
 
 #define WF_SCENE_FOLD_MAX 0.05    /* noise_tolerance: folding at most this */
