@@ -988,6 +988,38 @@ static void logged_counts(const char *log, long *used, long *drawn)
     free(text);
 }
 
+/* From the products' FILTER keys: the PSFs a process builds that makes each SCA's exposures
+ * in plan order keeping its last PSF, one per run of an SCA's exposures in one filter. */
+static long psf_runs(const char *dir)
+{
+    long runs = 0;
+    for (int k = 0; k < 2; k++) {
+        char last[FLEN_VALUE] = "";
+        for (int e = 0; e <= 5; e++) {
+            char path[4400], v[FLEN_VALUE];
+            snprintf(path, sizeof path, "%s/wfisim_e%06d_sca%02d.fits", dir, e, k ? 7 : 3);
+            header(path, "FILTER", v);
+            runs += strcmp(v, last) != 0;
+            snprintf(last, sizeof last, "%s", v);
+        }
+    }
+    return runs;
+}
+
+/* "PSFs: N built" from a run's log. */
+static long logged_psfs(const char *log)
+{
+    size_t len;
+    long n = -1;
+    char *text = wf_test_slurp(log, &len);
+    ck_assert_ptr_nonnull(text);
+    const char *at = strstr(text, "PSFs: ");
+    ck_assert_msg(at != NULL, "%s: no line on the PSFs", log);
+    ck_assert_int_eq(sscanf(at, "PSFs: %ld built", &n), 1);
+    free(text);
+    return n;
+}
+
 static void assert_same_history_products(const char *d, const char *a, const char *b)
 {
     for (int e = 0; e <= 5; e++)
@@ -1006,7 +1038,10 @@ static void assert_same_history_products(const char *d, const char *a, const cha
  * the layer), so here, where every history's exposures are items of the run, none is drawn
  * (D = 0; each distinct one drawn once, D = 10, before the layer), in one process and with
  * each item in a process of its own (--isolate); under MPI a walk's first item draws its
- * history, whose exposures another rank made (0 < D < U). */
+ * history, whose exposures another rank made (0 < D < U). The items of an SCA and filter
+ * share one PSF: one process builds one per run of an SCA's exposures in one filter
+ * (isolated, the parent builds it before the fork); MPI's ranks at least as many, each for
+ * its own walks, and fewer than the items. */
 START_TEST(history_cache_any_process)
 {
     const char *bin = wf_test_program();
@@ -1036,6 +1071,10 @@ START_TEST(history_cache_any_process)
     ck_assert_int_eq(lu, u);
     ck_assert_int_eq(ld, 0);
     assert_same_history_products(d, "off", "on");
+    const long runs = psf_runs(dir);
+    ck_assert_int_ge(runs, 2);
+    ck_assert_int_lt(runs, 12); /* else nothing to share */
+    ck_assert_int_eq(logged_psfs(log), runs);
     /* each item in a child: what the children drew comes back to the parent's cache */
     ck_assert_int_eq(wf_test_run("%s survey run --isolate --plan %s " HIST " --set scene.stars=%s --out %s/iso 2>%s",
                                  bin, plan, stars, d, log), 0);
@@ -1043,6 +1082,7 @@ START_TEST(history_cache_any_process)
     ck_assert_int_eq(lu, u);
     ck_assert_int_eq(ld, 0);
     assert_same_history_products(d, "off", "iso");
+    ck_assert_int_eq(logged_psfs(log), runs);
     /* under MPI, ranks make walks of an SCA's items: the same bytes, and ranks draw less
      * than every history whole (each walk draws its first item's history, then one a step) */
     const char *mpi = mpi_program();
@@ -1054,6 +1094,8 @@ START_TEST(history_cache_any_process)
     ck_assert_int_gt(ld, 0);
     ck_assert_int_lt(ld, u);
     assert_same_history_products(d, "off", "mpi");
+    ck_assert_int_ge(logged_psfs(log), runs);
+    ck_assert_int_lt(logged_psfs(log), 12);
 }
 END_TEST
 

@@ -239,8 +239,9 @@ wf_status wf_survey_make_item_isolated(wf_survey_ctx *ctx, size_t i, wf_survey_i
 {
     *crashed = 0;
     memset(res, 0, sizeof *res);
+    int built = 0;
     wf_status st = wf_survey_item_digest(ctx, i);
-    if (!st) st = wf_survey_item_psf(ctx, i);
+    if (!st) st = wf_survey_item_psf(ctx, i, &built);
     if (st) return st;
     char name[64];
     wf_survey_item_name(ctx, i, name, sizeof name);
@@ -252,5 +253,6 @@ wf_status wf_survey_make_item_isolated(wf_survey_ctx *ctx, size_t i, wf_survey_i
      * that drawing again (the products are the same) */
     if (!st && tail) (void)wf_survey_history_import(ctx, tail, size);
     free(tail);
+    if (!st && res->made) res->psf_built += built;
     return st;
 }

@@ -596,8 +596,9 @@ wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i)
     return prepare(ctx, i, ctx->cache, ctx->p);
 }
 
-wf_status wf_survey_item_psf(wf_survey_ctx *ctx, size_t i)
+wf_status wf_survey_item_psf(wf_survey_ctx *ctx, size_t i, int *built)
 {
+    *built = 0;
     if (ctx->state[i] == P_SAME) return WF_OK; /* most likely whole, and skipped */
     wf_status st = prepare(ctx, i, NULL, ctx->p);
     if (st || ctx->p->cfg.scene_kind == 2) return st; /* the grid draws no PSF */
@@ -607,7 +608,12 @@ wf_status wf_survey_item_psf(wf_survey_ctx *ctx, size_t i)
     ss.psf_cache = ctx->psfs;
     /* the wide PSF too: nearly every SCA of the deep fields has a star it draws, and it is
      * built once for the items of one SCA and filter */
-    return wf_scene_psf_prefetch(&ss, ss.bright_mag >= -50.0);
+    wf_scene_psf_cache_stats before, after;
+    wf_scene_psf_cache_get_stats(ctx->psfs, &before);
+    st = wf_scene_psf_prefetch(&ss, ss.bright_mag >= -50.0);
+    wf_scene_psf_cache_get_stats(ctx->psfs, &after);
+    *built = (int)(after.built - before.built);
+    return st;
 }
 
 unsigned long wf_survey_history_mark(const wf_survey_ctx *ctx)
@@ -727,6 +733,8 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         wf_persist_history *ph = NULL;
         wf_persist_source src;
         int drawn = 0;
+        wf_scene_psf_cache_stats before, after;
+        wf_scene_psf_cache_get_stats(ctx->psfs, &before);
         if (h->n && (st = build_history(ctx, i, h, &p->cfg, &ph, &src, &drawn)))
             return wf_error(st, "%s: %s", name, wf_error_message());
         res->hist_used = h->n;
@@ -751,6 +759,8 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
             snprintf(msg, sizeof msg, "%s", wf_error_message());
             return wf_error(st, "%s: %s", name, msg);
         }
+        wf_scene_psf_cache_get_stats(ctx->psfs, &after);
+        res->psf_built = (int32_t)(after.built - before.built);
         res->made = 1;
         res->changed = state == P_CHANGED;
         res->redone = state != P_CHANGED && state != P_MISSING;
@@ -794,6 +804,7 @@ static void tally(const wf_survey_ctx *ctx, const wf_survey_item_result *res, wf
         stats->sne_drawn += (long)res[i].sne;
         stats->hist_used += res[i].hist_used;
         stats->hist_drawn += res[i].hist_drawn;
+        stats->psf_built += res[i].psf_built;
     }
 }
 

@@ -64,6 +64,7 @@ typedef struct wf_survey_run_stats {
     long sne_drawn;                 /* SN entries in the truth of the products rendered */
     long outside;                   /* items outside --area, not made */
     long hist_used, hist_drawn;     /* earlier exposures in the persistence histories, and drawn */
+    long psf_built;                 /* PSFs built (the other items took theirs from the cache) */
     int silent;                     /* 1: another process reports this run (MPI ranks > 0) */
 } wf_survey_run_stats;
 
@@ -96,6 +97,8 @@ typedef struct wf_survey_item_result {
     int64_t sne;           /* SNe drawn */
     int32_t hist_used;     /* earlier exposures in its persistence history */
     int32_t hist_drawn;    /* of them drawn for it (the others were in the process's cache) */
+    int32_t psf_built;     /* PSFs built for it (by its process, or by the parent before the
+                            * fork); 0: it found its PSF kept from an earlier item */
     wf_survey_index_row row;
 } wf_survey_item_result;
 
@@ -118,8 +121,8 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
 wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i);
 /* Builds item i's PSF and wide PSF into this process's cache unless it holds them, for the
  * same reason: a child's own build is lost with it, and the next items of the SCA and filter
- * use the same. */
-wf_status wf_survey_item_psf(wf_survey_ctx *ctx, size_t i);
+ * use the same. *built: the PSFs it built (0 or 1). */
+wf_status wf_survey_item_psf(wf_survey_ctx *ctx, size_t i, int *built);
 /* The persistence histories this process's cache took in since mark (wf_survey_history_mark),
  * as bytes for another process's wf_survey_history_import (*buf malloc'd, NULL when none):
  * how an item's child gives what it drew back to the process that makes the next items. */
