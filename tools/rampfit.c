@@ -3,6 +3,8 @@
 #include <math.h>
 #include <stddef.h>
 
+#include "hal/simd.h"
+
 /* One fitted stretch of consecutive resultants [start, end]. The Poisson variance is kept per
  * unit rate so that segments can be combined before the rate it is evaluated at is known. */
 typedef struct seg_fit {
@@ -13,6 +15,13 @@ typedef struct seg_fit {
 } seg_fit;
 
 static void derive_tables(wf_rampfit_setup *s);
+
+/* max(v, 0), 0 for NaN, as fmax(v, 0.0) but inline: fmax is a call (its signed zeros are
+ * not the compiler's to choose), which keeps the lanes' loops scalar. Both paths use it. */
+static inline double pos(double v)
+{
+    return v > 0.0 ? v : 0.0;
+}
 
 wf_status wf_rampfit_setup_init(const wf_clock *clock, double read_noise_e,
                                 wf_rampfit_setup *out)
@@ -151,8 +160,9 @@ static int gls_slope(const wf_rampfit_setup *su, int start, const double *R, int
         double piv = diag - (i > 0 ? prev_off * cdiag[i - 1] : 0.0);
         if (!(piv > 1e-12 * diag))
             return 0; /* no read noise and no signal: nothing to weight by */
-        cdiag[i] = off / piv;
-        x[i] = (dt[i] - (i > 0 ? prev_off * x[i - 1] : 0.0)) / piv;
+        const double inv = 1.0 / piv; /* one division a step (the fit's were half its time) */
+        cdiag[i] = off * inv;
+        x[i] = (dt[i] - (i > 0 ? prev_off * x[i - 1] : 0.0)) * inv;
         prev_off = off;
     }
     for (int i = k - 2; i >= 0; i--)
@@ -246,11 +256,11 @@ static void fit_segment(const wf_rampfit_setup *su, const double *res, int start
     for (int i = 0; i < m; i++)
         slope0 += c[i] * R[i];
     double snr_slope = slope0;
-    (void)gls_slope(su, start, R, m, rn2, fmax(slope0, 0.0), &snr_slope);
+    (void)gls_slope(su, start, R, m, rn2, pos(slope0), &snr_slope);
 
     /* Casertano Eq. 44 with the signal over this segment (as stcal: a segment after a jump
      * should not inherit the charge collected before it). */
-    double signal = fmax(snr_slope, 0.0) * (t[m - 1] - t[0]);
+    double signal = pos(snr_slope) * (t[m - 1] - t[0]);
     double noise = sqrt(rn2 + signal);
     int level = cas22_level(noise > 0.0 ? signal / noise : 0.0);
 
@@ -273,7 +283,7 @@ static void fit_segment(const wf_rampfit_setup *su, const double *res, int start
     out->end = end;
     out->slope = slope;
     out->var_read = rn2 * cr;
-    out->pois_coef = fmax(cp, 0.0); /* a variance: only rounding can make it negative */
+    out->pois_coef = pos(cp); /* a variance: only rounding can make it negative */
 }
 
 static double jump_threshold(const wf_rampfit_setup *su, double slope)
@@ -292,7 +302,7 @@ static double jump_threshold(const wf_rampfit_setup *su, double slope)
 static int worst_difference(const wf_rampfit_setup *su, const double *res, const seg_fit *f,
                             double *stat)
 {
-    const double rn2 = su->read_noise * su->read_noise, rate = fmax(f->slope, 0.0);
+    const double rn2 = su->read_noise * su->read_noise, rate = pos(f->slope);
     int best = -1;
     double best_stat = 0.0;
     for (int i = f->start; i < f->end; i++) {
@@ -328,7 +338,7 @@ static void combine(const seg_fit *f, int nf, wf_rampfit_result *out)
             if (pass == 0)
                 v = all_read ? f[k].var_read : f[k].pois_coef; /* no read noise: Poisson shape */
             else
-                v = f[k].var_read + fmax(rate, 0.0) * f[k].pois_coef;
+                v = f[k].var_read + pos(rate) * f[k].pois_coef;
             w[k] = v > 0.0 ? 1.0 / v : 1.0;
             sw += w[k];
             sr += w[k] * f[k].slope;
@@ -346,7 +356,7 @@ static void combine(const seg_fit *f, int nf, wf_rampfit_result *out)
     out->rate = rate;
     out->var_read = vr;
     out->poisson_coef = vp;
-    out->var_poisson = fmax(rate, 0.0) * vp;
+    out->var_poisson = pos(rate) * vp;
 }
 
 /* Rate from one resultant against a zero reset level (true in simulation; a real detector
@@ -358,7 +368,7 @@ static void single_resultant(const wf_rampfit_setup *su, const double *res, int 
     out->rate = res[r] / t;
     out->var_read = su->read_noise * su->read_noise / (su->nreads[r] * t * t);
     out->poisson_coef = su->tau[r] / (t * t);
-    out->var_poisson = fmax(out->rate, 0.0) * out->poisson_coef;
+    out->var_poisson = pos(out->rate) * out->poisson_coef;
 }
 
 static wf_status fit_pixel(const wf_rampfit_setup *setup, const double *resultants,
@@ -376,87 +386,139 @@ wf_status wf_rampfit_pixel(const wf_rampfit_setup *setup, const double *resultan
 }
 
 /* The whole ramp of up to RF_LANES pixels at once, for pixels whose every resultant is usable
- * and in range: the first fit_segment and jump test of wf_rampfit_pixel, with the same
- * operations in the same order on each pixel, so the same bits. Pixel after pixel, the
- * GLS's Thomas recursion is a chain of dependent divisions (~100 ns a pixel); side by side,
- * the chains of several pixels overlap. A pixel whose ramp needs more (a jump above the
- * threshold, a singular covariance is not one: it keeps the first-pass slope as fit_segment
- * does) is marked for the one-pixel path. rn2_n[i] = rn2 / n_i. */
-#define RF_LANES 8
-static void fit_full_lanes(const wf_rampfit_setup *su, const double *const *R, int L,
-                           const double *rn2_n, wf_rampfit_result *out, int *redo)
+ * and in range: fit_segment, the jump test of worst_difference and combine of one segment,
+ * with the same operations in the same order on each pixel, so the same bits as
+ * wf_rampfit_pixel. Pixel after pixel, the GLS's Thomas recursion is a chain of dependent
+ * divisions, and the power level, the jump test and the combination are branches and
+ * calls (~130 ns a pixel); here every step runs on all lanes at once in vector registers (two
+ * chains of 8 side by side hide the divisions' latency), with lanes past L repeating lane 0
+ * and dropped. A pixel whose ramp needs more (a difference near the jump threshold; a
+ * singular covariance is not one: it keeps the first-pass slope as fit_segment does) is
+ * marked for the one-pixel path. rn2_n[i] = rn2 / n_i. */
+#define RF_LANES 16
+WF_CLONES static void fit_full_lanes(const wf_rampfit_setup *su, const double *const *R, int L,
+                                     const double *rn2_n, wf_rampfit_result *out, int *redo)
 {
+    enum { NL = RF_LANES };
     const int m = su->nres, k = m - 1;
-    const double rn2 = su->read_noise * su->read_noise;
+    const double rn2 = su->read_noise * su->read_noise, span = su->tbar[m - 1] - su->tbar[0];
     const double *pn = su->pair_inv_n, *pt = su->pair_tau, *dt = su->pair_dt, *po = su->pair_off;
-    double rate[RF_LANES], snr[RF_LANES], prev_off[RF_LANES], num[RF_LANES], den[RF_LANES];
-    double cdiag[WF_MA_MAX_RESULTANTS][RF_LANES], x[WF_MA_MAX_RESULTANTS][RF_LANES];
-    int ok[RF_LANES];
-    for (int l = 0; l < L; l++) {
-        double slope0 = 0.0;
-        for (int i = 0; i < m; i++)
-            slope0 += su->full_c[0][i] * R[l][i];
-        snr[l] = slope0;
-        rate[l] = fmax(slope0, 0.0);
+    double r[WF_MA_MAX_RESULTANTS][NL]; /* resultants, lane fastest */
+    double cdiag[WF_MA_MAX_RESULTANTS][NL], x[WF_MA_MAX_RESULTANTS][NL];
+    double snr[NL], rate[NL], prev_off[NL], off[NL], piv[NL], num[NL], den[NL];
+    double slope[NL], var_read[NL], pois[NL];
+    double level[NL]; /* the power level, a double: its compares then mask doubles */
+    int ok[NL], hit[NL];
+    for (int i = 0; i < m; i++)
+        for (int l = 0; l < NL; l++)
+            r[i][l] = R[l < L ? l : 0][i];
+    for (int l = 0; l < NL; l++) {
+        snr[l] = 0.0;
         ok[l] = 1;
-        prev_off[l] = 0.0;
-        num[l] = den[l] = 0.0;
+        prev_off[l] = num[l] = den[l] = 0.0;
     }
-    /* gls_slope, lane by lane within each step */
-    for (int i = 0; i < k; i++)
-        for (int l = 0; l < L; l++) {
-            double diag = rn2 * pn[i] + rate[l] * pt[i];
-            double off = i + 1 < k ? rate[l] * po[i] - rn2_n[i + 1] : 0.0;
-            double piv = diag - (i > 0 ? prev_off[l] * cdiag[i - 1][l] : 0.0);
-            if (!(piv > 1e-12 * diag))
-                ok[l] = 0; /* its result is not used; the arithmetic below stays harmless */
-            cdiag[i][l] = off / piv;
-            x[i][l] = (dt[i] - (i > 0 ? prev_off[l] * x[i - 1][l] : 0.0)) / piv;
-            prev_off[l] = off;
+    /* fit_segment's unweighted first pass */
+    for (int i = 0; i < m; i++)
+        for (int l = 0; l < NL; l++)
+            snr[l] += su->full_c[0][i] * r[i][l];
+    for (int l = 0; l < NL; l++)
+        rate[l] = pos(snr[l]);
+    /* gls_slope */
+    for (int i = 0; i < k; i++) {
+        for (int l = 0; l < NL; l++)
+            off[l] = i + 1 < k ? rate[l] * po[i] - rn2_n[i + 1] : 0.0;
+        for (int l = 0; l < NL; l++) {
+            const double diag = rn2 * pn[i] + rate[l] * pt[i];
+            piv[l] = diag - (i > 0 ? prev_off[l] * cdiag[i > 0 ? i - 1 : 0][l] : 0.0);
+            ok[l] &= piv[l] > 1e-12 * diag; /* a lane that fails keeps the first pass */
         }
+        for (int l = 0; l < NL; l++) {
+            const double inv = 1.0 / piv[l];
+            cdiag[i][l] = off[l] * inv;
+            x[i][l] = (dt[i] - (i > 0 ? prev_off[l] * x[i > 0 ? i - 1 : 0][l] : 0.0)) * inv;
+            prev_off[l] = off[l];
+        }
+    }
     for (int i = k - 2; i >= 0; i--)
-        for (int l = 0; l < L; l++)
+        for (int l = 0; l < NL; l++)
             x[i][l] -= cdiag[i][l] * x[i + 1][l];
     for (int i = 0; i < k; i++)
-        for (int l = 0; l < L; l++) {
-            num[l] += x[i][l] * (R[l][i + 1] - R[l][i]);
+        for (int l = 0; l < NL; l++) {
+            num[l] += x[i][l] * (r[i + 1][l] - r[i][l]);
             den[l] += x[i][l] * dt[i];
         }
-    for (int l = 0; l < L; l++) {
-        if (ok[l] && den[l] > 0.0 && isfinite(num[l] / den[l]))
-            snr[l] = num[l] / den[l];
-        const double *t = su->tbar;
-        double signal = fmax(snr[l], 0.0) * (t[m - 1] - t[0]);
-        double noise = sqrt(rn2 + signal);
-        int level = cas22_level(noise > 0.0 ? signal / noise : 0.0);
-        const double *c = su->full_c[level];
-        seg_fit f;
-        f.start = 0;
-        f.end = k;
-        f.slope = 0.0;
-        for (int i = m - 1; i >= 0; i--)
-            f.slope += c[i] * R[l][i];
-        f.var_read = rn2 * su->full_cr[level];
-        f.pois_coef = fmax(su->full_cp[level], 0.0);
-        redo[l] = 0;
-        if (su->detect_jumps && m >= 3) {
-            /* worst_difference's z = d / sqrt(v) exceeds the (positive) threshold only where
-             * d > 0 and d^2 > thr^2 v; with a margin far above rounding, a pixel none of whose
-             * differences passes cannot have a jump, and any other goes the one-pixel way */
-            double thr = jump_threshold(su, f.slope), thr2 = thr * thr * (1.0 - 1e-9);
-            double r0 = fmax(f.slope, 0.0);
-            int hit = 0; /* without branches: d's sign is a coin toss on a flat ramp */
-            for (int i = 0; i < k; i++) {
-                double d = R[l][i + 1] - R[l][i] - f.slope * su->pair_dt[i];
-                hit |= (d > 0.0) & (d * d > thr2 * (rn2 * su->pair_inv_n[i] + r0 * su->pair_tau[i]));
+    /* the power level (cas22_level: NaN, as there, takes the last), the slope and its
+     * variances at that level; each lane's coefficients picked by blends, not gathers */
+    for (int l = 0; l < NL; l++) {
+        const double q = num[l] / den[l];
+        snr[l] = ok[l] & (den[l] > 0.0) & (isfinite(q) != 0) ? q : snr[l];
+        const double signal = pos(snr[l]) * span, noise = sqrt(rn2 + signal);
+        const double s2n = noise > 0.0 ? signal / noise : 0.0;
+        level[l] = (double)(!(s2n < 5.0) + !(s2n < 10.0) + !(s2n < 20.0) + !(s2n < 50.0) + !(s2n < 100.0));
+        slope[l] = 0.0;
+        const double v = level[l];
+        const double *fr = su->full_cr, *fp = su->full_cp;
+        const double cr = v == 0 ? fr[0] : v == 1 ? fr[1] : v == 2 ? fr[2] : v == 3 ? fr[3] : v == 4 ? fr[4] : fr[5];
+        const double cp = v == 0 ? fp[0] : v == 1 ? fp[1] : v == 2 ? fp[2] : v == 3 ? fp[3] : v == 4 ? fp[4] : fp[5];
+        var_read[l] = rn2 * cr;
+        pois[l] = pos(cp);
+    }
+    _Static_assert(WF_RAMPFIT_POWER_LEVELS == 6, "the blends below pick one of six levels");
+    for (int i = m - 1; i >= 0; i--) {
+        const double c0 = su->full_c[0][i], c1 = su->full_c[1][i], c2 = su->full_c[2][i],
+                     c3 = su->full_c[3][i], c4 = su->full_c[4][i], c5 = su->full_c[5][i];
+        for (int l = 0; l < NL; l++) {
+            const double v = level[l];
+            const double c = v == 0 ? c0 : v == 1 ? c1 : v == 2 ? c2 : v == 3 ? c3 : v == 4 ? c4 : c5;
+            slope[l] += c * r[i][l];
+        }
+    }
+    /* worst_difference's z = d / sqrt(v) exceeds the (positive) threshold only where d > 0
+     * and d^2 > thr^2 v; with a margin far above rounding, a pixel none of whose differences
+     * passes cannot have a jump, and any other goes the one-pixel way. The threshold is at
+     * least its value at the top rate (log10 is a call): the lanes with a difference past that
+     * (a few in 10^5 without a jump) alone take their own. */
+    for (int l = 0; l < NL; l++)
+        hit[l] = 0;
+    if (su->detect_jumps && m >= 3) {
+        const double lo = jump_threshold(su, 1e4), lo2 = lo * lo * (1.0 - 1e-9);
+        int any = 0;
+        for (int i = 0; i < k; i++)
+            for (int l = 0; l < NL; l++) {
+                const double d = r[i + 1][l] - r[i][l] - slope[l] * dt[i];
+                const double v = rn2 * pn[i] + pos(slope[l]) * pt[i];
+                hit[l] |= (d > 0.0) & (d * d > lo2 * v);
             }
-            redo[l] = hit;
+        for (int l = 0; l < L; l++)
+            any |= hit[l];
+        for (int l = 0; any && l < L; l++) {
+            if (!hit[l]) continue;
+            const double thr = jump_threshold(su, slope[l]), thr2 = thr * thr * (1.0 - 1e-9);
+            hit[l] = 0;
+            for (int i = 0; i < k; i++) {
+                const double d = r[i + 1][l] - r[i][l] - slope[l] * dt[i];
+                hit[l] |= (d > 0.0) & (d * d > thr2 * (rn2 * pn[i] + pos(slope[l]) * pt[i]));
+            }
         }
-        if (!redo[l]) {
-            wf_rampfit_result res = {0};
-            combine(&f, 1, &res);
-            out[l] = res;
-        }
+    }
+    /* combine of the one segment, pass by pass as there */
+    double w[NL], rt[NL];
+    for (int l = 0; l < NL; l++) {
+        const double v = var_read[l] > 0.0 ? var_read[l] : pois[l];
+        w[l] = v > 0.0 ? 1.0 / v : 1.0;
+        rt[l] = (0.0 + w[l] * slope[l]) / (0.0 + w[l]);
+    }
+    for (int l = 0; l < NL; l++) {
+        const double v = var_read[l] + pos(rt[l]) * pois[l];
+        w[l] = v > 0.0 ? 1.0 / v : 1.0;
+        rt[l] = (0.0 + w[l] * slope[l]) / (0.0 + w[l]);
+    }
+    for (int l = 0; l < L; l++) {
+        redo[l] = hit[l];
+        if (hit[l]) continue;
+        const double a = w[l] / (0.0 + w[l]), vp = 0.0 + a * a * pois[l];
+        out[l] = (wf_rampfit_result){.rate = rt[l], .var_read = 0.0 + a * a * var_read[l],
+                                     .var_poisson = pos(rt[l]) * vp, .poisson_coef = vp};
     }
 }
 
