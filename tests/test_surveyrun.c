@@ -1099,8 +1099,9 @@ START_TEST(history_cache_any_process)
 }
 END_TEST
 
-/* The MPI program's walks: every item once, each walk one SCA's items in plan order, at most
- * ceil(items / (2 workers)) of them, and walks listed by their first item. */
+/* The walks: every item once, each walk one SCA's items in plan order, at most
+ * ceil(items / (2 workers)) of them (the MPI program's), or all of them (0 workers: a
+ * one-process run's), and walks listed by their first item. */
 START_TEST(walks_cover_items)
 {
     const char *bin = wf_test_program();
@@ -1124,9 +1125,9 @@ START_TEST(walks_cover_items)
     size_t n;
     ck_assert_int_eq(wf_survey_begin(&cfg, &opt, &ctx, &n), WF_OK);
     ck_assert_uint_eq(n, 30);
-    size_t workers[] = {1, 2, 4, 100};
-    for (int q = 0; q < 4; q++) {
-        size_t *order, *start, nwalks, len = (n + 2 * workers[q] - 1) / (2 * workers[q]);
+    size_t workers[] = {1, 2, 4, 100, 0}; /* 0: one walk per SCA (a one-process run's order) */
+    for (int q = 0; q < 5; q++) {
+        size_t *order, *start, nwalks, len = workers[q] ? (n + 2 * workers[q] - 1) / (2 * workers[q]) : n;
         ck_assert_int_eq(wf_survey_walks(ctx, workers[q], &order, &start, &nwalks), WF_OK);
         ck_assert_uint_eq(start[0], 0);
         ck_assert_uint_eq(start[nwalks], n);

@@ -388,7 +388,7 @@ static int cmd_survey_run(cli *c)
                 "%ld already done; %ld supernova images%s\n", stats.rendered, stats.redone, stats.changed,
                 stats.skipped, stats.sne_drawn, c->area ? "; SCAs outside --area not made" : "");
     if (!c->cfg.quiet && !stats.silent && stats.rendered)
-        fprintf(stderr, "wfisim survey: PSFs: %ld built, the other products' kept from an earlier one\n",
+        fprintf(stderr, "wfisim survey: PSFs: %ld built (the items of an SCA and filter share one)\n",
                 stats.psf_built);
     if (!c->cfg.quiet && !stats.silent && c->cfg.ro.persist.on)
         fprintf(stderr, "wfisim survey: persistence histories: %ld earlier exposures, %ld of them drawn\n",

@@ -633,7 +633,7 @@ wf_status wf_survey_history_import(wf_survey_ctx *ctx, const void *buf, size_t s
 
 wf_status wf_survey_walks(const wf_survey_ctx *ctx, size_t nworkers, size_t **order, size_t **start, size_t *nwalks)
 {
-    size_t n = ctx->nitems, two = 2 * (nworkers ? nworkers : 1), len = (n + two - 1) / two, w = 0;
+    size_t n = ctx->nitems, two = 2 * (nworkers ? nworkers : 1), len = nworkers ? (n + two - 1) / two : n, w = 0;
     if (len < 1) len = 1;
     size_t *walk = malloc((n ? n : 1) * sizeof *walk), *cursor = malloc((n + 1) * sizeof *cursor);
     *order = malloc((n ? n : 1) * sizeof **order);
@@ -857,9 +857,9 @@ wf_status wf_survey_run(const wf_config *base, const wf_survey_run_options *opt,
     unsigned char *lost = opt->isolate ? calloc(n, 1) : NULL;
     size_t nlost = 0, *order = NULL, *start = NULL, nwalks;
     if (opt->isolate && !lost) st = wf_error(WF_ERR_NOMEM, "out of memory");
-    /* SCA by SCA, each one's exposures in plan order (the walks of one worker): the items of
-     * an SCA and filter follow one another and share their PSF (ctx->psfs) */
-    if (!st) st = wf_survey_walks(ctx, 1, &order, &start, &nwalks);
+    /* SCA by SCA, each one's exposures in plan order (one walk per SCA): the items of an SCA
+     * and filter follow one another and share their PSF (ctx->psfs) */
+    if (!st) st = wf_survey_walks(ctx, 0, &order, &start, &nwalks);
     for (size_t k = 0; k < n && !st; k++) {
         size_t i = order[k];
         int crashed = 0;

@@ -13,7 +13,7 @@
  *          truth carries the same WFDIGEST is skipped; anything else (missing, truncated,
  *          damaged, from other inputs) is rendered again, through temporary files, so an
  *          interrupted run leaves no half file. wf_survey_run makes the items one after
- *          another, SCA by SCA (wf_survey_walks of one worker), so that the items of an SCA
+ *          another, SCA by SCA (wf_survey_walks, one walk per SCA), so that the items of an SCA
  *          and filter share one PSF (sim/draw/scene_psf.h); the MPI program
  *          (tools/survey_mpi.c) hands them out to its ranks by the same walks.
  *   end    one process writes the index and survey_run.txt (and the release with an SN
@@ -64,7 +64,8 @@ typedef struct wf_survey_run_stats {
     long sne_drawn;                 /* SN entries in the truth of the products rendered */
     long outside;                   /* items outside --area, not made */
     long hist_used, hist_drawn;     /* earlier exposures in the persistence histories, and drawn */
-    long psf_built;                 /* PSFs built (the other items took theirs from the cache) */
+    long psf_built;                 /* PSFs built, for the items and their histories' scenes (the
+                                     * other items took theirs from the process's cache) */
     int silent;                     /* 1: another process reports this run (MPI ranks > 0) */
 } wf_survey_run_stats;
 
@@ -132,8 +133,8 @@ wf_status wf_survey_history_import(wf_survey_ctx *ctx, const void *buf, size_t s
 /* The items as walks for a run on nworkers processes: a walk is consecutive items of one SCA
  * in plan (exposure) order, so that the process that makes it finds in its cache all the
  * earlier exposures of each history but the newest (tools/persist.h); walks are cut to
- * ceil(items / (2 nworkers)) items, so that every worker has some, and listed by their first
- * item. (*order)[k] for k in [(*start)[w], (*start)[w + 1]) are walk w's items; both
+ * ceil(items / (2 nworkers)) items, so that every worker has some (nworkers 0: not cut, one
+ * walk per SCA), and listed by their first item. (*order)[k] for k in [(*start)[w], (*start)[w + 1]) are walk w's items; both
  * malloc'd. */
 wf_status wf_survey_walks(const wf_survey_ctx *ctx, size_t nworkers, size_t **order, size_t **start, size_t *nwalks);
 /* "exposure E SCA S" of item i, for messages. */

@@ -302,8 +302,9 @@ wf_status wf_scene_psf_get(wf_scene_psf_cache *cache, const wf_scene_setup *setu
                 *out = p;
                 return WF_OK;
             }
-    if (cache && cache->n == cache->capacity) { /* the least recently taken makes room first,
-                                                 * so that a process never holds more */
+    if (cache && cache->n == cache->capacity) { /* the least recently taken makes room first:
+                                                 * the cache holds no more than capacity (a
+                                                 * scene may still hold the one it let go) */
         int old = 0;
         for (int i = 1; i < cache->n; i++)
             if (cache->e[i]->priv->used < cache->e[old]->priv->used) old = i;
