@@ -7,8 +7,6 @@
 #include <math.h>
 #include <pthread.h>
 #include <stdint.h>
-#include <sys/mman.h>
-#include <unistd.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -19,7 +17,6 @@
 #include "sim/fits/fitsout.h"
 #include "sim/numeric/parallel.h"
 #include "sim/draw/profile.h"
-#include "sim/optics/psf.h"
 #include "sim/draw/render.h"
 #include "sim/draw/scene_psf.h"
 #include "sim/optics/sky.h"
