@@ -451,7 +451,7 @@ WF_CLONES static void fit_full_lanes(const wf_rampfit_setup *su, const double *c
      * variances at that level; each lane's coefficients picked by blends, not gathers */
     for (int l = 0; l < NL; l++) {
         const double q = num[l] / den[l];
-        snr[l] = ok[l] & (den[l] > 0.0) & (isfinite(q) != 0) ? q : snr[l];
+        snr[l] = (ok[l] & (den[l] > 0.0) & (isfinite(q) != 0)) ? q : snr[l];
         const double signal = pos(snr[l]) * span, noise = sqrt(rn2 + signal);
         const double s2n = noise > 0.0 ? signal / noise : 0.0;
         level[l] = (double)(!(s2n < 5.0) + !(s2n < 10.0) + !(s2n < 20.0) + !(s2n < 50.0) + !(s2n < 100.0));
