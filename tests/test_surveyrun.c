@@ -1099,6 +1099,41 @@ START_TEST(history_cache_any_process)
 }
 END_TEST
 
+/* A run that begins mid-plan (a job array's task; an MPI walk) draws its first item's whole
+ * history and then none: each later item of the SCA finds the earlier exposures the first
+ * one drew, and the one before it made, in the cache (at the default depth, 8, the cache's
+ * size per SCA, which a least-recently-used eviction emptied of the newest ones: 22 of 24
+ * drawn). The products are those of a run with the cache off. */
+START_TEST(history_cache_mid_plan)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], stars[4200], log[4200];
+    history_inputs(bin, d, plan, stars, sizeof plan);
+    snprintf(log, sizeof log, "%s/log", d);
+#define MID "--exposures 12:14 --scas 3 --mode single " SMALL " --set scene.kind=catalog"
+    long lu, ld;
+    ck_assert_int_eq(wf_test_run("%s survey run --plan %s " MID " --set scene.stars=%s --out %s/mid 2>%s", bin, plan,
+                                 stars, d, log), 0);
+    logged_counts(log, &lu, &ld);
+    ck_assert_int_eq(lu, 3 * 8);
+    ck_assert_int_eq(ld, 8);
+    ck_assert_int_eq(wf_test_run("WFISIM_TEST_PERSIST_CACHE=off %s survey run --plan %s " MID " --set scene.stars=%s "
+                                 "--out %s/midoff 2>%s", bin, plan, stars, d, log), 0);
+    logged_counts(log, &lu, &ld);
+    ck_assert_int_eq(ld, 3 * 8);
+#undef MID
+    for (int e = 12; e <= 14; e++)
+        for (int t = 0; t < 2; t++) {
+            char x[4300], y[4300];
+            snprintf(x, sizeof x, "%s/mid/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
+            snprintf(y, sizeof y, "%s/midoff/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
+            wf_test_assert_same_file(x, y);
+        }
+}
+END_TEST
+
 /* The walks: every item once, each walk one SCA's items in plan order, at most
  * ceil(items / (2 workers)) of them (the MPI program's), or all of them (0 workers: a
  * one-process run's), and walks listed by their first item. */
@@ -1178,6 +1213,7 @@ static Suite *suite(void)
     tcase_add_test(tc, mpi_crashed_item_lost_alone);
     tcase_add_test(tc, history_cache_any_process);
     tcase_add_test(tc, walks_cover_items);
+    tcase_add_test(tc, history_cache_mid_plan);
     suite_add_tcase(s, tc);
     return s;
 }
