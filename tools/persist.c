@@ -2,6 +2,7 @@
 
 #include <math.h>
 #include <pthread.h>
+#include <limits.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -28,6 +29,9 @@ struct wf_persist_history {
     double dt[WF_PERSIST_DEPTH_MAX];
     slot_list slot[WF_PERSIST_DEPTH_MAX];
     int own[WF_PERSIST_DEPTH_MAX]; /* 1: freed with the history; 0: the cache's */
+    unsigned long held;            /* the cache's tick before its first slot: the entries used
+                                    * since are its own, never thrown out while it is built */
+    int marked;
 };
 
 /* Per SCA, the last CACHE_DEPTH exposures drawn or used: a history (at most
@@ -63,21 +67,21 @@ void wf_persist_cache_free(wf_persist_cache *c)
 }
 
 /* The entry of (expid, sca), or NULL; *slot: where a new one goes: an empty one, else the
- * earliest exposure before expid, else the least recently used. Not the least recently used
- * first: a history takes its exposures newest first, so after a full history was drawn that
- * is its newest, which the SCA's next item needs, and each next item then drew all but one
- * again (a run that begins mid-plan, a job array's task, an MPI walk: 22 of 24 drawn for
- * three items at depth 8). An exposure before expid is none the history being built holds
- * (they all come after it) and the one the SCA's later items need least; when there is none,
- * the least recently used is not one it holds either (it holds fewer than CACHE_DEPTH, all
- * used since). */
-static cache_entry *cache_find(wf_persist_cache *c, long long expid, int sca, cache_entry **slot)
+ * earliest exposure before expid not used after tick `held` (the entries a history being
+ * built holds), else the least recently used. Not the least recently used first: a history
+ * takes its exposures newest first, so after a full history was drawn that is its newest,
+ * which the SCA's next item needs, and each next item then drew all but one again (a run that
+ * begins mid-plan, a job array's task, an MPI walk: 22 of 24 drawn for three items at depth
+ * 8); the earliest is the one the SCA's later items need least. The least recently used is
+ * never one a history holds either: it holds fewer than CACHE_DEPTH, all used since. */
+static cache_entry *cache_find(wf_persist_cache *c, long long expid, int sca, unsigned long held, cache_entry **slot)
 {
     cache_entry *row = c->s[sca], *lru = &row[0], *early = NULL;
     for (int i = 0; i < CACHE_DEPTH; i++) {
         if (row[i].used && row[i].expid == expid) return &row[i];
         if (row[i].used < lru->used) lru = &row[i];
-        if (row[i].used && row[i].expid < expid && (!early || row[i].expid < early->expid)) early = &row[i];
+        if (row[i].used && row[i].used <= held && row[i].expid < expid && (!early || row[i].expid < early->expid))
+            early = &row[i];
     }
     *slot = !lru->used || !early ? lru : early;
     return NULL;
@@ -144,7 +148,7 @@ wf_status wf_persist_cache_import(wf_persist_cache *c, const void *buf, size_t s
             return wf_error(WF_ERR_INPUT, "persistence histories: a record of SCA %d with %u pixels does not fit",
                             (int)sca, (unsigned)n);
         cache_entry *slot;
-        if (cache_find(c, expid, sca, &slot)) { p += (size_t)n * 6; continue; } /* the same bytes */
+        if (cache_find(c, expid, sca, ULONG_MAX, &slot)) { p += (size_t)n * 6; continue; } /* the same bytes */
         slot_list list = {malloc((n ? n : 1) * sizeof(entry)), n};
         if (!list.e) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence histories");
         for (uint32_t j = 0; j < n; j++) memcpy(&list.e[j].pixel, p + 4 * (size_t)j, 4);
@@ -416,7 +420,11 @@ wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config
         wf_status st = exposure_list(h, cfg, clock, psfs, &list);
         return st ? st : add_slot(h, list, 1, dt);
     }
-    cache_entry *slot, *e = cache_find(cache, expid, sca, &slot);
+    if (!h->marked) {
+        h->held = cache->tick;
+        h->marked = 1;
+    }
+    cache_entry *slot, *e = cache_find(cache, expid, sca, h->held, &slot);
     if (e) {
         *drawn = 0;
         e->used = ++cache->tick;
@@ -575,7 +583,7 @@ wf_status wf_persist_layer_finish(wf_persist_layer *l, wf_persist_cache *cache, 
         n += l->rows[y].n;
     }
     cache_entry *slot;
-    if (cache_find(cache, expid, sca, &slot)) return WF_OK;
+    if (cache_find(cache, expid, sca, ULONG_MAX, &slot)) return WF_OK;
     slot_list list = {malloc((n ? n : 1) * sizeof(entry)), n};
     if (!list.e) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence history");
     size_t k = 0;
