@@ -449,6 +449,63 @@ START_TEST(history_threshold_exact)
 }
 END_TEST
 
+/* The history cache never throws out a slot the history being built holds, whatever order
+ * its exposures' EXPIDs come in (the cache puts an exposure in place of the earliest one
+ * before it): SCA 1's eight entries full (EXPIDs 20..27), then a history of EXPIDs 5 and 9
+ * (a plan whose EXPIDs do not follow its rows), whose 9 must not go in place of its own 5.
+ * Its codes are those of the same history built without the cache (a slot thrown out would
+ * be read after it was freed: the sanitizers' run says so, a plain run reads what the
+ * allocator wrote there). The grid scene: the same bright pixels in every exposure. */
+START_TEST(history_cache_keeps_held)
+{
+    wf_config cfg;
+    wf_clock clock;
+    wf_config_defaults(&cfg);
+    const char *set[] = {"scene.kind=grid", "readout.ncols=48", "readout.nrows=40", "scene.grid.flux=5e4",
+                         "scene.grid.spacing=8", "exposure.mode=single", "exposure.sca=1"};
+    for (size_t i = 0; i < sizeof set / sizeof *set; i++)
+        ck_assert_msg(wf_config_set(&cfg, set[i], NULL) == WF_OK, "%s: %s", set[i], wf_error_message());
+    ck_assert_msg(wf_config_finish(&cfg, &clock) == WF_OK, "%s", wf_error_message());
+    const int n = 48 * 40;
+    wf_persist_cache *cache;
+    ck_assert_int_eq(wf_persist_cache_new(&cache), WF_OK);
+    wf_persist_history *fill, *h, *ref;
+    int drawn;
+    ck_assert_int_eq(wf_persist_history_new(48, 40, cfg.persist.min_stimulus, 1e5, &fill), WF_OK);
+    for (int e = 27; e >= 20; e--) {
+        cfg.ro.exposure = (uint32_t)e;
+        ck_assert_int_eq(wf_persist_history_add_exposure(fill, &cfg, &clock, 100.0 * (28 - e), cache, NULL, &drawn), WF_OK);
+        ck_assert_int_eq(drawn, 1);
+    }
+    wf_persist_history_free(fill);
+    ck_assert_int_eq(wf_persist_history_new(48, 40, cfg.persist.min_stimulus, 1e5, &h), WF_OK);
+    ck_assert_int_eq(wf_persist_history_new(48, 40, cfg.persist.min_stimulus, 1e5, &ref), WF_OK);
+    const int ids[2] = {5, 9};
+    for (int j = 0; j < 2; j++) {
+        cfg.ro.exposure = (uint32_t)ids[j];
+        ck_assert_int_eq(wf_persist_history_add_exposure(h, &cfg, &clock, 60.0 + 400.0 * j, cache, NULL, &drawn), WF_OK);
+        ck_assert_int_eq(drawn, 1);
+        ck_assert_int_eq(wf_persist_history_add_exposure(ref, &cfg, &clock, 60.0 + 400.0 * j, NULL, NULL, &drawn), WF_OK);
+    }
+    wf_persist_source a, b;
+    wf_persist_history_source(h, &a);
+    wf_persist_history_source(ref, &b);
+    ck_assert_int_eq(a.depth, 2);
+    uint16_t *ca = malloc(sizeof *ca * (size_t)n * 2), *cb = malloc(sizeof *cb * (size_t)n * 2);
+    ck_assert_int_eq(a.fill(a.ctx, 0, 40, 48, ca), WF_OK);
+    ck_assert_int_eq(b.fill(b.ctx, 0, 40, 48, cb), WF_OK);
+    int kept = 0;
+    for (int i = 0; i < 2 * n; i++) kept += cb[i] > 0;
+    ck_assert_int_gt(kept, 20);
+    ck_assert(!memcmp(ca, cb, sizeof *ca * (size_t)n * 2));
+    free(ca);
+    free(cb);
+    wf_persist_history_free(h);
+    wf_persist_history_free(ref);
+    wf_persist_cache_free(cache);
+}
+END_TEST
+
 /* The bound that picks an earlier exposure's bright objects holds: no drawn pixel of any
  * object, compact or extended, round or sheared, bulge, disk, knots or a star, exceeds its
  * flux x wf_persist_peak_fraction at the scene PSF's own psf_pixel_max, at Y106 and F184
@@ -714,6 +771,7 @@ static Suite *suite(void)
     tcase_add_test(tc, independent_of_tiles_and_threads);
     tcase_add_test(tc, zero_gap_refused);
     tcase_add_test(tc, history_threshold_exact);
+    tcase_add_test(tc, history_cache_keeps_held);
     tcase_add_test(tc, bright_bound_holds);
     tcase_add_test(tc, survey_history_any_split);
     tcase_add_test(tc, survey_ramp_longer_than_slot);

@@ -1,8 +1,8 @@
 #include "tools/persist.h"
 
+#include <limits.h>
 #include <math.h>
 #include <pthread.h>
-#include <limits.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -34,9 +34,10 @@ struct wf_persist_history {
     int marked;
 };
 
-/* Per SCA, the last CACHE_DEPTH exposures drawn or used: a history (at most
- * WF_PERSIST_DEPTH_MAX slots, all of its SCA) then never loses a slot it holds, and a run in
- * plan order (every SCA of one exposure, then the next) keeps each SCA's recent past. */
+/* Per SCA, CACHE_DEPTH exposures drawn or made, the earliest thrown out first (cache_find):
+ * a history (at most WF_PERSIST_DEPTH_MAX slots, all of its SCA) never loses a slot it holds
+ * while it is built, and a run that goes forward in the plan keeps each SCA's recent past
+ * (which assumes EXPIDs follow the plan's time, as `wfisim survey plan` numbers them). */
 #define CACHE_SCAS 32
 #define CACHE_DEPTH WF_PERSIST_DEPTH_MAX
 
@@ -134,6 +135,7 @@ wf_status wf_persist_cache_export(const wf_persist_cache *c, unsigned long mark,
 
 wf_status wf_persist_cache_import(wf_persist_cache *c, const void *buf, size_t size)
 {
+    const unsigned long held = c ? c->tick : 0;
     const unsigned char *p = buf, *end = p + size;
     while (c && p < end) {
         int64_t expid;
@@ -148,7 +150,8 @@ wf_status wf_persist_cache_import(wf_persist_cache *c, const void *buf, size_t s
             return wf_error(WF_ERR_INPUT, "persistence histories: a record of SCA %d with %u pixels does not fit",
                             (int)sca, (unsigned)n);
         cache_entry *slot;
-        if (cache_find(c, expid, sca, ULONG_MAX, &slot)) { p += (size_t)n * 6; continue; } /* the same bytes */
+        /* held: the records of this batch do not go in place of each other */
+        if (cache_find(c, expid, sca, held, &slot)) { p += (size_t)n * 6; continue; } /* the same bytes */
         slot_list list = {malloc((n ? n : 1) * sizeof(entry)), n};
         if (!list.e) return wf_error(WF_ERR_NOMEM, "out of memory for the persistence histories");
         for (uint32_t j = 0; j < n; j++) memcpy(&list.e[j].pixel, p + 4 * (size_t)j, 4);
