@@ -948,6 +948,14 @@ static void history_inputs(const char *bin, const char *d, char *plan, char *sta
     free(rows);
 }
 
+/* history_inputs in a fresh folder *d, and the path of a run's log there. */
+static void history_setup(const char *bin, const char **d, char *plan, char *stars, char *log, size_t cap)
+{
+    *d = wf_test_tmpdir();
+    history_inputs(bin, *d, plan, stars, cap);
+    snprintf(log, cap, "%s/log", *d);
+}
+
 /* From the products' headers alone: U, the earlier exposures of every history (PERSISTN
  * summed), and the distinct (EXPID, SCA) among them, what a cache that never loses one of a
  * run in plan order draws. */
@@ -1046,10 +1054,9 @@ START_TEST(history_cache_any_process)
 {
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
-    const char *d = wf_test_tmpdir();
+    const char *d;
     char plan[4200], stars[4200], log[4200];
-    history_inputs(bin, d, plan, stars, sizeof plan);
-    snprintf(log, sizeof log, "%s/log", d);
+    history_setup(bin, &d, plan, stars, log, sizeof plan);
     long u, dist, lu, ld;
     ck_assert_int_eq(wf_test_run("WFISIM_TEST_PERSIST_CACHE=off %s survey run --plan %s " HIST " --set scene.stars=%s "
                                  "--out %s/off 2>%s", bin, plan, stars, d, log), 0);
@@ -1108,11 +1115,11 @@ START_TEST(history_cache_mid_plan)
 {
     const char *bin = wf_test_program();
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
-    const char *d = wf_test_tmpdir();
+    const char *d;
     char plan[4200], stars[4200], log[4200];
-    history_inputs(bin, d, plan, stars, sizeof plan);
-    snprintf(log, sizeof log, "%s/log", d);
-#define MID "--exposures 12:14 --scas 3 --mode single " SMALL " --set scene.kind=catalog"
+    history_setup(bin, &d, plan, stars, log, sizeof plan);
+#define MID "--exposures 12:14 --scas 3 --mode single " SMALL " --set scene.kind=catalog " \
+            "--set detector.persistence.depth=8 --set detector.persistence.window=3600"
     long lu, ld;
     ck_assert_int_eq(wf_test_run("%s survey run --plan %s " MID " --set scene.stars=%s --out %s/mid 2>%s", bin, plan,
                                  stars, d, log), 0);
@@ -1122,6 +1129,7 @@ START_TEST(history_cache_mid_plan)
     ck_assert_int_eq(wf_test_run("WFISIM_TEST_PERSIST_CACHE=off %s survey run --plan %s " MID " --set scene.stars=%s "
                                  "--out %s/midoff 2>%s", bin, plan, stars, d, log), 0);
     logged_counts(log, &lu, &ld);
+    ck_assert_int_eq(lu, 3 * 8);
     ck_assert_int_eq(ld, 3 * 8);
 #undef MID
     for (int e = 12; e <= 14; e++)
