@@ -447,10 +447,7 @@ wf_status wf_scene_prepare(const wf_scene_setup *setup, wf_scene **out)
     wf_sky_model *sky = NULL;
     s->works = (works_job){s, WF_OK, ""};
     if (setup->threads < 1) { st = wf_error(WF_ERR_RANGE, "scene: %d threads", setup->threads); goto bad; }
-    wf_profile_accuracy_default(&s->acc);
-    s->acc.flux_fraction = setup->flux_fraction;
-    s->acc.core_radius = setup->core_radius;
-    s->acc.core_levels = setup->core_levels;
+    wf_scene_psf_accuracy(setup, &s->acc); /* the PSF's tables are made under the same */
     if (!(s->ts = calloc((size_t)setup->threads, sizeof *s->ts))) {
         st = wf_error(WF_ERR_NOMEM, "scene: out of memory");
         goto bad;
@@ -487,7 +484,7 @@ wf_status wf_scene_prepare(const wf_scene_setup *setup, wf_scene **out)
             if (v > s->stats.sky_max) s->stats.sky_max = v;
         }
     s->stats.zodi = s->zodi;
-    if ((st = wf_scene_psf_get(setup->psf_cache, setup, s->bp, &s->psf))) goto bad;
+    if ((st = wf_scene_psf_get(setup->psf_cache, setup, &s->psf))) goto bad;
     s->ppsf = s->psf->ppsf;
     s->stats.psf_lambda_nm = s->psf->lambda_nm;
     s->stats.psf_image_sum = s->psf->image_sum;

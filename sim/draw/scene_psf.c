@@ -9,9 +9,12 @@
 #include <unistd.h>
 
 #include "hal/arena.h"
+#include "sim/optics/bandpass.h"
 #include "sim/optics/psf.h"
 
-/* Every input of the PSF and its tables: two scenes that agree on these get the same bits. */
+/* Every input of the PSF and its tables, and all that build() reads of a scene's setup (its
+ * thread count aside, which changes no bit): two scenes that agree on these get the same
+ * bits. */
 typedef struct psf_key {
     char filter[16];
     char data_dir[1024];
@@ -22,6 +25,7 @@ typedef struct psf_key {
 struct wf_scene_psf_private {
     psf_key key;
     int threads;                  /* for building the tables (the same for any count) */
+    wf_profile_accuracy acc;      /* the tables' knobs (key_accuracy) */
     wf_psf_optics optics;         /* the wide PSF is built from these */
     double lams[WF_PSF_MAX_LAMBDAS], ws[WF_PSF_MAX_LAMBDAS];
     int nl;
@@ -62,6 +66,21 @@ static void key_of(const wf_scene_setup *s, psf_key *k)
     k->diffusion = s->diffusion;
     k->flux_fraction = s->flux_fraction;
     k->core_radius = s->core_radius;
+}
+
+static void key_accuracy(const psf_key *k, wf_profile_accuracy *acc)
+{
+    wf_profile_accuracy_default(acc);
+    acc->flux_fraction = k->flux_fraction;
+    acc->core_radius = k->core_radius;
+    acc->core_levels = k->core_levels;
+}
+
+void wf_scene_psf_accuracy(const wf_scene_setup *setup, wf_profile_accuracy *acc)
+{
+    psf_key k;
+    key_of(setup, &k);
+    key_accuracy(&k, acc);
 }
 
 static int key_same(const psf_key *a, const psf_key *b)
@@ -142,33 +161,37 @@ static void psf_free(wf_scene_psf *p)
 }
 
 /* PSF: this SCA and filter only; achromatic at the band's effective wavelength, or the
- * photon-weighted sum over slices of the band for a flat-f_nu source. */
-static wf_status build(const wf_scene_setup *setup, const wf_bandpass *bp, const psf_key *key, wf_scene_psf **out)
+ * photon-weighted sum over slices of the band for a flat-f_nu source. From the key alone. */
+static wf_status build(const psf_key *key, int threads, wf_scene_psf **out)
 {
-    double t0 = now();
     wf_scene_psf *p = calloc(1, sizeof *p);
     struct wf_scene_psf_private *q = p ? calloc(1, sizeof *q) : NULL;
-    if (!q) {
+    wf_bandpass *bp = q ? malloc(sizeof *bp) : NULL;
+    if (!bp) {
+        free(q);
         free(p);
         return wf_error(WF_ERR_NOMEM, "scene: out of memory");
     }
     p->priv = q;
     q->key = *key;
     wf_status st;
+    wf_filter filter;
     wf_psf_optics_default(&q->optics);
-    q->optics.sca = setup->sca;
-    q->optics.pupil_bin = setup->pupil_bin;
+    q->optics.sca = key->sca;
+    q->optics.pupil_bin = key->pupil_bin;
     double *pix = NULL;
-    if ((st = wf_pupil_group_of_filter(setup->filter, &q->optics.group))) goto bad;
-    snprintf(q->optics.data_dir, sizeof q->optics.data_dir, "%s", setup->data_dir);
-    int nl = setup->psf_nlambda;
+    const char *data = key->data_dir[0] ? key->data_dir : NULL;
+    if ((st = wf_filter_parse(key->filter, &filter)) || (st = wf_bandpass_load(filter, data, bp))) goto bad;
+    if ((st = wf_pupil_group_of_filter(key->filter, &q->optics.group))) goto bad;
+    snprintf(q->optics.data_dir, sizeof q->optics.data_dir, "%s", key->data_dir);
+    int nl = key->psf_nlambda;
     if (nl < 1 || nl > WF_PSF_MAX_LAMBDAS) {
         st = wf_error(WF_ERR_RANGE, "scene: psf nlambda %d outside 1..%d", nl, WF_PSF_MAX_LAMBDAS);
         goto bad;
     }
-    if (!(setup->jitter >= 0) || !(setup->diffusion >= 0)) {
-        st = wf_error(WF_ERR_RANGE, "scene: jitter %g arcsec and diffusion %g pixels must be >= 0", setup->jitter,
-                      setup->diffusion);
+    if (!(key->jitter >= 0) || !(key->diffusion >= 0)) {
+        st = wf_error(WF_ERR_RANGE, "scene: jitter %g arcsec and diffusion %g pixels must be >= 0", key->jitter,
+                      key->diffusion);
         goto bad;
     }
     if (nl == 1) {
@@ -185,15 +208,12 @@ static wf_status build(const wf_scene_setup *setup, const wf_bandpass *bp, const
     p->lambda_nm = lam_mean;
     /* the pupil's cut-off 2 pi D / lambda in rad/arcsec: D = 2.36 m (SPEC §2) */
     q->band_limit = 2.0 * M_PI * 2.36 / (lam * 1e-9) * (M_PI / (180.0 * 3600.0));
-    wf_profile_accuracy_default(&p->acc);
-    p->acc.flux_fraction = setup->flux_fraction;
-    p->acc.core_radius = setup->core_radius;
-    p->acc.core_levels = setup->core_levels;
+    key_accuracy(key, &q->acc);
     /* the cores' tables on up to one thread each (scratch for each, given back at once) */
-    const int cores = p->acc.core_radius > 0.0 ? p->acc.core_levels : 1;
-    q->threads = setup->threads < 1 ? 1 : setup->threads;
+    const int cores = q->acc.core_radius > 0.0 ? q->acc.core_levels : 1;
+    q->threads = threads < 1 ? 1 : threads;
     const int pt = q->threads < cores ? q->threads : cores;
-    int n = setup->psf_size;
+    int n = key->psf_size;
     if (!(pix = wf_arena_host_realloc(NULL, 0, (size_t)n * n * sizeof *pix))) {
         st = wf_error(WF_ERR_NOMEM, "scene: PSF image");
         goto bad;
@@ -201,15 +221,16 @@ static wf_status build(const wf_scene_setup *setup, const wf_bandpass *bp, const
     /* The image holds ~99% of the light within its 7" (the rest is far wings and spikes);
      * normalised, every object keeps its whole flux, the wings' share moved inside. */
     if ((st = draw_image(&q->optics, q, n, pix, &p->image_sum))) goto bad;
-    const wf_psf_image img = {n, WF_PSF_PIXEL_SCALE / setup->psf_oversample, pix, q->band_limit};
-    if ((st = make_tables(&img, &p->acc, pt, "scene PSF arena", &q->memory, &p->ppsf))) goto bad;
+    const wf_psf_image img = {n, WF_PSF_PIXEL_SCALE / key->psf_oversample, pix, q->band_limit};
+    if ((st = make_tables(&img, &q->acc, pt, "scene PSF arena", &q->memory, &p->ppsf))) goto bad;
     free(pix); /* the tables are all the drawer reads */
-    p->seconds = now() - t0;
+    free(bp);
     q->refs = 1;
     *out = p;
     return WF_OK;
 bad:
     free(pix);
+    free(bp);
     psf_free(p);
     return st;
 }
@@ -230,13 +251,13 @@ wf_status wf_scene_psf_wide(wf_scene_psf *p)
     if (!pix) return wf_error(WF_ERR_NOMEM, "scene: wide PSF image of %d x %d", n, n);
     wf_status st = draw_image(&optics, q, n, pix, &sum);
     const wf_psf_image img = {n, WF_PSF_PIXEL_SCALE / q->key.psf_oversample, pix, q->band_limit};
-    p->acc_wide = p->acc;
-    p->acc_wide.core_radius = 0.0; /* few objects; their halo is what they are drawn for */
+    wf_profile_accuracy acc = q->acc;
+    acc.core_radius = 0.0; /* few objects; their halo is what they are drawn for */
     /* the table's period is the image's width: the image periodised onto it does not overlap
      * itself, and a wider period would only cost memory (the transform of os x period) */
-    p->acc_wide.psf_table_fft = 2 * (int)ceil(n / (double)q->key.psf_oversample / 2.0);
-    p->acc_wide.extra_tables = 0; /* a few stars, whose boxes are near that period anyway */
-    if (!st) st = make_tables(&img, &p->acc_wide, 1, "scene wide PSF arena", &q->wide_memory, &p->ppsf_wide);
+    acc.psf_table_fft = 2 * (int)ceil(n / (double)q->key.psf_oversample / 2.0);
+    acc.extra_tables = 0; /* a few stars, whose boxes are near that period anyway */
+    if (!st) st = make_tables(&img, &acc, 1, "scene wide PSF arena", &q->wide_memory, &p->ppsf_wide);
     free(pix);
     if (st) {
         free(q->wide_memory);
@@ -286,8 +307,7 @@ void wf_scene_psf_cache_get_stats(const wf_scene_psf_cache *c, wf_scene_psf_cach
     *out = c->stats;
 }
 
-wf_status wf_scene_psf_get(wf_scene_psf_cache *cache, const wf_scene_setup *setup, const wf_bandpass *bp,
-                           wf_scene_psf **out)
+wf_status wf_scene_psf_get(wf_scene_psf_cache *cache, const wf_scene_setup *setup, wf_scene_psf **out)
 {
     *out = NULL;
     psf_key key;
@@ -311,7 +331,7 @@ wf_status wf_scene_psf_get(wf_scene_psf_cache *cache, const wf_scene_setup *setu
         drop(cache, old);
     }
     wf_scene_psf *p = NULL;
-    wf_status st = build(setup, bp, &key, &p);
+    wf_status st = build(&key, setup->threads, &p);
     if (st) return st;
     if (cache) {
         cache->e[cache->n++] = p;
@@ -327,16 +347,10 @@ wf_status wf_scene_psf_get(wf_scene_psf_cache *cache, const wf_scene_setup *setu
 wf_status wf_scene_psf_prefetch(const wf_scene_setup *setup, int wide)
 {
     if (!setup->psf_cache) return wf_error(WF_ERR_INPUT, "scene PSF prefetch: no cache");
-    wf_filter f;
-    wf_bandpass *bp = malloc(sizeof *bp);
-    if (!bp) return wf_error(WF_ERR_NOMEM, "scene: out of memory");
     wf_scene_psf *p = NULL;
-    wf_status st = wf_filter_parse(setup->filter, &f);
-    if (!st) st = wf_bandpass_load(f, setup->data_dir[0] ? setup->data_dir : NULL, bp);
-    if (!st) st = wf_scene_psf_get(setup->psf_cache, setup, bp, &p);
+    wf_status st = wf_scene_psf_get(setup->psf_cache, setup, &p);
     if (!st && wide) st = wf_scene_psf_wide(p);
     wf_scene_psf_release(p);
-    free(bp);
     return st;
 }
 

@@ -11,20 +11,21 @@
 
 #include "sim/draw/profile.h"
 #include "sim/draw/scene.h"
-#include "sim/optics/bandpass.h"
 
 typedef struct wf_scene_psf {
-    wf_profile_accuracy acc;      /* the tables' knobs (the scene's, before per-object ones) */
     wf_profile_psf ppsf;          /* the tables (pointers into the PSF's own memory) */
     double image_sum;             /* the image's share of the light before normalising */
     double lambda_nm;             /* photon-weighted mean wavelength of the slices */
-    double seconds;               /* building it */
     int wide_built;               /* wf_scene_psf_wide has run */
-    wf_profile_accuracy acc_wide;
     wf_profile_psf ppsf_wide;
-    double wide_seconds;
+    double wide_seconds;          /* building the wide PSF */
     struct wf_scene_psf_private *priv;
 } wf_scene_psf;
+
+/* The drawing knobs of a scene of setup before any object's own (wf_profile_accuracy's
+ * defaults with setup's flux_fraction and core split): the PSF's tables are made under them,
+ * and the scene's works too. */
+void wf_scene_psf_accuracy(const wf_scene_setup *setup, wf_profile_accuracy *acc);
 
 /* Keeps up to `capacity` (>= 1) PSFs; the least recently taken goes first. */
 wf_status wf_scene_psf_cache_new(int capacity, wf_scene_psf_cache **out);
@@ -37,11 +38,10 @@ typedef struct wf_scene_psf_cache_stats {
 } wf_scene_psf_cache_stats;
 void wf_scene_psf_cache_get_stats(const wf_scene_psf_cache *c, wf_scene_psf_cache_stats *out);
 
-/* The PSF of setup's SCA, filter and PSF knobs (bp: setup's bandpass): the cache's when it
- * holds one of that key, else built (and kept there; cache NULL: the caller's alone). Held
- * until wf_scene_psf_release. */
-wf_status wf_scene_psf_get(wf_scene_psf_cache *cache, const wf_scene_setup *setup, const wf_bandpass *bp,
-                           wf_scene_psf **out);
+/* The PSF of setup's SCA, filter and PSF knobs: the cache's when it holds one of that key,
+ * else built (and kept there; cache NULL: the caller's alone), on up to setup->threads
+ * threads. Held until wf_scene_psf_release. */
+wf_status wf_scene_psf_get(wf_scene_psf_cache *cache, const wf_scene_setup *setup, wf_scene_psf **out);
 /* Builds p's wide PSF unless it has one. */
 wf_status wf_scene_psf_wide(wf_scene_psf *p);
 void wf_scene_psf_release(wf_scene_psf *p);
