@@ -396,6 +396,14 @@ wf_status wf_rampfit_pixel(const wf_rampfit_setup *setup, const double *resultan
  * singular covariance is not one: it keeps the first-pass slope as fit_segment does) is
  * marked for the one-pixel path. rn2_n[i] = rn2 / n_i. */
 #define RF_LANES 16
+_Static_assert(WF_RAMPFIT_POWER_LEVELS == 6, "level_pick picks one of six levels");
+
+/* t[level] as a chain of selects (level a double 0..5): a blend in vector lanes, not a gather */
+static inline double level_pick(double level, const double *t)
+{
+    return level == 0 ? t[0] : level == 1 ? t[1] : level == 2 ? t[2] : level == 3 ? t[3] : level == 4 ? t[4] : t[5];
+}
+
 WF_CLONES static void fit_full_lanes(const wf_rampfit_setup *su, const double *const *R, int L,
                                      const double *rn2_n, wf_rampfit_result *out, int *redo)
 {
@@ -456,50 +464,30 @@ WF_CLONES static void fit_full_lanes(const wf_rampfit_setup *su, const double *c
         const double s2n = noise > 0.0 ? signal / noise : 0.0;
         level[l] = (double)(!(s2n < 5.0) + !(s2n < 10.0) + !(s2n < 20.0) + !(s2n < 50.0) + !(s2n < 100.0));
         slope[l] = 0.0;
-        const double v = level[l];
-        const double *fr = su->full_cr, *fp = su->full_cp;
-        const double cr = v == 0 ? fr[0] : v == 1 ? fr[1] : v == 2 ? fr[2] : v == 3 ? fr[3] : v == 4 ? fr[4] : fr[5];
-        const double cp = v == 0 ? fp[0] : v == 1 ? fp[1] : v == 2 ? fp[2] : v == 3 ? fp[3] : v == 4 ? fp[4] : fp[5];
-        var_read[l] = rn2 * cr;
-        pois[l] = pos(cp);
+        var_read[l] = rn2 * level_pick(level[l], su->full_cr);
+        pois[l] = pos(level_pick(level[l], su->full_cp));
     }
-    _Static_assert(WF_RAMPFIT_POWER_LEVELS == 6, "the blends below pick one of six levels");
     for (int i = m - 1; i >= 0; i--) {
-        const double c0 = su->full_c[0][i], c1 = su->full_c[1][i], c2 = su->full_c[2][i],
-                     c3 = su->full_c[3][i], c4 = su->full_c[4][i], c5 = su->full_c[5][i];
-        for (int l = 0; l < NL; l++) {
-            const double v = level[l];
-            const double c = v == 0 ? c0 : v == 1 ? c1 : v == 2 ? c2 : v == 3 ? c3 : v == 4 ? c4 : c5;
-            slope[l] += c * r[i][l];
-        }
+        const double c[WF_RAMPFIT_POWER_LEVELS] = {su->full_c[0][i], su->full_c[1][i], su->full_c[2][i],
+                                                   su->full_c[3][i], su->full_c[4][i], su->full_c[5][i]};
+        for (int l = 0; l < NL; l++)
+            slope[l] += level_pick(level[l], c) * r[i][l];
     }
     /* worst_difference's z = d / sqrt(v) exceeds the (positive) threshold only where d > 0
-     * and d^2 > thr^2 v; with a margin far above rounding, a pixel none of whose differences
-     * passes cannot have a jump, and any other goes the one-pixel way. The threshold is at
-     * least its value at the top rate (log10 is a call): the lanes with a difference past that
-     * (a few in 10^5 without a jump) alone take their own. */
+     * and d^2 > thr^2 v. The threshold is at least its value at the top rate, so with a margin
+     * far above rounding a pixel none of whose differences passes that one cannot have a jump;
+     * any other (a few in 10^5 without a jump) goes the one-pixel way, which decides it
+     * exactly (and no log10, a call, runs here). */
     for (int l = 0; l < NL; l++)
         hit[l] = 0;
     if (su->detect_jumps && m >= 3) {
         const double lo = jump_threshold(su, 1e4), lo2 = lo * lo * (1.0 - 1e-9);
-        int any = 0;
         for (int i = 0; i < k; i++)
             for (int l = 0; l < NL; l++) {
                 const double d = r[i + 1][l] - r[i][l] - slope[l] * dt[i];
                 const double v = rn2 * pn[i] + pos(slope[l]) * pt[i];
                 hit[l] |= (d > 0.0) & (d * d > lo2 * v);
             }
-        for (int l = 0; l < L; l++)
-            any |= hit[l];
-        for (int l = 0; any && l < L; l++) {
-            if (!hit[l]) continue;
-            const double thr = jump_threshold(su, slope[l]), thr2 = thr * thr * (1.0 - 1e-9);
-            hit[l] = 0;
-            for (int i = 0; i < k; i++) {
-                const double d = r[i + 1][l] - r[i][l] - slope[l] * dt[i];
-                hit[l] |= (d > 0.0) & (d * d > thr2 * (rn2 * pn[i] + pos(slope[l]) * pt[i]));
-            }
-        }
     }
     /* combine of the one segment, pass by pass as there */
     double w[NL], rt[NL];
