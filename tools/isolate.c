@@ -239,12 +239,9 @@ wf_status wf_survey_make_item_isolated(wf_survey_ctx *ctx, size_t i, wf_survey_i
 {
     *crashed = 0;
     memset(res, 0, sizeof *res);
-    int built = 0;
-    wf_status st = wf_survey_item_digest(ctx, i);
+    int built;
+    wf_status st = wf_survey_item_before_fork(ctx, i, &built);
     if (st) return st;
-    /* a PSF that fails to build here is left to the child, which reports it as the item's
-     * failure, as before the parent built any */
-    if (wf_survey_item_psf(ctx, i, &built)) built = 0;
     char name[64];
     wf_survey_item_name(ctx, i, name, sizeof name);
     item_job j = {ctx, i, wf_survey_history_mark(ctx)};

@@ -14,8 +14,8 @@
 #define WF_TOOLS_PERSIST_H
 
 #include "hal/persist.h"
-#include "sim/draw/scene.h"
 #include "hal/scene.h"
+#include "sim/draw/scene.h"
 #include "sim/survey/catalog.h"
 #include "tools/config.h"
 

@@ -591,29 +591,30 @@ unsigned char *wf_survey_item_states(wf_survey_ctx *ctx)
     return ctx->state;
 }
 
-wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i)
+/* PSFs this process has built so far. */
+static long psfs_built(const wf_survey_ctx *ctx)
 {
-    return prepare(ctx, i, ctx->cache, ctx->p);
+    wf_scene_psf_cache_stats s;
+    wf_scene_psf_cache_get_stats(ctx->psfs, &s);
+    return s.built;
 }
 
-wf_status wf_survey_item_psf(wf_survey_ctx *ctx, size_t i, int *built)
+wf_status wf_survey_item_before_fork(wf_survey_ctx *ctx, size_t i, int *psf_built)
 {
-    *built = 0;
-    if (ctx->state[i] == P_SAME) return WF_OK; /* most likely whole, and skipped */
-    wf_status st = prepare(ctx, i, NULL, ctx->p);
-    if (st || ctx->p->cfg.scene_kind == 2) return st; /* the grid draws no PSF */
+    *psf_built = 0;
+    wf_status st = prepare(ctx, i, ctx->cache, ctx->p);
+    if (st || ctx->state[i] == P_SAME || ctx->p->cfg.scene_kind == 2) /* skipped, most likely; a grid */
+        return st;
     wf_scene_setup ss;
     const wf_config *cfg = &ctx->p->cfg;
     wf_pipeline_scene_setup(cfg, &ctx->p->clock, cfg->threads < 1 ? 1 : cfg->threads, &ss);
     ss.psf_cache = ctx->psfs;
     /* the wide PSF too: nearly every SCA of the deep fields has a star it draws, and it is
-     * built once for the items of one SCA and filter */
-    wf_scene_psf_cache_stats before, after;
-    wf_scene_psf_cache_get_stats(ctx->psfs, &before);
-    st = wf_scene_psf_prefetch(&ss, ss.bright_mag >= -50.0);
-    wf_scene_psf_cache_get_stats(ctx->psfs, &after);
-    *built = (int)(after.built - before.built);
-    return st;
+     * built once for the items of one SCA and filter; a failure is left to the child */
+    const long before = psfs_built(ctx);
+    (void)wf_scene_psf_prefetch(&ss, ss.bright_mag >= -50.0);
+    *psf_built = (int)(psfs_built(ctx) - before);
+    return WF_OK;
 }
 
 unsigned long wf_survey_history_mark(const wf_survey_ctx *ctx)
@@ -633,7 +634,7 @@ wf_status wf_survey_history_import(wf_survey_ctx *ctx, const void *buf, size_t s
 
 wf_status wf_survey_walks(const wf_survey_ctx *ctx, size_t nworkers, size_t **order, size_t **start, size_t *nwalks)
 {
-    size_t n = ctx->nitems, two = 2 * (nworkers ? nworkers : 1), len = nworkers ? (n + two - 1) / two : n, w = 0;
+    size_t n = ctx->nitems, len = nworkers ? (n + 2 * nworkers - 1) / (2 * nworkers) : n, w = 0;
     if (len < 1) len = 1;
     size_t *walk = malloc((n ? n : 1) * sizeof *walk), *cursor = malloc((n + 1) * sizeof *cursor);
     *order = malloc((n ? n : 1) * sizeof **order);
@@ -733,8 +734,7 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         wf_persist_history *ph = NULL;
         wf_persist_source src;
         int drawn = 0;
-        wf_scene_psf_cache_stats before, after;
-        wf_scene_psf_cache_get_stats(ctx->psfs, &before);
+        const long psfs_before = psfs_built(ctx);
         if (h->n && (st = build_history(ctx, i, h, &p->cfg, &ph, &src, &drawn)))
             return wf_error(st, "%s: %s", name, wf_error_message());
         res->hist_used = h->n;
@@ -759,8 +759,7 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
             snprintf(msg, sizeof msg, "%s", wf_error_message());
             return wf_error(st, "%s: %s", name, msg);
         }
-        wf_scene_psf_cache_get_stats(ctx->psfs, &after);
-        res->psf_built = (int32_t)(after.built - before.built);
+        res->psf_built = (int32_t)(psfs_built(ctx) - psfs_before);
         res->made = 1;
         res->changed = state == P_CHANGED;
         res->redone = state != P_CHANGED && state != P_MISSING;

@@ -117,13 +117,12 @@ unsigned char *wf_survey_item_states(wf_survey_ctx *ctx);
 /* Item i (0-based, plan order), after the check: skipped when its products are whole and
  * from this run's inputs, else rendered. */
 wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_result *res);
-/* Computes item i's input digest in this process, so that its files' digests stay in the
- * run's cache (a child process that then makes the item finds them there). */
-wf_status wf_survey_item_digest(wf_survey_ctx *ctx, size_t i);
-/* Builds item i's PSF and wide PSF into this process's cache unless it holds them, for the
- * same reason: a child's own build is lost with it, and the next items of the SCA and filter
- * use the same. *built: the PSFs it built (0 or 1). */
-wf_status wf_survey_item_psf(wf_survey_ctx *ctx, size_t i, int *built);
+/* What a child process that makes item i needs, made in this process so that it stays for
+ * the next items (a child's own is lost with it): the item's input digest (its files' digests
+ * stay in the run's cache) and, unless the item will most likely be skipped, its PSF and wide
+ * PSF (the next items of its SCA and filter take the same). A PSF that fails to build here is
+ * left to the child, which reports it as the item's failure. *psf_built: PSFs built (0, 1). */
+wf_status wf_survey_item_before_fork(wf_survey_ctx *ctx, size_t i, int *psf_built);
 /* The persistence histories this process's cache took in since mark (wf_survey_history_mark),
  * as bytes for another process's wf_survey_history_import (*buf malloc'd, NULL when none):
  * how an item's child gives what it drew back to the process that makes the next items. */
@@ -134,8 +133,8 @@ wf_status wf_survey_history_import(wf_survey_ctx *ctx, const void *buf, size_t s
  * in plan (exposure) order, so that the process that makes it finds in its cache all the
  * earlier exposures of each history but the newest (tools/persist.h); walks are cut to
  * ceil(items / (2 nworkers)) items, so that every worker has some (nworkers 0: not cut, one
- * walk per SCA), and listed by their first item. (*order)[k] for k in [(*start)[w], (*start)[w + 1]) are walk w's items; both
- * malloc'd. */
+ * walk per SCA), and listed by their first item. (*order)[k] for k in
+ * [(*start)[w], (*start)[w + 1]) are walk w's items; both malloc'd. */
 wf_status wf_survey_walks(const wf_survey_ctx *ctx, size_t nworkers, size_t **order, size_t **start, size_t *nwalks);
 /* "exposure E SCA S" of item i, for messages. */
 void wf_survey_item_name(const wf_survey_ctx *ctx, size_t i, char *buf, size_t cap);
