@@ -31,7 +31,6 @@ struct wf_persist_history {
     int own[WF_PERSIST_DEPTH_MAX]; /* 1: freed with the history; 0: the cache's */
     unsigned long held;            /* the cache's tick before its first slot: the entries used
                                     * since are its own, never thrown out while it is built */
-    int marked;
 };
 
 /* Per SCA, CACHE_DEPTH exposures drawn or made, the earliest thrown out first (cache_find):
@@ -423,10 +422,7 @@ wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config
         wf_status st = exposure_list(h, cfg, clock, psfs, &list);
         return st ? st : add_slot(h, list, 1, dt);
     }
-    if (!h->marked) {
-        h->held = cache->tick;
-        h->marked = 1;
-    }
+    if (!h->depth) h->held = cache->tick; /* its first slot */
     cache_entry *slot, *e = cache_find(cache, expid, sca, h->held, &slot);
     if (e) {
         *drawn = 0;
