@@ -984,16 +984,25 @@ static void history_counts(const char *dir, long *used, long *distinct)
     *distinct = nseen;
 }
 
-/* "persistence histories: U earlier exposures, D of them drawn" from a run's log. */
-static void logged_counts(const char *log, long *used, long *drawn)
+/* The numbers of a run's log line that begins with format's text up to its first '%':
+ * format's conversions, n of them, into a and b. */
+static void logged(const char *log, const char *format, int n, long *a, long *b)
 {
     size_t len;
     char *text = wf_test_slurp(log, &len);
     ck_assert_ptr_nonnull(text);
-    const char *at = strstr(text, "persistence histories: ");
-    ck_assert_msg(at != NULL, "%s: no line on the persistence histories", log);
-    ck_assert_int_eq(sscanf(at, "persistence histories: %ld earlier exposures, %ld of them drawn", used, drawn), 2);
+    char head[64];
+    snprintf(head, sizeof head, "%.*s", (int)strcspn(format, "%"), format);
+    const char *at = strstr(text, head);
+    ck_assert_msg(at != NULL, "%s: no line \"%s\"", log, head);
+    ck_assert_int_eq(sscanf(at, format, a, b), n);
     free(text);
+}
+
+/* "persistence histories: U earlier exposures, D of them drawn" from a run's log. */
+static void logged_counts(const char *log, long *used, long *drawn)
+{
+    logged(log, "persistence histories: %ld earlier exposures, %ld of them drawn", 2, used, drawn);
 }
 
 /* From the products' FILTER keys: the PSFs a process builds that makes each SCA's exposures
@@ -1017,14 +1026,8 @@ static long psf_runs(const char *dir)
 /* "PSFs: N built" from a run's log. */
 static long logged_psfs(const char *log)
 {
-    size_t len;
     long n = -1;
-    char *text = wf_test_slurp(log, &len);
-    ck_assert_ptr_nonnull(text);
-    const char *at = strstr(text, "PSFs: ");
-    ck_assert_msg(at != NULL, "%s: no line on the PSFs", log);
-    ck_assert_int_eq(sscanf(at, "PSFs: %ld built", &n), 1);
-    free(text);
+    logged(log, "PSFs: %ld built", 1, &n, NULL);
     return n;
 }
 
