@@ -169,6 +169,12 @@ static int words_blocks(const wf_readout_config *cfg, const wf_clock *clock)
     return cfg->mode == WF_MODE_RAMP && cfg->sampling == WF_SAMPLE_DIRECT ? direct_blocks(&clock->ma) : 1;
 }
 
+/* ro->words: the blocks, and a few words more for per-read sampling's pairs (row_noise_pairs) */
+static size_t words_count(const wf_readout_config *cfg, const wf_clock *clock)
+{
+    return 4 * (size_t)words_blocks(cfg, clock) * (size_t)cfg->ncols + 4;
+}
+
 static wf_status check_config(const wf_readout_config *cfg, const wf_clock *clock)
 {
     if (cfg->ncols < 1 || cfg->nrows < 1 || cfg->ncols > 65536 || cfg->nrows > 65536)
@@ -235,7 +241,7 @@ wf_status wf_readout_arena_need(const wf_readout_config *cfg, const wf_clock *cl
         ADD(wf_size_mul3(3, nc, sizeof(float)));
     }
     ADD(wf_size_mul(tile, sizeof(float)));
-    ADD(wf_size_mul3(4 * sizeof(uint32_t), (size_t)words_blocks(cfg, clock), nc));
+    ADD(wf_size_mul(words_count(cfg, clock), sizeof(uint32_t)));
     ADD(wf_size_mul(nc, sizeof(double)));
     ADD(wf_size_mul(tile, sizeof(double)));
     if (cfg->mode == WF_MODE_RAMP) {
@@ -392,7 +398,7 @@ wf_status wf_readout_create(const wf_readout_config *cfg, const wf_clock *clock,
     TAKE(ro->charge, halo, "collected charge");
     TAKE(ro->meas, halo, "measured charge");
     TAKE(ro->gauss, tile, "read-noise normals");
-    TAKE(ro->words, 4 * (size_t)words_blocks(cfg, clock) * (size_t)cfg->ncols, "noise words");
+    TAKE(ro->words, words_count(cfg, clock), "noise words");
     ro->noise_off = noise->kind == WF_NOISE_OFF;
     TAKE(ro->row, cfg->ncols, "IPC row");
     TAKE(ro->sum, tile, "resultant sums");
@@ -508,7 +514,9 @@ static inline double interval_mean(const wf_readout *ro, size_t i, double frames
 /* Each (pixel, read) has one stream. Its first block, computed a row at a time by
  * wf_noise_block_row, serves the common case: word 0 is the read-noise normal, words 1-3
  * the uniforms of Poisson draws by inversion. Draws that need more (PTRS above a mean of
- * 10) continue the same stream after the blocks the batch took, created on first use. */
+ * 10) continue the same stream after the blocks the batch took, created on first use
+ * (per-read sampling takes its two words from a block of two pixels, row_noise_pairs, and
+ * continues at block 1 of the pixel's own stream all the same). */
 typedef struct more_noise {
     wf_rng rng;
     int ready;
@@ -633,6 +641,27 @@ static void row_noise(wf_readout *ro, int y, uint32_t read, wf_purpose purpose, 
                            w, w + nc, w + 2 * nc, w + 3 * nc);
     }
     if (z) wf_norm_from_u32(ro->words, (int)nc, z);
+}
+
+/* Per-read sampling needs two words a pixel and read (the read-noise normal and the Poisson
+ * word), so one Philox block serves two pixels of a row, x and x + h with h = ceil(ncols / 2):
+ * block 0 of (pixel y h + x, read, WF_PURPOSE_PHOTON_PAIR) gives words 0-1 to the first and
+ * 2-3 to the second. The halves of the row land where they belong, with no unpacking. A draw
+ * that needs more (PTRS above a mean of 10) takes the pixel's own stream (more_noise). Row
+ * y's words of one read: the normals' at ro->words, the Poisson words at row_words_poisson,
+ * and for tile rows the normals in z. */
+static uint32_t *row_words_poisson(const wf_readout *ro)
+{
+    return ro->words + ro->cfg.ncols + 1; /* one word apart: an odd row's last block writes one past */
+}
+
+static void row_noise_pairs(wf_readout *ro, int y, uint32_t read, float *z)
+{
+    const int nc = ro->cfg.ncols, h = (nc + 1) / 2;
+    uint32_t *zw = ro->words, *pw = row_words_poisson(ro); /* up to words[2 nc + 2] */
+    wf_noise_block_row(&ro->noise, (uint32_t)y * (uint32_t)h, h, read, WF_PURPOSE_PHOTON_PAIR, 0, zw, pw, zw + h,
+                       pw + h);
+    if (z) wf_norm_from_u32(zw, nc, z);
 }
 
 /* IPC for tile row y (absolute) from the measured halo block that starts at row h0. */
@@ -792,7 +821,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
             float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
             int photons = d->on.photon_noise && !ro->noise_off;
             if (photons || (z && d->on.read_noise && !ro->noise_off)) {
-                row_noise(ro, y, (uint32_t)k, WF_PURPOSE_PHOTON, 1, z && d->on.read_noise ? z : NULL);
+                row_noise_pairs(ro, y, (uint32_t)k, z && d->on.read_noise ? z : NULL);
             } else if (z) {
                 memset(z, 0, (size_t)nc * sizeof *z);
             }
@@ -803,7 +832,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
                     for (int x = 0; x < nc; x++) q[x] += m[x] * frames;
                 continue;
             }
-            const uint32_t *w1 = ro->words + nc, *w2 = ro->words + 2 * nc;
+            const uint32_t *w1 = row_words_poisson(ro);
             if (frames == 1.0 && !ro->slope_any) { /* the common read: the tile's thresholds */
                 uint8_t *slow = ro->slow;
                 poisson_row_small(nc, w1, ro->thr + row0, (size_t)hn, ro->thr + 6 * (size_t)hn + row0, q,
@@ -811,7 +840,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
                 for (int x = next_flag(slow, 0, nc); x < nc; x = next_flag(slow, x + 1, nc)) {
                     more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)k,
                                      .purpose = WF_PURPOSE_PHOTON};
-                    q[x] += poisson_word(w1[x], &w2[x], m[x], em[x], &mn);
+                    q[x] += poisson_word(w1[x], NULL, m[x], em[x], &mn);
                 }
                 continue;
             }
@@ -820,11 +849,11 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
                                  .purpose = WF_PURPOSE_PHOTON};
                 if (ro->slope_any) {
                     double mean = interval_mean(ro, row0 + (size_t)x, frames, tau);
-                    q[x] += poisson_word(w1[x], &w2[x], mean, exp(-mean), &mn);
+                    q[x] += poisson_word(w1[x], NULL, mean, exp(-mean), &mn);
                     continue;
                 }
                 double mean = m[x] * frames;
-                q[x] += poisson_word(w1[x], &w2[x], mean, frames == 1.0 ? em[x] : exp(-mean), &mn);
+                q[x] += poisson_word(w1[x], NULL, mean, frames == 1.0 ? em[x] : exp(-mean), &mn);
             }
         }
         if (ro->cosmic_on)

@@ -462,45 +462,52 @@ END_TEST
  * linear pixel: per-resultant means and variances over many pixels agree within 4 sigma. */
 START_TEST(direct_matches_per_read)
 {
-    wf_readout_config cfg;
-    wf_clock clock;
-    small_config(&cfg, &clock, 128, 128);
-    ck_assert_int_eq(wf_ma_builtin("6", &clock.ma), WF_OK);
-    wf_detector *d = &cfg.det;
-    memset(&d->on, 0, sizeof d->on);
-    d->on.photon_noise = 1;
-    wf_scene_grid g = {128, 128, 3.0, 0.0, 1.0, 64}; /* flat 3 e-/s: photon noise only */
-    wf_scene_source src;
-    wf_scene_grid_source(&g, &src);
-    decoded dd[2];
-    for (int s = 0; s < 2; s++) {
-        cfg.sampling = s ? WF_SAMPLE_DIRECT : WF_SAMPLE_PER_READ;
-        run_decoded(&cfg, &clock, &src, 1, &dd[s]);
-    }
-    size_t n = 128 * 128;
-    for (int r = 0; r < dd[0].nres; r++) {
-        double m[2], v[2];
+    /* 3 e-/s: ~9 e- a read, by inversion; 40 e-/s: ~120 e- a read, PTRS from the pixel's own
+     * stream in per-read sampling */
+    const double rates[] = {3.0, 40.0};
+    for (int k = 0; k < 2; k++) {
+        wf_readout_config cfg;
+        wf_clock clock;
+        small_config(&cfg, &clock, 128, 128);
+        ck_assert_int_eq(wf_ma_builtin("6", &clock.ma), WF_OK);
+        wf_detector *d = &cfg.det;
+        memset(&d->on, 0, sizeof d->on);
+        d->on.photon_noise = 1;
+        wf_scene_grid g = {128, 128, rates[k], 0.0, 1.0, 64}; /* flat: photon noise only */
+        wf_scene_source src;
+        wf_scene_grid_source(&g, &src);
+        decoded dd[2];
         for (int s = 0; s < 2; s++) {
-            double a = 0, b = 0;
-            for (size_t i = 0; i < n; i++) {
-                double x = dd[s].res[(size_t)r * n + i];
-                a += x;
-                b += x * x;
-            }
-            m[s] = a / n;
-            v[s] = b / n - m[s] * m[s];
+            cfg.sampling = s ? WF_SAMPLE_DIRECT : WF_SAMPLE_PER_READ;
+            run_decoded(&cfg, &clock, &src, 1, &dd[s]);
         }
-        double tb = wf_clock_resultant_time(&clock, r);
-        ck_assert_msg(fabs(m[0] - m[1]) < 4.0 * sqrt((v[0] + v[1]) / n),
-                      "resultant %d: means %.4f vs %.4f", r, m[0], m[1]);
-        double expect = 3.0 * tb + cfg.det.bias_adu;
-        ck_assert_msg(fabs(m[0] - expect) < 4.0 * sqrt(v[0] / n) + 0.5, "resultant %d mean %.3f vs %.3f", r, m[0], expect);
-        /* variance of a sample variance ~ 2 v^2 / n (near-Gaussian counts), plus rounding */
-        double tol = 4.0 * sqrt(2.0 / n) * (v[0] + v[1]) / 2 + 1.0 / 6.0;
-        ck_assert_msg(fabs(v[0] - v[1]) < tol, "resultant %d: variances %.4f vs %.4f", r, v[0], v[1]);
+        size_t n = 128 * 128;
+        for (int r = 0; r < dd[0].nres; r++) {
+            double m[2], v[2];
+            for (int s = 0; s < 2; s++) {
+                double a = 0, b = 0;
+                for (size_t i = 0; i < n; i++) {
+                    double x = dd[s].res[(size_t)r * n + i];
+                    a += x;
+                    b += x * x;
+                }
+                m[s] = a / n;
+                v[s] = b / n - m[s] * m[s];
+            }
+            double tb = wf_clock_resultant_time(&clock, r);
+            ck_assert_msg(fabs(m[0] - m[1]) < 4.0 * sqrt((v[0] + v[1]) / n),
+                          "%g e-/s, resultant %d: means %.4f vs %.4f", rates[k], r, m[0], m[1]);
+            double expect = rates[k] * tb + cfg.det.bias_adu;
+            ck_assert_msg(fabs(m[0] - expect) < 4.0 * sqrt(v[0] / n) + 0.5, "%g e-/s, resultant %d mean %.3f vs %.3f",
+                          rates[k], r, m[0], expect);
+            /* variance of a sample variance ~ 2 v^2 / n (near-Gaussian counts), plus rounding */
+            double tol = 4.0 * sqrt(2.0 / n) * (v[0] + v[1]) / 2 + 1.0 / 6.0;
+            ck_assert_msg(fabs(v[0] - v[1]) < tol, "%g e-/s, resultant %d: variances %.4f vs %.4f", rates[k], r, v[0],
+                          v[1]);
+        }
+        free_decoded(&dd[0]);
+        free_decoded(&dd[1]);
     }
-    free_decoded(&dd[0]);
-    free_decoded(&dd[1]);
 }
 END_TEST
 
@@ -540,7 +547,8 @@ static double inversion(uint32_t w, double m)
 
 /* Photon noise alone, one read per resultant, unit gain, no bias: each resultant is the
  * charge collected so far, and must be the sum of the inversion draws from each pixel's
- * stream (word 1 of the first block at each read), every pixel and read exactly. */
+ * words (word 1 of block 0 of its pair's stream at each read, word 3 in the row's second
+ * half), every pixel and read exactly. */
 START_TEST(per_read_counts_exact)
 {
     wf_readout_config cfg;
@@ -560,13 +568,15 @@ START_TEST(per_read_counts_exact)
     ck_assert_int_eq(dd.nres, 8);
     wf_noise noise = {WF_NOISE_PHILOX, cfg.seed, cfg.exposure, cfg.sca};
     long above6 = 0, zero = 0;
+    const int h = (cfg.ncols + 1) / 2; /* a block serves pixels x and x + h of a row */
     for (int y = 0; y < cfg.nrows; y++)
         for (int x = 0; x < cfg.ncols; x++) {
-            uint32_t pix = (uint32_t)(y * cfg.ncols + x), w[4];
+            uint32_t w[4];
             double m = (double)(float)(exact_means[(x + 5 * y) % EXACT_NM] / ft) * ft, q = 0.0;
             for (int r = 0; r < 8; r++) {
-                wf_noise_block_row(&noise, pix, 1, (uint32_t)r, WF_PURPOSE_PHOTON, 0, &w[0], &w[1], &w[2], &w[3]);
-                double k = inversion(w[1], m);
+                wf_noise_block_row(&noise, (uint32_t)(y * h + (x < h ? x : x - h)), 1, (uint32_t)r,
+                                   WF_PURPOSE_PHOTON_PAIR, 0, &w[0], &w[1], &w[2], &w[3]);
+                double k = inversion(w[x < h ? 1 : 3], m);
                 above6 += k > 6.0;
                 zero += k == 0.0;
                 q += k;
