@@ -800,11 +800,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
         return wf_error(WF_ERR_INTERNAL, "readout: packet buffer of %zu bytes holds no %d-pixel "
                         "thresholds", scratch, hn);
     if (d->on.photon_noise && !ro->noise_off && !ro->slope_any)
-        for (int i = 0; i < hn; i++) {
-            uint32_t t[6];
-            wf_poisson_inversion_thresholds(ro->mean[i], ro->expm[i], t, &ro->thr[6 * (size_t)hn + i]);
-            for (int j = 0; j < 6; j++) ro->thr[(size_t)j * hn + i] = t[j];
-        }
+        wf_poisson_inversion_thresholds_row(hn, ro->mean, ro->expm, ro->thr, (size_t)hn, ro->thr + 6 * (size_t)hn);
     for (int k = 0; k < ro->total_reads; k++) {
         int r = ro->resultant_of_read[k];
         if (r < 0) continue; /* charge of skipped reads is drawn with the next digitised one */

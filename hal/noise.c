@@ -195,25 +195,6 @@ static int inversion_sums(double m, double e, double *F, int cap)
     return n;
 }
 
-void wf_poisson_inversion_thresholds(double m, double e, uint32_t thr[6], uint32_t *slow)
-{
-    if (!(m > 0.0 && m < 10.0)) { /* not inversion's range: every word is the caller's */
-        memset(thr, 0, 6 * sizeof *thr);
-        *slow = 0;
-        return;
-    }
-    double F[7];
-    int n = inversion_sums(m, e, F, 7);
-    uint32_t T[7];
-    for (int j = 0; j < 7; j++) {
-        /* past a sum that stopped growing the later ones equal it: its terms only shrink */
-        double first = first_word_above(F[j < n ? j : n - 1]); /* F >= e^-m > e^-10 */
-        T[j] = first >= 4294967295.0 ? UINT32_MAX : (uint32_t)first;
-    }
-    memcpy(thr, T, 6 * sizeof *thr);
-    *slow = T[n < 7 ? n - 1 : 6]; /* from there the one-pixel draw stops early, or counts on */
-}
-
 wf_status wf_poisson_table_init(wf_poisson_table *t, double mean)
 {
     if (!(mean > 0.0 && mean < 10.0))

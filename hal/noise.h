@@ -12,6 +12,7 @@
 #ifndef WF_NOISE_H
 #define WF_NOISE_H
 
+#include <stddef.h>
 #include <stdint.h>
 #include "hal/status.h"
 
@@ -113,15 +114,17 @@ double wf_norm_ppf(double p);
 void wf_poisson_ptrs_row(const double *mean, const uint32_t *wu, const uint32_t *wv, int n,
                          double *k);
 
-/* Poisson inversion of one mean as thresholds on its word, for a mean drawn many times
+/* Poisson inversion of n means as thresholds on their words, for means drawn many times
  * (a pixel at every read of a tile): with u = (w + 0.5) / 2^32 and the cumulative sums
  * F_0 = e, F_1 = F_0 + e m, F_2 = F_1 + e m^2 / 2, F_j = F_(j-1) + p_(j-1) m / j summed in
  * that order (e = exp(-m) as the caller has it), the count is the smallest k with u <= F_k,
- * and u > F_j exactly when w >= thr[j]. For w < *slow the count is the number of j < 6
- * with w >= thr[j]; from *slow on the caller draws otherwise: a count above 6, a sum that
- * stopped growing, a mean outside (0, 10) (*slow 0). Thresholds are clamped to 2^32 - 1,
- * whose word is then always slow. */
-void wf_poisson_inversion_thresholds(double m, double e, uint32_t thr[6], uint32_t *slow);
+ * and u > F_j exactly when w >= thr[j] (mean i's thr[j] at thr[j * stride + i]). For
+ * w < slow[i] the count is the number of j < 6 with w >= thr[j]; from slow[i] on the caller
+ * draws otherwise: a count above 6, a sum that stopped growing, a mean outside (0, 10)
+ * (slow 0). Thresholds are clamped to 2^32 - 1, whose word is then always slow. In SIMD
+ * lanes. */
+void wf_poisson_inversion_thresholds_row(int n, const double *m, const double *e, uint32_t *thr, size_t stride,
+                                         uint32_t *slow);
 
 /* wf_noise_block_row for a list of pixels (stream pixel[i], at one read and purpose). */
 void wf_noise_block_list(const wf_noise *noise, const uint32_t *pixel, int n, uint32_t read,

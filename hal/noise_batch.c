@@ -442,6 +442,42 @@ void wf_poisson_ptrs_row53(const double *mean, const uint32_t *w0, const uint32_
     ptrs_batch(mean, w0, w1, w2, w3, 1, n, k);
 }
 
+/* wf_poisson_inversion_thresholds's sums without a branch: a sum that stopped growing holds
+ * (later terms only shrink, as that function says), the word of each sum as its
+ * first_word_above, and a mean outside (0, 10) gives zeros. */
+WF_CLONES
+void wf_poisson_inversion_thresholds_row(int n, const double *restrict m, const double *restrict e,
+                                         uint32_t *restrict thr, size_t stride, uint32_t *restrict slow)
+{
+    for (int i = 0; i < n; i++) {
+        const double mi = m[i], ei = e[i];
+        const int in = (mi > 0.0) & (mi < 10.0);
+        const double p1 = ei * mi;
+        double F = ei, p = p1 * mi * 0.5, T[7];
+        T[0] = floor(F * 4294967296.0 - 0.5) + 1.0;
+        F += p1; /* the first three sums are always formed */
+        T[1] = floor(F * 4294967296.0 - 0.5) + 1.0;
+        F += p;
+        T[2] = floor(F * 4294967296.0 - 0.5) + 1.0;
+        int nsum = 3, grow = 1;
+        for (int j = 3; j < 7; j++) {
+            p *= mi / (double)j;
+            const double next = F + p;
+            grow &= next != F;
+            F = grow ? next : F;
+            nsum += grow;
+            T[j] = floor(F * 4294967296.0 - 0.5) + 1.0;
+        }
+        uint32_t slow_i = 0;
+        for (int j = 0; j < 7; j++) {
+            const uint32_t t = in ? (T[j] >= 4294967295.0 ? UINT32_MAX : (uint32_t)T[j]) : 0u;
+            if (j < 6) thr[(size_t)j * stride + (size_t)i] = t;
+            slow_i = j == (nsum < 7 ? nsum - 1 : 6) ? t : slow_i;
+        }
+        slow[i] = slow_i;
+    }
+}
+
 WF_CLONES
 void wf_poisson_table_row(const wf_poisson_table *t, const uint32_t *w, int n, double *k)
 {
