@@ -122,6 +122,19 @@ void wf_det_measure_row(const wf_detector *det, const double *q, int n, double *
 }
 
 WF_CLONES
+void wf_det_hold_measure_row(const wf_detector *det, double *restrict q, int n, double *restrict out)
+{
+    const double fw = det->full_well, beta = det->nl_beta;
+    const int sat = det->on.saturation, nl = det->on.nonlinearity;
+    for (int i = 0; i < n; i++) {
+        double v = q[i];
+        if (sat) q[i] = v = v > fw ? fw : v;
+        if (nl) v = wf_det_nonlinearity(v, beta);
+        out[i] = v;
+    }
+}
+
+WF_CLONES
 int wf_det_first_nonfinite(const float *v, int n)
 {
     int bad = 0;

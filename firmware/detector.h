@@ -83,6 +83,9 @@ void wf_det_reciprocity_counts(const wf_detector *det, double exptime, const dou
 /* Full well (when saturation is on) and nonlinearity (when on) of a row of charge: what the
  * read-out would measure; out may be q. */
 void wf_det_measure_row(const wf_detector *det, const double *q, int n, double *out);
+/* The same, and q itself held at the full well (saturation on): the charge a pixel keeps,
+ * in the pass that measures it. */
+void wf_det_hold_measure_row(const wf_detector *det, double *q, int n, double *out);
 
 /* One row of single-frame output from the measured charge after IPC, e[x], and the collected
  * charge q[x]: read noise (when on) sigma z[x] with sigma = read_noise_e, gain and bias,

@@ -856,8 +856,7 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
             for (; next_dep < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[next_dep].read <= k; next_dep++)
                 ro->charge[ro->cosmic.deposits[next_dep].pixel] += ro->cosmic.deposits[next_dep].electrons;
         wf_persist_release(&ro->persist, k, t1, t2, ro->charge, NULL, 0.0);
-        if (d->on.saturation) clamp_row(hn, ro->charge, d->full_well);
-        wf_det_measure_row(d, ro->charge, hn, ro->meas);
+        wf_det_hold_measure_row(d, ro->charge, hn, ro->meas);
         int last_of_resultant = ro->clock.ma.read[ro->clock.ma.first[r + 1] - 1] == k;
         int nreads = ro->clock.ma.first[r + 1] - ro->clock.ma.first[r];
         for (int y = y0; y < y1; y++) {
@@ -1214,11 +1213,8 @@ static wf_status ramp_grouped(wf_readout *ro, int y0, int y1, int h0, int h1)
                 ro->charge[dp->pixel] += dp->electrons;
                 avg[dp->pixel] += dp->electrons * later / n;
             }
-        if (d->on.saturation) {
-            clamp_row(hn, ro->charge, d->full_well);
-            clamp_row(hn, avg, d->full_well);
-        }
-        wf_det_measure_row(d, avg, hn, ro->meas); /* in place: avg is ro->meas */
+        if (d->on.saturation) clamp_row(hn, ro->charge, d->full_well);
+        wf_det_measure_row(d, avg, hn, ro->meas); /* in place (avg is ro->meas), at the full well too */
         if (moments && d->on.nonlinearity)
             spread_row(hn, ro->meas, ro->spread, ro->charge, d->nl_beta, d->full_well, d->on.saturation);
         for (int y = y0; y < y1; y++) {

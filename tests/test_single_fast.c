@@ -349,6 +349,17 @@ START_TEST(detector_rows_match_scalar)
             double v = d.on.saturation && q[i] > d.full_well ? d.full_well : q[i];
             ck_assert(m[i] == wf_det_nonlinearity(v, d.nl_beta));
         }
+        /* the same measure, the charge itself held at the full well */
+        static double qh[N], mh[N];
+        memcpy(qh, q, sizeof qh);
+        wf_det_hold_measure_row(&d, qh, N, mh);
+        int held = 0;
+        for (int i = 0; i < N; i++) {
+            ck_assert(mh[i] == m[i]);
+            ck_assert(qh[i] == (d.on.saturation && q[i] > d.full_well ? d.full_well : q[i]));
+            held += qh[i] != q[i];
+        }
+        ck_assert(d.on.saturation ? held > 0 : held == 0);
     }
 
     /* reciprocity on whole counts: the table below 4096, computed above, dark added */
