@@ -940,7 +940,8 @@ static inline double draw_at(const uint32_t *words, size_t nc, int x, int *c, do
 
 /* Moments' draws of a row's chunk: out[x] = Poisson(mean[x]) by inversion of the word w[x]
  * below a mean of 10 (from its start e0[x] = exp(-mean[x])), N(mean, mean) from the normal
- * z[x] above, clamped at 0 (see above). The inversion runs the pixels in lockstep, one
+ * z[x] above, clamped at 0 (see above); big: whether any mean reaches 10 (else z is not
+ * read). The inversion runs the pixels in lockstep, one
  * term of every pixel's sum per pass, so that it vectorises: a pixel's count is the number of
  * partial sums below its uniform, the smallest k with u <= F_k, as a scalar search gives.
  * A pixel whose uniform is no longer above its sum is done (the sums only grow), so once
@@ -972,7 +973,7 @@ WF_CLONES static int moments_passes(int n, int k0, int until, const double *rest
     return k;
 }
 
-WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, const float *restrict z,
+WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, const float *restrict z, int big,
                                             const double *restrict mean, const double *restrict e0,
                                             const double *restrict inv_k, double *restrict out)
 {
@@ -1017,6 +1018,10 @@ WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, c
             }
         }
         m = j;
+    }
+    if (!big) { /* no mean reaches 10 (z was not made): the counts, 0 for a mean <= 0 or NaN */
+        memcpy(out, cnt, (size_t)n * sizeof *out);
+        return;
     }
     for (int x = 0; x < n; x++) {
         const double g = mean[x] + sqrt(mean[x] > 0.0 ? mean[x] : 0.0) * (double)z[x];
@@ -1102,8 +1107,8 @@ static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double 
         const int big1 = count_at_least(c, lm + x0, 10.0), big2 = count_at_least(c, mu + x0, 10.0);
         if (big1) wf_norm_from_u32(w + nc + x0, c, z1 + x0);
         if (big2) wf_norm_from_u32(w + 2 * (size_t)nc + x0, c, z2 + x0);
-        moments_poisson_chunk(c, w + nc + x0, z1 + x0, lm + x0, le + x0, ro->inv_k, ld + x0);
-        moments_poisson_chunk(c, w + 2 * (size_t)nc + x0, z2 + x0, mu + x0, me + x0, ro->inv_k, t + x0);
+        moments_poisson_chunk(c, w + nc + x0, z1 + x0, big1, lm + x0, le + x0, ro->inv_k, ld + x0);
+        moments_poisson_chunk(c, w + 2 * (size_t)nc + x0, z2 + x0, big2, mu + x0, me + x0, ro->inv_k, t + x0);
     }
     moments_finish(nc, n > 1, ld, t, ab, cv, z3, g->vu, g->bs, q, a, sp);
 }
