@@ -104,16 +104,22 @@ wf_status wf_persist_tile(wf_persist *p, int h0, int h1)
     return WF_OK;
 }
 
-void wf_persist_release(const wf_persist *p, int read, double t1, double t2, double *charge,
-                        double *avg, double weight)
+void wf_persist_release(const wf_persist *p, int read, double t1, double t2, uint32_t lo, uint32_t hi,
+                        double *charge, double *avg, double weight)
 {
-    if (p->nhit == 0) return;
+    int h = 0, top = p->nhit; /* the first hit at or past lo (the hits are in order) */
+    while (h < top) {
+        const int mid = h + (top - h) / 2;
+        if (p->hit[mid] < lo) h = mid + 1;
+        else top = mid;
+    }
+    if (h == p->nhit || p->hit[h] >= hi) return;
     const wf_persist_source *s = &p->cfg.source;
     const int d = s->depth;
     double span[WF_PERSIST_DEPTH_MAX];
     for (int j = 0; j < d; j++) span[j] = wf_persist_time_integral(p->cfg.model.gamma, s->dt[j] + t1, s->dt[j] + t2);
     const uint32_t px0 = (uint32_t)p->h0 * (uint32_t)p->ncols;
-    for (int h = 0; h < p->nhit; h++) {
+    for (; h < p->nhit && p->hit[h] < hi; h++) {
         uint32_t i = p->hit[h];
         const uint16_t *c = p->code + (size_t)i * d;
         double mean = 0.0;

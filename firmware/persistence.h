@@ -67,9 +67,10 @@ wf_status wf_persist_init(wf_persist *p, const wf_persist_config *cfg, const wf_
 wf_status wf_persist_tile(wf_persist *p, int h0, int h1);
 
 /* Up the ramp: the electrons released over [t1, t2] (read `read` ends the interval) added to
- * charge[i] of the halo block, and weight times them to avg[i] when avg is not NULL. */
-void wf_persist_release(const wf_persist *p, int read, double t1, double t2, double *charge,
-                        double *avg, double weight);
+ * charge[i] for the pixels lo <= i < hi of the halo block (row-major from its first row), and
+ * weight times them to avg[i] when avg is not NULL. */
+void wf_persist_release(const wf_persist *p, int read, double t1, double t2, uint32_t lo, uint32_t hi,
+                        double *charge, double *avg, double weight);
 
 /* Single frame: GalSim's P(x, dt_j + T/2) T for halo row y's pixels, added to q. */
 void wf_persist_single_row(const wf_persist *p, int y, double exptime, double *q);

@@ -788,11 +788,82 @@ static wf_status send_refrows(wf_readout *ro)
 
 /* ---- up-the-ramp, read by read --------------------------------------------------------- */
 
+/* Read k's charge of halo row y (Poisson, or the means without photon noise) and, for tile
+ * rows, its read-noise normals. */
+static void per_read_charge_row(wf_readout *ro, int y, int y0, int y1, int h0, int h1, int k, double frames,
+                                double tau)
+{
+    const wf_detector *d = &ro->cfg.det;
+    const int nc = ro->cfg.ncols, hn = (h1 - h0) * nc;
+    const size_t row0 = (size_t)(y - h0) * nc;
+    double *q = ro->charge + row0;
+    const double *m = ro->mean + row0, *em = ro->expm + row0;
+    float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
+    const int photons = d->on.photon_noise && !ro->noise_off;
+    if (photons || (z && d->on.read_noise && !ro->noise_off)) {
+        row_noise_pairs(ro, y, (uint32_t)k, z && d->on.read_noise ? z : NULL);
+    } else if (z) {
+        memset(z, 0, (size_t)nc * sizeof *z);
+    }
+    if (!photons) {
+        if (ro->slope_any)
+            for (int x = 0; x < nc; x++) q[x] += interval_mean(ro, row0 + (size_t)x, frames, tau);
+        else
+            for (int x = 0; x < nc; x++) q[x] += m[x] * frames;
+        return;
+    }
+    const uint32_t *w1 = row_words_poisson(ro);
+    if (frames == 1.0 && !ro->slope_any) { /* the common read: the tile's thresholds */
+        uint8_t *slow = ro->slow;
+        poisson_row_small(nc, w1, ro->thr + row0, (size_t)hn, ro->thr + 6 * (size_t)hn + row0, q, slow);
+        for (int x = next_flag(slow, 0, nc); x < nc; x = next_flag(slow, x + 1, nc)) {
+            more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)k,
+                             .purpose = WF_PURPOSE_PHOTON};
+            q[x] += poisson_word(w1[x], NULL, m[x], em[x], &mn);
+        }
+        return;
+    }
+    for (int x = 0; x < nc; x++) {
+        more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)k,
+                         .purpose = WF_PURPOSE_PHOTON};
+        if (ro->slope_any) {
+            double mean = interval_mean(ro, row0 + (size_t)x, frames, tau);
+            q[x] += poisson_word(w1[x], NULL, mean, exp(-mean), &mn);
+            continue;
+        }
+        double mean = m[x] * frames;
+        q[x] += poisson_word(w1[x], NULL, mean, frames == 1.0 ? em[x] : exp(-mean), &mn);
+    }
+}
+
+/* Read k of tile row y from the measured rows around it: IPC, correlated noise, read noise,
+ * ADC, into the resultant's sum (and the resultant when it is the group's last read). */
+static void per_read_digitise_row(wf_readout *ro, int y, int y0, int y1, int h0, int h1, int k, int r, int last,
+                                  int nreads)
+{
+    const wf_detector *d = &ro->cfg.det;
+    const int nc = ro->cfg.ncols, rows = y1 - y0;
+    const double *v = ipc_row(ro, y, h0, h1);
+    if (ro->cn) v = corr_row(ro, v, y, corr_key(k, 0), 1.0);
+    const double *q = ro->charge + (size_t)(y - h0) * nc;
+    double *s = ro->sum + (size_t)(y - y0) * nc;
+    uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
+    uint16_t *out = ro->res_out + ((size_t)r * rows + (size_t)(y - y0)) * nc;
+    const float *z = ro->gauss + (size_t)(y - y0) * nc;
+    wf_det_ramp_read_row(d, v, q, z, nc, (uint8_t)r, s, sat);
+    if (last) wf_det_resultant_row(s, nc, nreads, out);
+    if (ro->refpix) side_read(ro, y, y0, rows, corr_key(k, 0), r, last, nreads);
+}
+
+/* Read by read, and within a read row by row down the tile: a row's charge (Poisson, then
+ * its cosmic-ray hits and persistence, in that order as every pixel always had them), its
+ * full well and measure, then the row above it digitised, whose IPC needed this one. So a
+ * row's arrays are still in cache when they are used again: passes over the whole tile
+ * waited on memory. */
 static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
 {
     const wf_detector *d = &ro->cfg.det;
-    const int nc = ro->cfg.ncols, rows = y1 - y0, hn = (h1 - h0) * nc;
-    const size_t plane = (size_t)rows * nc;
+    const int nc = ro->cfg.ncols, hn = (h1 - h0) * nc;
     int next_dep = 0, prev_read = -1;
     size_t scratch;
     ro->thr = wf_packer_scratch(&ro->packer, &scratch); /* no packet goes out until the tile's */
@@ -809,68 +880,23 @@ static wf_status ramp_per_read(wf_readout *ro, int y0, int y1, int h0, int h1)
         double t1 = wf_clock_read_time(&ro->clock, prev_read), t2 = wf_clock_read_time(&ro->clock, k);
         double tau = 0.5 * (t1 + t2) - ro->t_mid;
         prev_read = k;
+        int dep_end = next_dep; /* this read's cosmic-ray hits: [next_dep, dep_end) */
+        while (ro->cosmic_on && dep_end < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[dep_end].read <= k)
+            dep_end++;
+        const int last = ro->clock.ma.read[ro->clock.ma.first[r + 1] - 1] == k;
+        const int nreads = ro->clock.ma.first[r + 1] - ro->clock.ma.first[r];
         for (int y = h0; y < h1; y++) {
-            double *q = ro->charge + (size_t)(y - h0) * nc;
-            const double *m = ro->mean + (size_t)(y - h0) * nc;
-            const double *em = ro->expm + (size_t)(y - h0) * nc;
-            const size_t row0 = (size_t)(y - h0) * nc;
-            float *z = y >= y0 && y < y1 ? ro->gauss + (size_t)(y - y0) * nc : NULL;
-            int photons = d->on.photon_noise && !ro->noise_off;
-            if (photons || (z && d->on.read_noise && !ro->noise_off)) {
-                row_noise_pairs(ro, y, (uint32_t)k, z && d->on.read_noise ? z : NULL);
-            } else if (z) {
-                memset(z, 0, (size_t)nc * sizeof *z);
-            }
-            if (!photons) {
-                if (ro->slope_any)
-                    for (int x = 0; x < nc; x++) q[x] += interval_mean(ro, row0 + (size_t)x, frames, tau);
-                else
-                    for (int x = 0; x < nc; x++) q[x] += m[x] * frames;
-                continue;
-            }
-            const uint32_t *w1 = row_words_poisson(ro);
-            if (frames == 1.0 && !ro->slope_any) { /* the common read: the tile's thresholds */
-                uint8_t *slow = ro->slow;
-                poisson_row_small(nc, w1, ro->thr + row0, (size_t)hn, ro->thr + 6 * (size_t)hn + row0, q,
-                                  slow);
-                for (int x = next_flag(slow, 0, nc); x < nc; x = next_flag(slow, x + 1, nc)) {
-                    more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)k,
-                                     .purpose = WF_PURPOSE_PHOTON};
-                    q[x] += poisson_word(w1[x], NULL, m[x], em[x], &mn);
-                }
-                continue;
-            }
-            for (int x = 0; x < nc; x++) {
-                more_noise mn = {.noise = &ro->noise, .pixel = pixel_id(ro, y, x), .read = (uint32_t)k,
-                                 .purpose = WF_PURPOSE_PHOTON};
-                if (ro->slope_any) {
-                    double mean = interval_mean(ro, row0 + (size_t)x, frames, tau);
-                    q[x] += poisson_word(w1[x], NULL, mean, exp(-mean), &mn);
-                    continue;
-                }
-                double mean = m[x] * frames;
-                q[x] += poisson_word(w1[x], NULL, mean, frames == 1.0 ? em[x] : exp(-mean), &mn);
-            }
+            const uint32_t lo = (uint32_t)(y - h0) * (uint32_t)nc, hi = lo + (uint32_t)nc;
+            per_read_charge_row(ro, y, y0, y1, h0, h1, k, frames, tau);
+            for (int j = next_dep; j < dep_end; j++)
+                if (ro->cosmic.deposits[j].pixel >= lo && ro->cosmic.deposits[j].pixel < hi)
+                    ro->charge[ro->cosmic.deposits[j].pixel] += ro->cosmic.deposits[j].electrons;
+            wf_persist_release(&ro->persist, k, t1, t2, lo, hi, ro->charge, NULL, 0.0);
+            wf_det_hold_measure_row(d, ro->charge + lo, nc, ro->meas + lo);
+            if (y - 1 >= y0 && y - 1 < y1) per_read_digitise_row(ro, y - 1, y0, y1, h0, h1, k, r, last, nreads);
         }
-        if (ro->cosmic_on)
-            for (; next_dep < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[next_dep].read <= k; next_dep++)
-                ro->charge[ro->cosmic.deposits[next_dep].pixel] += ro->cosmic.deposits[next_dep].electrons;
-        wf_persist_release(&ro->persist, k, t1, t2, ro->charge, NULL, 0.0);
-        wf_det_hold_measure_row(d, ro->charge, hn, ro->meas);
-        int last_of_resultant = ro->clock.ma.read[ro->clock.ma.first[r + 1] - 1] == k;
-        int nreads = ro->clock.ma.first[r + 1] - ro->clock.ma.first[r];
-        for (int y = y0; y < y1; y++) {
-            const double *v = ipc_row(ro, y, h0, h1);
-            if (ro->cn) v = corr_row(ro, v, y, corr_key(k, 0), 1.0);
-            const double *q = ro->charge + (size_t)(y - h0) * nc;
-            double *s = ro->sum + (size_t)(y - y0) * nc;
-            uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
-            uint16_t *out = ro->res_out + (size_t)r * plane + (size_t)(y - y0) * nc;
-            const float *z = ro->gauss + (size_t)(y - y0) * nc;
-            wf_det_ramp_read_row(d, v, q, z, nc, (uint8_t)r, s, sat);
-            if (last_of_resultant) wf_det_resultant_row(s, nc, nreads, out);
-            if (ro->refpix) side_read(ro, y, y0, rows, corr_key(k, 0), r, last_of_resultant, nreads);
-        }
+        if (h1 == y1) per_read_digitise_row(ro, y1 - 1, y0, y1, h0, h1, k, r, last, nreads); /* no row below */
+        next_dep = dep_end;
     }
     return WF_OK;
 }
@@ -1206,10 +1232,11 @@ static wf_status ramp_grouped(wf_readout *ro, int y0, int y1, int h0, int h1)
         /* the same intervals, and draws, as read by read: the lead seen by every read of the
          * group, interval j by the n - j reads from j on */
         wf_persist_release(&ro->persist, reads[0], wf_clock_read_time(ck, lead_from),
-                           wf_clock_read_time(ck, reads[0]), ro->charge, avg, 1.0);
+                           wf_clock_read_time(ck, reads[0]), 0, (uint32_t)hn, ro->charge, avg, 1.0);
         for (int j = 1; j < n; j++)
             wf_persist_release(&ro->persist, reads[j], wf_clock_read_time(ck, reads[j - 1]),
-                               wf_clock_read_time(ck, reads[j]), ro->charge, avg, (double)(n - j) / n);
+                               wf_clock_read_time(ck, reads[j]), 0, (uint32_t)hn, ro->charge, avg,
+                               (double)(n - j) / n);
         if (ro->cosmic_on)
             for (; next_dep < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[next_dep].read <= reads[n - 1]; next_dep++) {
                 const wf_cr_deposit *dp = &ro->cosmic.deposits[next_dep];
