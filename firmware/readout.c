@@ -1139,15 +1139,35 @@ static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double 
     moments_finish(nc, n > 1, ld, t, ab, cv, z3, g->vu, g->bs, q, a, sp);
 }
 
+/* Resultant r (a group of n reads) of tile row y from the measured rows around it: IPC,
+ * correlated noise, read noise of the mean, ADC. A resultant holds a saturated read when its
+ * last read did: the charge at that read reached the well, or its measured signal the ADC
+ * ceiling. */
+static void grouped_digitise_row(wf_readout *ro, int y, int y0, int y1, int h0, int h1, int r, int n)
+{
+    const int nc = ro->cfg.ncols, rows = y1 - y0;
+    const double *v = ipc_row(ro, y, h0, h1);
+    if (ro->cn) {
+        v = corr_row(ro, v, y, corr_key(r, 1), 1.0 / sqrt((double)n));
+        if (ro->refpix) side_direct(ro, y, y0, rows, r, n);
+    }
+    const double *q = ro->charge + (size_t)(y - h0) * nc;
+    uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
+    uint16_t *out = ro->res_out + ((size_t)r * rows + (size_t)(y - y0)) * nc;
+    const float *z = ro->gauss + (size_t)(y - y0) * nc;
+    wf_det_group_row(&ro->cfg.det, v, q, z, nc, n, (uint8_t)r, sat, out);
+}
+
 /* Direct and moments sampling: each resultant drawn at once. They differ only in how a
  * pixel's group is drawn (every interval, or three draws); the rest (persistence, cosmic
- * rays, full well, nonlinearity, IPC, read noise, gain, ADC, saturation) is this one path. */
+ * rays, full well, nonlinearity, IPC, read noise, gain, ADC, saturation) is this one path.
+ * A group at a time, and within it row by row down the tile, as ramp_per_read: a row's
+ * draws, persistence, cosmic rays, full well, measure, then the row above it digitised. */
 static wf_status ramp_grouped(wf_readout *ro, int y0, int y1, int h0, int h1)
 {
     const wf_detector *d = &ro->cfg.det;
     const wf_ma_table *ma = &ro->clock.ma;
-    const int nc = ro->cfg.ncols, rows = y1 - y0, hn = (h1 - h0) * nc;
-    const size_t plane = (size_t)rows * nc;
+    const int nc = ro->cfg.ncols;
     const int moments = ro->cfg.sampling == WF_SAMPLE_MOMENTS;
     const int nblocks = moments ? 1 : direct_blocks(ma);
     const wf_purpose purpose = moments ? WF_PURPOSE_MOMENTS : WF_PURPOSE_RESULTANT;
@@ -1162,6 +1182,9 @@ static wf_status ramp_grouped(wf_readout *ro, int y0, int y1, int h0, int h1)
         const int lead_from = prev_read;
         prev_read = reads[n - 1];
         const moments_group *g = &ro->mgroup[r];
+        int dep_end = next_dep; /* the group's cosmic-ray hits: [next_dep, dep_end) */
+        while (ro->cosmic_on && dep_end < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[dep_end].read <= reads[n - 1])
+            dep_end++;
         double seen = 0.0; /* frames of charge each read of the group adds, averaged */
         for (int j = 1; j < n; j++) seen += (reads[j] - reads[j - 1]) * (double)(n - j) / n;
         for (int y = h0; y < h1; y++) {
@@ -1179,11 +1202,8 @@ static wf_status ramp_grouped(wf_readout *ro, int y0, int y1, int h0, int h1)
                 memset(z, 0, (size_t)nc * sizeof *z);
             }
             const size_t row0 = (size_t)(y - h0) * nc;
-            if (moments && photons) {
-                moments_row(ro, r, row0, lead, tau_lead, q, a, sp);
-                continue;
-            }
-            for (int x = 0; x < nc; x++) {
+            if (moments && photons) moments_row(ro, r, row0, lead, tau_lead, q, a, sp);
+            for (int x = 0; !(moments && photons) && x < nc; x++) {
                 if (!photons && ro->slope_any) { /* each interval at its own mean rate */
                     q[x] += interval_mean(ro, row0 + (size_t)x, lead, tau_lead);
                     double within = 0.0, total = 0.0;
@@ -1228,41 +1248,29 @@ static wf_status ramp_grouped(wf_readout *ro, int y0, int y1, int h0, int h1)
                 a[x] = q[x] + within / n;
                 q[x] += total;
             }
-        }
-        /* the same intervals, and draws, as read by read: the lead seen by every read of the
-         * group, interval j by the n - j reads from j on */
-        wf_persist_release(&ro->persist, reads[0], wf_clock_read_time(ck, lead_from),
-                           wf_clock_read_time(ck, reads[0]), 0, (uint32_t)hn, ro->charge, avg, 1.0);
-        for (int j = 1; j < n; j++)
-            wf_persist_release(&ro->persist, reads[j], wf_clock_read_time(ck, reads[j - 1]),
-                               wf_clock_read_time(ck, reads[j]), 0, (uint32_t)hn, ro->charge, avg,
-                               (double)(n - j) / n);
-        if (ro->cosmic_on)
-            for (; next_dep < ro->cosmic.ndeposits && (int)ro->cosmic.deposits[next_dep].read <= reads[n - 1]; next_dep++) {
-                const wf_cr_deposit *dp = &ro->cosmic.deposits[next_dep];
+            /* the same intervals, and draws, as read by read: the lead seen by every read of
+             * the group, interval j by the n - j reads from j on */
+            const uint32_t lo = (uint32_t)row0, hi = lo + (uint32_t)nc;
+            wf_persist_release(&ro->persist, reads[0], wf_clock_read_time(ck, lead_from),
+                               wf_clock_read_time(ck, reads[0]), lo, hi, ro->charge, avg, 1.0);
+            for (int j = 1; j < n; j++)
+                wf_persist_release(&ro->persist, reads[j], wf_clock_read_time(ck, reads[j - 1]),
+                                   wf_clock_read_time(ck, reads[j]), lo, hi, ro->charge, avg, (double)(n - j) / n);
+            for (int i = next_dep; i < dep_end; i++) {
+                const wf_cr_deposit *dp = &ro->cosmic.deposits[i];
+                if (dp->pixel < lo || dp->pixel >= hi) continue;
                 int later = 0; /* reads of the group that see the hit */
                 for (int j = 0; j < n; j++) later += reads[j] >= (int)dp->read;
                 ro->charge[dp->pixel] += dp->electrons;
                 avg[dp->pixel] += dp->electrons * later / n;
             }
-        if (d->on.saturation) clamp_row(hn, ro->charge, d->full_well);
-        wf_det_measure_row(d, avg, hn, ro->meas); /* in place (avg is ro->meas), at the full well too */
-        if (moments && d->on.nonlinearity)
-            spread_row(hn, ro->meas, ro->spread, ro->charge, d->nl_beta, d->full_well, d->on.saturation);
-        for (int y = y0; y < y1; y++) {
-            const double *v = ipc_row(ro, y, h0, h1);
-            if (ro->cn) {
-                v = corr_row(ro, v, y, corr_key(r, 1), 1.0 / sqrt((double)n));
-                if (ro->refpix) side_direct(ro, y, y0, rows, r, n);
-            }
-            const double *q = ro->charge + (size_t)(y - h0) * nc;
-            uint8_t *sat = ro->sat + (size_t)(y - y0) * nc;
-            uint16_t *out = ro->res_out + (size_t)r * plane + (size_t)(y - y0) * nc;
-            const float *z = ro->gauss + (size_t)(y - y0) * nc;
-            /* A resultant holds a saturated read when its last read did: the charge at that
-             * read reached the well, or its measured signal the ADC ceiling. */
-            wf_det_group_row(d, v, q, z, nc, n, (uint8_t)r, sat, out);
+            if (d->on.saturation) clamp_row(nc, q, d->full_well);
+            wf_det_measure_row(d, a, nc, a); /* in place (avg is ro->meas), at the full well too */
+            if (moments && d->on.nonlinearity) spread_row(nc, a, sp, q, d->nl_beta, d->full_well, d->on.saturation);
+            if (y - 1 >= y0 && y - 1 < y1) grouped_digitise_row(ro, y - 1, y0, y1, h0, h1, r, n);
         }
+        if (h1 == y1) grouped_digitise_row(ro, y1 - 1, y0, y1, h0, h1, r, n); /* no row below */
+        next_dep = dep_end;
     }
     return WF_OK;
 }
