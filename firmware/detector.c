@@ -108,30 +108,31 @@ void wf_det_ipc_row(const double *above, const double *row, const double *below,
     }
 }
 
-WF_CLONES
-void wf_det_measure_row(const wf_detector *det, const double *q, int n, double *out)
+/* held: where q is held at the full well too (q itself, or NULL) */
+static inline __attribute__((always_inline)) void measure_body(const wf_detector *det, const double *q,
+                                                               double *held, int n, double *out)
 {
     const double fw = det->full_well, beta = det->nl_beta;
     const int sat = det->on.saturation, nl = det->on.nonlinearity;
     for (int i = 0; i < n; i++) {
         double v = q[i];
         if (sat) v = v > fw ? fw : v;
+        if (sat && held) held[i] = v;
         if (nl) v = wf_det_nonlinearity(v, beta);
         out[i] = v;
     }
 }
 
 WF_CLONES
+void wf_det_measure_row(const wf_detector *det, const double *q, int n, double *out)
+{
+    measure_body(det, q, NULL, n, out);
+}
+
+WF_CLONES
 void wf_det_hold_measure_row(const wf_detector *det, double *restrict q, int n, double *restrict out)
 {
-    const double fw = det->full_well, beta = det->nl_beta;
-    const int sat = det->on.saturation, nl = det->on.nonlinearity;
-    for (int i = 0; i < n; i++) {
-        double v = q[i];
-        if (sat) q[i] = v = v > fw ? fw : v;
-        if (nl) v = wf_det_nonlinearity(v, beta);
-        out[i] = v;
-    }
+    measure_body(det, q, q, n, out);
 }
 
 WF_CLONES

@@ -27,7 +27,7 @@ typedef enum {
     WF_PURPOSE_1F_TREE = 8,   /* correlated read noise: bridge nodes, channel offsets (firmware/corrnoise.c) */
     WF_PURPOSE_1F_STEP = 9,   /* correlated read noise: steps along a row, reference pixels' read noise */
     WF_PURPOSE_MOMENTS = 10,  /* moments sampling: one block per (pixel, resultant) (firmware/readout.c) */
-    WF_PURPOSE_PHOTON_PAIR = 11, /* per-read sampling: one block per two pixels (pixel = id / 2) and read */
+    WF_PURPOSE_PHOTON_PAIR = 11, /* per-read sampling: one block per read for pixels x and x + ncols/2 of a row */
     WF_PURPOSE_TEST = 15
 } wf_purpose;
 

@@ -268,7 +268,7 @@ wf_status wf_noise_stream_blocks(const wf_noise *noise, uint32_t pixel, uint32_t
  * to float, is the same for every one of the 2^32 words (checked exhaustively when this was
  * written, and on a sample by tests/test_single_fast.c). */
 _Static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "norm_tails reads its flags' bytes in little-endian order");
-#define NORM_CHUNK 2048 /* ~100 tails: enough for whole SIMD iterations; 24 KiB of stack */
+#define NORM_CHUNK 2048 /* ~100 tails: enough for whole SIMD iterations; 26 KiB of stack */
 WF_INLINE void norm_tails(const uint32_t *w, int n, float *out)
 {
     const double c0 = -7.784894002430293e-03, c1 = -3.223964580411365e-01,
@@ -449,9 +449,12 @@ void wf_poisson_ptrs_row53(const double *mean, const uint32_t *w0, const uint32_
     ptrs_batch(mean, w0, w1, w2, w3, 1, n, k);
 }
 
-/* wf_poisson_inversion_thresholds's sums without a branch: a sum that stopped growing holds
- * (later terms only shrink, as that function says), the word of each sum as its
- * first_word_above, and a mean outside (0, 10) gives zeros. */
+/* The first word w with (w + 0.5) 2^-32 > c: w >= floor(c 2^32 - 0.5) + 1 (exact for
+ * c >= e^-10), as hal/noise.c's first_word_above; 2^32 or more when no word is. */
+WF_INLINE double word_above(double c) { return floor(c * 4294967296.0 - 0.5) + 1.0; }
+
+/* The sums as hal/noise.c's inversion_sums forms them (the one-pixel draw's order), without a
+ * branch: past a sum that stopped growing the later ones equal it (its terms only shrink). */
 WF_CLONES
 void wf_poisson_inversion_thresholds_row(int n, const double *restrict m, const double *restrict e,
                                          uint32_t *restrict thr, size_t stride, uint32_t *restrict slow)
@@ -461,11 +464,11 @@ void wf_poisson_inversion_thresholds_row(int n, const double *restrict m, const 
         const int in = (mi > 0.0) & (mi < 10.0);
         const double p1 = ei * mi;
         double F = ei, p = p1 * mi * 0.5, T[7];
-        T[0] = floor(F * 4294967296.0 - 0.5) + 1.0;
+        T[0] = word_above(F);
         F += p1; /* the first three sums are always formed */
-        T[1] = floor(F * 4294967296.0 - 0.5) + 1.0;
+        T[1] = word_above(F);
         F += p;
-        T[2] = floor(F * 4294967296.0 - 0.5) + 1.0;
+        T[2] = word_above(F);
         int nsum = 3, grow = 1;
         for (int j = 3; j < 7; j++) {
             p *= mi / (double)j;
@@ -473,7 +476,7 @@ void wf_poisson_inversion_thresholds_row(int n, const double *restrict m, const 
             grow &= next != F;
             F = grow ? next : F;
             nsum += grow;
-            T[j] = floor(F * 4294967296.0 - 0.5) + 1.0;
+            T[j] = word_above(F);
         }
         uint32_t slow_i = 0;
         for (int j = 0; j < 7; j++) {
