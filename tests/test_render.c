@@ -66,7 +66,7 @@ static void make_objects(int n, int ncols, int nrows, gauss *g, wf_render_object
         g[i].sigma = 0.5 + 4.0 * rand() / (double)RAND_MAX;
         g[i].flux = 10.0 + 1000.0 * rand() / (double)RAND_MAX;
         int h = (int)ceil(6 * g[i].sigma);
-        o[i] = (wf_render_object){(uint64_t)i, (int)floor(g[i].x) - h, (int)floor(g[i].y) - h, 2 * h + 2, 2 * h + 2, &g[i], 0.0, 0, 0, 0, 0, 0, 0};
+        o[i] = (wf_render_object){(uint64_t)i, (int)floor(g[i].x) - h, (int)floor(g[i].y) - h, 2 * h + 2, 2 * h + 2, &g[i], 0.0, 0, 0, 0, 0, 0, 0, 0};
     }
 }
 
@@ -102,7 +102,7 @@ START_TEST(tile_height_and_pool_do_not_matter)
     static gauss g[N];
     static wf_render_object o[N];
     make_objects(N, W, H, g, o, 7);
-    wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL, NULL, NULL, NULL};
     counter c = {0, 0};
     float *ref = render_all(&cfg, o, N, H, &c);
     const int tiles[] = {1, 7, 64};
@@ -140,7 +140,7 @@ START_TEST(halo_objects)
         o[i].bnx = o[i].bny = 2 * hb + 2;
         o[i].halo = 1;
     }
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL};
     counter c = {0, 0};
     float *ref = render_all(&cfg, o, N, H, &c);
     const int tiles[] = {1, 9, 40};
@@ -191,8 +191,8 @@ START_TEST(halo_clipped)
 {
     enum { W = 40, H = 30 };
     static gauss g[1] = {{20.3, 14.6, 1.2, 500.0, 0.0, 0.5}};
-    wf_render_object o = {1, 5, 2, 30, 26, &g[0], 0.0, 1, 15, 10, 12, 10, 0};
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 20, 0, halo_dip, NULL, NULL};
+    wf_render_object o = {1, 5, 2, 30, 26, &g[0], 0.0, 1, 15, 10, 12, 10, 0, 0};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 20, 0, halo_dip, NULL, NULL, NULL, NULL, NULL};
     counter c = {0, 0};
     float *img = render_all(&cfg, &o, 1, 7, &c);
     int zero = 0, positive_halo = 0;
@@ -230,9 +230,9 @@ START_TEST(negatives_clipped_in_the_sum)
 {
     enum { W = 30, H = 20 };
     static double val[2] = {5.0, -3.0};
-    wf_render_object o[2] = {{1, 2, 3, 12, 10, &val[0], 0.0, 0, 0, 0, 0, 0, 0},
-                             {2, 8, 6, 15, 9, &val[1], 0.0, 0, 0, 0, 0, 0, 0}};
-    wf_renderer_config cfg = {W, H, 1.0, NULL, NULL, 1u << 20, 0, NULL, NULL, NULL};
+    wf_render_object o[2] = {{1, 2, 3, 12, 10, &val[0], 0.0, 0, 0, 0, 0, 0, 0, 0},
+                             {2, 8, 6, 15, 9, &val[1], 0.0, 0, 0, 0, 0, 0, 0, 0}};
+    wf_renderer_config cfg = {W, H, 1.0, NULL, NULL, 1u << 20, 0, NULL, NULL, NULL, NULL, NULL, NULL};
     wf_renderer *r;
     ck_assert_int_eq(wf_renderer_create(&cfg, o, 2, draw_const, NULL, &r), WF_OK);
     wf_scene_source src;
@@ -264,7 +264,7 @@ START_TEST(flux_conserved_and_off_sca_skipped)
     o[0].x0 = W + 5;
     o[1].y0 = -o[1].ny - 3;
     o[2].x0 = -o[2].nx;
-    wf_renderer_config cfg = {W, H, 0.25, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.25, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL, NULL, NULL, NULL};
     counter c = {0, 0};
     wf_renderer *r;
     ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
@@ -296,7 +296,7 @@ START_TEST(crowded_tile_and_empty_scene)
     gauss *g = malloc(N * sizeof *g);
     wf_render_object *o = malloc(N * sizeof *o);
     make_objects(N, W, 8, g, o, 3); /* 10,000 objects on the first rows */
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0, NULL, NULL, NULL, NULL, NULL, NULL};
     counter c = {0, 0};
     float *img = render_all(&cfg, o, N, 64, &c);
     double sum = 0;
@@ -308,7 +308,7 @@ START_TEST(crowded_tile_and_empty_scene)
     ck_assert_msg(c.calls <= N, "%ld draws for %d objects", c.calls, N);
     free(img);
     /* empty: the sky and nothing else */
-    wf_renderer_config e = {W, H, 1.5, NULL, NULL, 0, 0, NULL, NULL, NULL};
+    wf_renderer_config e = {W, H, 1.5, NULL, NULL, 0, 0, NULL, NULL, NULL, NULL, NULL, NULL};
     float *sky = render_all(&e, NULL, 0, 16, &c);
     for (int i = 0; i < W * H; i++) ck_assert(sky[i] == 1.5f);
     free(sky);
@@ -323,7 +323,7 @@ START_TEST(each_stamp_drawn_once)
     static gauss g[N];
     static wf_render_object o[N];
     make_objects(N, W, H, g, o, 5);
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0, NULL, NULL, NULL, NULL, NULL, NULL};
     counter c = {0, 0};
     wf_renderer *r;
     ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
@@ -347,7 +347,7 @@ START_TEST(pool_kept_near_live_stamps)
     static wf_render_object o[N];
     make_objects(N, W, H, g, o, 9);
     const size_t mib = (size_t)1 << 20;
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 64 * mib, 0, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 64 * mib, 0, NULL, NULL, NULL, NULL, NULL, NULL};
     counter c = {0, 0};
     wf_renderer *r;
     ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
@@ -388,9 +388,9 @@ START_TEST(passed_rows_leave_the_pool)
     static wf_render_object o[N];
     for (int i = 0; i < N; i++) {
         g[i] = (gauss){12.0 + 0.5 * NX + 0.37 * i, 60.0 * i + 0.5 * NY + 0.21 * i, 9.0 + 0.3 * i, 1000.0 + i, 0, 0};
-        o[i] = (wf_render_object){(uint64_t)i, 12 + (i % 3), 60 * i, NX, NY, &g[i], 0.0, 0, 0, 0, 0, 0, 0};
+        o[i] = (wf_render_object){(uint64_t)i, 12 + (i % 3), 60 * i, NX, NY, &g[i], 0.0, 0, 0, 0, 0, 0, 0, 0};
     }
-    wf_renderer_config big = {W, H, 0.1, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL};
+    wf_renderer_config big = {W, H, 0.1, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL, NULL, NULL, NULL};
     counter c = {0, 0};
     float *ref = render_all(&big, o, N, 10, &c);
     wf_renderer_config cfg = big;
@@ -460,16 +460,16 @@ START_TEST(layer_is_the_flagged_objects_alone)
     static float limg[W * H];
     static unsigned char seen[H];
     counter c = {0, 0};
-    wf_renderer_config plain = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL};
+    wf_renderer_config plain = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL};
     float *want_all = render_all(&plain, o, N, H, &c);
-    wf_renderer_config alone = {W, H, 0.0, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL};
+    wf_renderer_config alone = {W, H, 0.0, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL};
     float *want_layer = render_all(&alone, ob, nb, H, &c);
     const int tiles[] = {1, 7, H};
     for (int t = 0; t < 3; t++) {
         layer_img l = {W, limg, seen, 0};
         memset(limg, 0, sizeof limg);
         memset(seen, 0, sizeof seen);
-        wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l};
+        wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l, NULL, NULL, NULL};
         float *img = render_all(&cfg, o, N, tiles[t], &c);
         ck_assert_msg(!memcmp(img, want_all, sizeof limg), "tile %d: the layer changed the rates", tiles[t]);
         for (int y = 0; y < H; y++) ck_assert_msg(seen[y], "tile %d: row %d never came", tiles[t], y);
@@ -486,6 +486,97 @@ START_TEST(layer_is_the_flagged_objects_alone)
 }
 END_TEST
 
+/* The plane (wf_renderer_config.plane_put, plane_get): what one renderer hands over, a later
+ * renderer of the same static objects with another sky and other variable objects takes
+ * instead of drawing them (it draws only the variable ones), and its rates and layer are
+ * those of a renderer that drew everything, bit for bit, whatever the tiles. */
+typedef struct plane_img {
+    int ncols, nrows;
+    float *plane, *layer;
+    unsigned char *seen;
+    int mismatch, layers;
+} plane_img;
+
+static void plane_put(void *ctx, int y, const float *plane, const float *layer, int ncols)
+{
+    plane_img *p = ctx;
+    float *row = p->plane + (size_t)y * ncols, *lrow = p->layer + (size_t)y * ncols;
+    if (p->seen[y] && memcmp(row, plane, (size_t)ncols * sizeof *row)) p->mismatch = 1;
+    memcpy(row, plane, (size_t)ncols * sizeof *row);
+    if (layer) memcpy(lrow, layer, (size_t)ncols * sizeof *lrow), p->layers++;
+    p->seen[y] = 1;
+}
+
+static wf_status plane_get(void *ctx, int y0, int y1, int ncols, float *plane, float *layer)
+{
+    plane_img *p = ctx;
+    ck_assert(ncols == p->ncols && y0 >= 0 && y1 <= p->nrows);
+    memcpy(plane, p->plane + (size_t)y0 * ncols, (size_t)(y1 - y0) * ncols * sizeof *plane);
+    if (layer) memcpy(layer, p->layer + (size_t)y0 * ncols, (size_t)(y1 - y0) * ncols * sizeof *layer);
+    return WF_OK;
+}
+
+START_TEST(plane_handed_over)
+{
+    enum { N = 300, W = 120, H = 150 };
+    static gauss g[N], g2[N];
+    static wf_render_object o[N], o2[N];
+    make_objects(N, W, H, g, o, 13);
+    for (int i = 0; i < N; i++) {
+        if (i % 5 == 0) {
+            g[i].halo_sigma = 1.5 * g[i].sigma;
+            g[i].halo_flux = 0.2 * g[i].flux;
+            o[i].halo = 1;
+        }
+        o[i].variable = i % 7 == 0;
+        o[i].layer = !o[i].variable && i % 3 == 0;
+        if (i % 14 == 0) o[i].rel_slope = 1e-4; /* and some vary within the exposure */
+    }
+    /* the next exposure: other variable objects (brighter), another sky */
+    memcpy(g2, g, sizeof g);
+    memcpy(o2, o, sizeof o);
+    for (int i = 0; i < N; i++) {
+        o2[i].data = &g2[i];
+        if (o[i].variable || o[i].rel_slope != 0.0) g2[i].flux *= 3.0;
+    }
+    static float pl[W * H], ly[W * H], limg[W * H], want_layer[W * H];
+    static unsigned char seen[H], lseen[H];
+    plane_img p = {W, H, pl, ly, seen, 0, 0};
+    counter c = {0, 0};
+    layer_img l0 = {W, want_layer, lseen, 0};
+    wf_renderer_config first = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l0, NULL, plane_put, &p};
+    float *a = render_all(&first, o, N, 7, &c);
+    wf_renderer_config plain = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL};
+    float *a_plain = render_all(&plain, o, N, H, &c);
+    ck_assert_msg(!memcmp(a, a_plain, sizeof pl), "handing the plane over changed the rates");
+    for (int y = 0; y < H; y++) ck_assert_msg(seen[y], "plane row %d never came", y);
+    ck_assert_msg(!p.mismatch && p.layers > 0, "a plane row came twice, differently (or no layer came)");
+    ck_assert_msg(!memcmp(ly, want_layer, sizeof ly), "the layer handed over is not the layer");
+    plain.sky = 0.9;
+    float *want = render_all(&plain, o2, N, H, &c);
+    const int tiles[] = {1, 7, H};
+    for (int t = 0; t < 3; t++) {
+        layer_img l = {W, limg, lseen, 0};
+        memset(limg, 0, sizeof limg);
+        memset(lseen, 0, sizeof lseen);
+        wf_renderer_config later = {W, H, 0.9, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l, plane_get, NULL, &p};
+        counter c2 = {0, 0};
+        float *b = render_all(&later, o2, N, tiles[t], &c2);
+        ck_assert_msg(!memcmp(b, want, sizeof pl), "tile %d: the plane given back changes the rates", tiles[t]);
+        ck_assert_msg(!memcmp(limg, want_layer, sizeof limg), "tile %d: the layer given back differs", tiles[t]);
+        long drawn_variable = 0;
+        for (int i = 0; i < N; i++) drawn_variable += o[i].variable || o[i].rel_slope != 0.0;
+        if (tiles[t] == H) /* one request: each stamp drawn once */
+            ck_assert_msg(c2.calls <= drawn_variable && c2.calls > 0,
+                          "%ld draws for %ld variable objects: static ones were drawn", c2.calls, drawn_variable);
+        free(b);
+    }
+    free(a);
+    free(a_plain);
+    free(want);
+}
+END_TEST
+
 static Suite *suite(void)
 {
     Suite *s = suite_create("render");
@@ -493,6 +584,7 @@ static Suite *suite(void)
     tcase_set_timeout(tc, 120);
     tcase_add_test(tc, tile_height_and_pool_do_not_matter);
     tcase_add_test(tc, layer_is_the_flagged_objects_alone);
+    tcase_add_test(tc, plane_handed_over);
     tcase_add_test(tc, flux_conserved_and_off_sca_skipped);
     tcase_add_test(tc, crowded_tile_and_empty_scene);
     tcase_add_test(tc, each_stamp_drawn_once);

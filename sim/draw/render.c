@@ -23,9 +23,10 @@ struct wf_renderer {
     size_t pool_used;
     size_t live_bytes;      /* bytes of the stamps still kept: pool_used - live_bytes is garbage */
     size_t *order;          /* compaction scratch: active objects by offset */
-    double *acc, *piece, *skyrow, *hbuf, *lacc;
-    size_t acc_cap, piece_cap, hbuf_cap, lacc_cap;
-    float *lrow; /* one row of the layer's rates */
+    double *acc, *piece, *skyrow, *hbuf, *lacc, *sacc;
+    size_t acc_cap, piece_cap, hbuf_cap, lacc_cap, sacc_cap;
+    float *plane, *lplane; /* the request's plane rows and layer rows (plane_get, plane_put) */
+    size_t plane_cap, lplane_cap;
     wf_renderer_stats stats;
 };
 
@@ -100,6 +101,12 @@ wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_obje
                   (long)o->y0 + o->ny <= 0;
         if (off) { r->stats.objects_skipped++; continue; }
         wf_render_object c = *o;
+        if (c.rel_slope != 0.0) c.variable = 1;
+        if (c.layer && c.variable) {
+            wf_renderer_destroy(r);
+            return wf_error(WF_ERR_INPUT, "renderer: object %llu varies, so it cannot be in the layer",
+                            (unsigned long long)o->id);
+        }
         if (!c.bnx) c.bx0 = c.x0, c.by0 = c.y0, c.bnx = c.nx, c.bny = c.ny;
         const char *bad = NULL;
         if (c.bnx < 1 || c.bny < 1 || c.bx0 < c.x0 || c.by0 < c.y0 || (long)c.bx0 + c.bnx > (long)c.x0 + c.nx ||
@@ -114,9 +121,9 @@ wf_status wf_renderer_create(const wf_renderer_config *cfg, const wf_render_obje
             return wf_error(WF_ERR_INPUT, "renderer: object %llu: box %d x %d at (%d, %d) %s (%d x %d at (%d, %d))",
                             (unsigned long long)o->id, c.bnx, c.bny, c.bx0, c.by0, bad, c.nx, c.ny, c.x0, c.y0);
         }
-        r->objs[r->n++] = c;
+        r->stats.objects_kept++;
+        if (!cfg->plane_get || c.variable) r->objs[r->n++] = c; /* else the plane has it */
     }
-    r->stats.objects_kept = (long)r->n;
     qsort(r->objs, r->n, sizeof *r->objs, by_row);
     for (size_t i = 0; i < r->n; i++) r->stamp_off[i] = NO_STAMP;
     *out = r;
@@ -137,7 +144,9 @@ void wf_renderer_destroy(wf_renderer *r)
     free(r->skyrow);
     free(r->hbuf);
     free(r->lacc);
-    free(r->lrow);
+    free(r->sacc);
+    free(r->plane);
+    free(r->lplane);
     free(r);
 }
 
@@ -252,6 +261,56 @@ static wf_status halo_open(wf_renderer *r, size_t i, int ya, int yb, int xa, int
     return st;
 }
 
+/* Adds the active objects that are variable (or, variable 0, the static ones) to rows
+ * [y0, y1) of acc, and those in the layer to lacc too when it is not NULL. */
+static wf_status add_objects(wf_renderer *r, int y0, int y1, int ncols, int variable, double *acc0, double *lacc)
+{
+    wf_status st;
+    for (size_t a = 0; a < r->nactive; a++) {
+        size_t i = r->active[a];
+        const wf_render_object *o = &r->objs[i];
+        if (!o->variable != !variable) continue;
+        int ya = o->y0 > y0 ? o->y0 : y0, yb = o->y0 + o->ny < y1 ? o->y0 + o->ny : y1;
+        if (ya >= yb) continue;
+        int xa = o->x0 > 0 ? o->x0 : 0, xb = o->x0 + o->nx < ncols ? o->x0 + o->nx : ncols;
+        if (o->halo) {
+            halo_view h;
+            if ((st = halo_open(r, i, ya, yb, xa, xb, &h))) return st;
+            for (int y = ya; y < yb; y++) {
+                double *acc = acc0 + (size_t)(y - y0) * ncols + xa;
+                const float *box = y >= h.ba && y < h.bb ? h.src + (size_t)(y - h.ba) * o->bnx : NULL;
+                if ((st = r->cfg.halo(r->draw_ctx, o, y, xa, xb, box, h.ca, h.cb, acc))) return st;
+                if (lacc && o->layer &&
+                    (st = r->cfg.halo(r->draw_ctx, o, y, xa, xb, box, h.ca, h.cb, lacc + (size_t)(y - y0) * ncols + xa)))
+                    return st;
+            }
+            continue;
+        }
+        const float *src = NULL;
+        if ((st = stamp_rows(r, i, ya, yb, &src))) return st;
+        for (int y = ya; y < yb; y++) {
+            const float *s = src + (size_t)(y - ya) * o->nx - o->x0;
+            double *acc = acc0 + (size_t)(y - y0) * ncols;
+            for (int x = xa; x < xb; x++) acc[x] += s[x];
+            if (lacc && o->layer) {
+                double *la = lacc + (size_t)(y - y0) * ncols;
+                for (int x = xa; x < xb; x++) la[x] += s[x];
+            }
+        }
+    }
+    return WF_OK;
+}
+
+static wf_status grow_float(float **buf, size_t *cap, size_t count)
+{
+    if (count <= *cap) return WF_OK;
+    float *p = wf_arena_host_realloc(*buf, 0, count * sizeof *p);
+    if (!p) return wf_error(WF_ERR_NOMEM, "renderer: cannot grow the plane rows to %zu values", count);
+    *buf = p;
+    *cap = count;
+    return WF_OK;
+}
+
 static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
 {
     wf_renderer *r = ctx;
@@ -293,14 +352,35 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
         if (o->y0 + o->ny > y0) r->active[r->nactive++] = r->next;
         r->next++;
     }
-    size_t rows = (size_t)(y1 - y0);
-    wf_status st = grow(&r->acc, &r->acc_cap, rows * (size_t)ncols, "row accumulator");
+    size_t rows = (size_t)(y1 - y0), npix = rows * (size_t)ncols;
+    wf_status st = grow(&r->acc, &r->acc_cap, npix, "row accumulator");
     if (st) return st;
-    double *lacc = NULL; /* the layer's rows, from 0.0 as a scene without sky starts */
-    if (r->cfg.layer) {
-        if ((st = grow(&r->lacc, &r->lacc_cap, rows * (size_t)ncols, "layer accumulator"))) return st;
-        lacc = r->lacc;
-        for (size_t k = 0; k < rows * (size_t)ncols; k++) lacc[k] = 0.0;
+    if ((st = grow_float(&r->plane, &r->plane_cap, npix))) return st;
+    const int layer = r->cfg.layer != NULL, got = r->cfg.plane_get != NULL;
+    if (layer && (st = grow_float(&r->lplane, &r->lplane_cap, npix))) return st;
+    /* the static objects into the plane (and the layer), from 0.0 as a scene without sky
+     * starts, or both from plane_get */
+    double *sacc = NULL, *lacc = NULL;
+    if (got) {
+        if ((st = r->cfg.plane_get(r->cfg.plane_ctx, y0, y1, ncols, r->plane, layer ? r->lplane : NULL))) return st;
+    } else {
+        if ((st = grow(&r->sacc, &r->sacc_cap, npix, "plane accumulator"))) return st;
+        sacc = r->sacc;
+        for (size_t k = 0; k < npix; k++) sacc[k] = 0.0;
+        if (layer) {
+            if ((st = grow(&r->lacc, &r->lacc_cap, npix, "layer accumulator"))) return st;
+            lacc = r->lacc;
+            for (size_t k = 0; k < npix; k++) lacc[k] = 0.0;
+        }
+        if ((st = add_objects(r, y0, y1, ncols, 0, sacc, lacc))) return st;
+        for (size_t k = 0; k < npix; k++) r->plane[k] = (float)sacc[k];
+        if (layer)
+            for (size_t k = 0; k < npix; k++) r->lplane[k] = lacc[k] > 0.0 ? (float)lacc[k] : 0.0f;
+        if (r->cfg.plane_put)
+            for (int y = y0; y < y1; y++) {
+                size_t off = (size_t)(y - y0) * ncols;
+                r->cfg.plane_put(r->cfg.plane_ctx, y, r->plane + off, layer ? r->lplane + off : NULL, ncols);
+            }
     }
     for (int y = y0; y < y1; y++) {
         double *acc = r->acc + (size_t)(y - y0) * ncols;
@@ -310,49 +390,14 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
             for (int x = 0; x < ncols; x++) acc[x] = r->cfg.sky;
         }
     }
-    for (size_t a = 0; a < r->nactive; a++) {
-        size_t i = r->active[a];
-        const wf_render_object *o = &r->objs[i];
-        int ya = o->y0 > y0 ? o->y0 : y0, yb = o->y0 + o->ny < y1 ? o->y0 + o->ny : y1;
-        if (ya >= yb) continue;
-        int xa = o->x0 > 0 ? o->x0 : 0, xb = o->x0 + o->nx < ncols ? o->x0 + o->nx : ncols;
-        if (o->halo) {
-            halo_view h;
-            if ((st = halo_open(r, i, ya, yb, xa, xb, &h))) return st;
-            for (int y = ya; y < yb; y++) {
-                double *acc = r->acc + (size_t)(y - y0) * ncols + xa;
-                const float *box = y >= h.ba && y < h.bb ? h.src + (size_t)(y - h.ba) * o->bnx : NULL;
-                if ((st = r->cfg.halo(r->draw_ctx, o, y, xa, xb, box, h.ca, h.cb, acc))) return st;
-                if (lacc && o->layer &&
-                    (st = r->cfg.halo(r->draw_ctx, o, y, xa, xb, box, h.ca, h.cb, lacc + (size_t)(y - y0) * ncols + xa)))
-                    return st;
-            }
-            continue;
-        }
-        const float *src = NULL;
-        if ((st = stamp_rows(r, i, ya, yb, &src))) return st;
-        for (int y = ya; y < yb; y++) {
-            const float *s = src + (size_t)(y - ya) * o->nx - o->x0;
-            double *acc = r->acc + (size_t)(y - y0) * ncols;
-            for (int x = xa; x < xb; x++) acc[x] += s[x];
-            if (lacc && o->layer) {
-                double *la = lacc + (size_t)(y - y0) * ncols;
-                for (int x = xa; x < xb; x++) la[x] += s[x];
-            }
-        }
-    }
+    for (size_t k = 0; k < npix; k++) r->acc[k] += (double)r->plane[k];
+    if ((st = add_objects(r, y0, y1, ncols, 1, r->acc, NULL))) return st;
     /* the objects' draws keep their negative ringing (so that none adds flux); the sum,
      * sky included, is clipped here */
-    for (size_t k = 0; k < rows * (size_t)ncols; k++) rate[k] = r->acc[k] > 0.0 ? (float)r->acc[k] : 0.0f;
-    if (lacc) {
-        if (!r->lrow && !(r->lrow = malloc((size_t)ncols * sizeof *r->lrow)))
-            return wf_error(WF_ERR_NOMEM, "renderer: out of memory for a layer row");
-        for (int y = y0; y < y1; y++) {
-            const double *la = lacc + (size_t)(y - y0) * ncols;
-            for (int x = 0; x < ncols; x++) r->lrow[x] = la[x] > 0.0 ? (float)la[x] : 0.0f;
-            r->cfg.layer(r->cfg.layer_ctx, y, r->lrow, ncols);
-        }
-    }
+    for (size_t k = 0; k < npix; k++) rate[k] = r->acc[k] > 0.0 ? (float)r->acc[k] : 0.0f;
+    if (layer)
+        for (int y = y0; y < y1; y++)
+            r->cfg.layer(r->cfg.layer_ctx, y, r->lplane + (size_t)(y - y0) * ncols, ncols);
     return WF_OK;
 }
 

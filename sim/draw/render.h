@@ -8,10 +8,16 @@
  * Objects entirely off the SCA are never drawn. Stamps are drawn in double and kept in the
  * pool as float. An object may keep only a box of its footprint in the pool and have the
  * rest of its light (over the whole footprint) added row by row by a halo function: a PSF
- * wing that is cheap to recompute costs no pool. The rate of a pixel is the sky plus the
- * objects in (first row, id) order, summed in double, so it does not depend on how the
- * rows are split into tiles, then clipped at zero: objects may hand over negative pixels (a
- * draw's ringing kept, so that no object gains flux by its clipping). */
+ * wing that is cheap to recompute costs no pool.
+ *
+ * The rate of a pixel is sky + plane + the variable objects, then clipped at zero (objects
+ * may hand over negative pixels: a draw's ringing kept, so that no object gains flux by its
+ * clipping). The plane is the static objects (all but the variable ones) summed from 0.0
+ * in double in (first row, id) order and rounded to float once; the variable objects are
+ * added to sky + plane in double in the same order. None of it depends on how the rows are
+ * split into tiles. The plane is all an exposure needs of its static objects, so it can be
+ * handed over (plane_put) and given back to a later renderer of the same static scene
+ * (plane_get), which then draws none of them: the same rates, bit for bit. */
 #ifndef WF_RENDER_H
 #define WF_RENDER_H
 
@@ -28,7 +34,9 @@ typedef struct wf_render_object {
     int halo;           /* nonzero: the config's halo function adds light over the footprint
                          * (the value is the caller's, e.g. which halo) */
     int bx0, by0, bnx, bny; /* the drawn and kept box, within the footprint (bnx 0: all) */
-    int layer;          /* nonzero: also in the layer (wf_renderer_config.layer) */
+    int layer;          /* nonzero: also in the layer (wf_renderer_config.layer); static only */
+    int variable;       /* nonzero: not in the plane (drawn by every exposure: a supernova);
+                         * implied by a nonzero rel_slope */
 } wf_render_object;
 
 /* Draws rows [ya, yb) (absolute SCA rows inside the box) of the object's box, in e-/s per
@@ -64,6 +72,15 @@ typedef struct wf_renderer_config {
      * reads a renderer of the scene. [NULL] */
     void (*layer)(void *ctx, int y, const float *rates, int ncols);
     void *layer_ctx;
+    /* The plane (above) from elsewhere: plane_get gives rows [y0, y1) of the plane, and of
+     * the layer's rates when layer is set (layer non-NULL), as a renderer of the same static
+     * objects handed them to plane_put; static objects are then never drawn. [NULL] */
+    wf_status (*plane_get)(void *ctx, int y0, int y1, int ncols, float *plane, float *layer);
+    /* Every row filled (halo rows more than once, the same each time) with its plane row and
+     * the layer's (NULL without a layer), from every thread reading a renderer of the scene.
+     * [NULL] */
+    void (*plane_put)(void *ctx, int y, const float *plane, const float *layer, int ncols);
+    void *plane_ctx;
 } wf_renderer_config;
 
 typedef struct wf_renderer_stats {

@@ -606,7 +606,8 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
         }
         const uint8_t *lf = o->kind == OBJ_GALAXY ? s->layer_gal : o->kind == OBJ_STAR ? s->layer_star : NULL;
         s->robj[kept++] = (wf_render_object){id * 4u + (uint64_t)o->kind, b.x0, b.y0, b.nx, b.ny, o, rel, pl->split,
-                                             box.x0, box.y0, box.nx, box.ny, s->layer_fn && lf && lf[o->row]};
+                                             box.x0, box.y0, box.nx, box.ny, s->layer_fn && lf && lf[o->row],
+                                             o->kind == OBJ_SN};
         if (rel != 0.0) s->time_variable = 1;
         if (b.x0 < setup->ncols && b.x0 + b.nx > 0 && b.y0 < setup->nrows && b.y0 + b.ny > 0) {
             if (o->kind == OBJ_GALAXY)
@@ -618,7 +619,7 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
     free(s->plans);
     s->plans = NULL;
     wf_renderer_config rc = {setup->ncols, setup->nrows, 0.0, sky_row, s, setup->pool_bytes, 0, halo_row,
-                             s->layer_fn, s->layer_ctx};
+                             s->layer_fn, s->layer_ctx, NULL, NULL, NULL};
     s->nrobj = (size_t)kept;
     for (int t = 0; t < setup->threads; t++)
         if ((st = wf_renderer_create(&rc, s->robj, (size_t)kept, draw_object, &s->ts[t], &s->ts[t].renderer))) return st;
