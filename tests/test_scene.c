@@ -196,7 +196,7 @@ START_TEST(noise_tolerance_bounds)
         ck_assert_int_eq(wf_scene_object_count(scene), N);
         wf_scene_stats st;
         wf_scene_get_stats(scene, &st);
-        sigma = sqrt(st.sky_min * ss.exptime) / ss.exptime; /* e-/s, the stamps' unit */
+        sigma = sqrt(st.sky_least * ss.exptime) / ss.exptime; /* e-/s, the stamps' unit */
         printf("noise tolerance: mode %d: of %ld galaxies, %ld drawn with the split PSF, %ld with smooth knots\n", m,
                st.galaxies, st.split, st.knots_smooth);
         if (m == 1 || m == 3) {
@@ -248,6 +248,54 @@ START_TEST(noise_tolerance_bounds)
         for (int m = 0; m < 4; m++) free(pix[m][k]);
     }
     ck_assert_msg(changed >= 3, "only %d faint objects took the looser knobs", changed);
+    wf_catalog_free(&gal);
+}
+END_TEST
+
+/* noise_tolerance's scale is the least sky the pointing has on any date, so the objects are
+ * drawn alike at two dates whose sky differs (the rates without sky, at its noise, are the
+ * same bits); that least sky is below either date's. */
+START_TEST(objects_drawn_alike_at_any_date)
+{
+    enum { N = 12 };
+    double x[N], y[N], mag[N];
+    for (int i = 0; i < N; i++) {
+        x[i] = 30.3 + 17.0 * i;
+        y[i] = 50.7 + 15.0 * i;
+        mag[i] = 19.0 + 0.8 * i;
+    }
+    wf_scene_setup ss;
+    setup_small(&ss);
+    char path[4200];
+    snprintf(path, sizeof path, "%s/dates.csv", wf_test_tmpdir());
+    write_catalog(path, &ss, 1, 0.2, N, x, y, mag);
+    wf_catalog gal;
+    ck_assert_msg(wf_catalog_read_galaxies(path, &gal) == WF_OK, "%s", wf_error_message());
+    float *img[2];
+    double sky_min[2], least[2];
+    for (int d = 0; d < 2; d++) {
+        setup_small(&ss);
+        ss.sky_noise = 1;
+        ss.noise_tolerance = 1.0;
+        ss.mjd = 61420.0 + 120.0 * d;
+        wf_scene *scene;
+        ck_assert_msg(wf_scene_create(&ss, &gal, NULL, &scene) == WF_OK, "%s", wf_error_message());
+        wf_scene_stats st;
+        wf_scene_get_stats(scene, &st);
+        sky_min[d] = st.sky_min;
+        least[d] = st.sky_least;
+        ck_assert_msg(st.knots_smooth > 0 && st.knots_smooth < N, "%ld of %d galaxies with smooth knots",
+                      st.knots_smooth, N);
+        img[d] = render(scene);
+        wf_scene_destroy(scene);
+    }
+    printf("objects at two dates: least sky %.6f, %.6f; the dates' %.6f, %.6f e-/s\n", least[0], least[1], sky_min[0],
+           sky_min[1]);
+    ck_assert_msg(fabs(sky_min[1] / sky_min[0] - 1.0) > 0.02, "the two dates' skies differ too little to test");
+    ck_assert(least[0] == least[1] && least[0] <= sky_min[0] && least[0] <= sky_min[1]);
+    ck_assert_msg(!memcmp(img[0], img[1], sizeof(float) * W * H), "the objects differ between the dates");
+    free(img[0]);
+    free(img[1]);
     wf_catalog_free(&gal);
 }
 END_TEST
@@ -658,6 +706,7 @@ static Suite *suite(void)
     tcase_add_test(tc, prepare_then_populate);
     tcase_add_test(tc, psf_cache_shares_the_same_bits);
     tcase_add_test(tc, noise_tolerance_bounds);
+    tcase_add_test(tc, objects_drawn_alike_at_any_date);
     suite_add_tcase(s, tc);
     return s;
 }

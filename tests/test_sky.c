@@ -118,6 +118,51 @@ START_TEST(test_ecliptic_rotation)
 END_TEST
 
 /* The deep field against GalSim (which uses the obliquity of 2025: 0.003 deg less). */
+/* wf_sky_zodiacal_least is the least level over the dates of a year on which the target is
+ * within the field of regard (54-126 degrees from the Sun), found by stepping the date
+ * (0.02 day, ~0.02 degree of the Sun's path): for a target near the ecliptic pole (the deep
+ * field, always in the field of regard), one on the ecliptic, and one between, both models. */
+START_TEST(test_zodiacal_least_over_a_year)
+{
+    const double pos[3][2] = {{71.0, -53.0}, {150.0, 13.0}, {300.0, -45.0}};
+    for (int model = 0; model < 2; model++) {
+        wf_sky_model *m = malloc(sizeof *m);
+        ck_assert_int_eq(wf_sky_builtin(m), WF_OK);
+        if (model == 1) {
+            const char *data = wf_test_data_dir();
+            if (!data) {
+                free(m);
+                printf("  zodiacal least: the table is absent, built-in law only\n");
+                break;
+            }
+            ck_assert_int_eq(wf_sky_load(data, m), WF_OK);
+            ck_assert_int_eq(m->from_table, 1);
+        }
+        for (int p = 0; p < 3; p++) {
+            double least, brute = INFINITY;
+            ck_assert_int_eq(wf_sky_zodiacal_least(m, WF_Y106, pos[p][0], pos[p][1], &least), WF_OK);
+            int in = 0;
+            for (double mjd = 61000.0; mjd < 61365.25; mjd += 0.02) {
+                double el, z;
+                ck_assert_int_eq(wf_sky_sun_relative(pos[p][0], pos[p][1], mjd, NULL, NULL, &el), WF_OK);
+                if (el < WF_SKY_REGARD_MIN_DEG || el > WF_SKY_REGARD_MAX_DEG) continue;
+                ck_assert_int_eq(wf_sky_zodiacal(m, WF_Y106, pos[p][0], pos[p][1], mjd, &z), WF_OK);
+                if (z < brute) brute = z;
+                in++;
+            }
+            printf("  zodiacal least (%s) at (%g, %g): %.12g, over the year's dates %.12g (%d in the field of regard)\n",
+                   model ? "table" : "law", pos[p][0], pos[p][1], least, brute, in);
+            ck_assert_int_gt(in, 100);
+            /* the table is linear between nodes, so its least is exact; the law's lies between
+             * the 1/8 degree steps */
+            ck_assert_msg(least <= brute * (1 + (model ? 1e-12 : 1e-5)), "least %.12g above a date's %.12g", least, brute);
+            ck_assert_msg(least >= brute * (1 - 2e-3), "least %g well below every date's %g", least, brute);
+        }
+        free(m);
+    }
+}
+END_TEST
+
 START_TEST(test_ecliptic_deep_field)
 {
     double lon, lat;
@@ -450,6 +495,7 @@ static Suite *suite(void)
     tcase_add_test(tc, test_sun_equinoxes_solstices);
     tcase_add_test(tc, test_ecliptic_rotation);
     tcase_add_test(tc, test_ecliptic_deep_field);
+    tcase_add_test(tc, test_zodiacal_least_over_a_year);
     tcase_add_test(tc, test_bad_inputs);
     tcase_add_test(tc, test_builtin_rate_composition);
     tcase_add_test(tc, test_sun_exclusion_builtin);

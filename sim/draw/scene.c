@@ -474,6 +474,8 @@ wf_status wf_scene_prepare(const wf_scene_setup *setup, wf_scene **out)
     s->gx = setup->ncols / SKY_GRID + 2;
     s->gy = setup->nrows / SKY_GRID + 2;
     if (!(s->area = malloc((size_t)s->gx * s->gy * sizeof *s->area))) { st = wf_error(WF_ERR_NOMEM, "scene: sky grid"); goto bad; }
+    double zodi_least, area_min = INFINITY;
+    if ((st = wf_sky_zodiacal_least(sky, s->filter, rac, decc, &zodi_least))) goto bad;
     s->stats.sky_min = INFINITY;
     s->stats.sky_max = -INFINITY;
     for (int j = 0; j < s->gy; j++)
@@ -482,7 +484,9 @@ wf_status wf_scene_prepare(const wf_scene_setup *setup, wf_scene **out)
             double v = s->zodi * (1 + s->setup.stray_light) * s->area[j * s->gx + i] + s->thermal;
             if (v < s->stats.sky_min) s->stats.sky_min = v;
             if (v > s->stats.sky_max) s->stats.sky_max = v;
+            if (s->area[j * s->gx + i] < area_min) area_min = s->area[j * s->gx + i];
         }
+    s->stats.sky_least = zodi_least * (1 + s->setup.stray_light) * area_min + s->thermal;
     s->stats.zodi = s->zodi;
     if ((st = wf_scene_psf_get(setup->psf_cache, setup, &s->psf))) goto bad;
     s->ppsf = s->psf->ppsf;
@@ -531,8 +535,11 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
      * and neither exceeds it, a strict bound for the exact images; a draw in a smaller box adds
      * its own folding, which the folding knob bounds; measured <= 0.04 of that, ~0.1 with the box that changes with them,
      * over GalSim's scene). Each may be as large as
-     * noise_tolerance x one pixel's sky noise over the exposure, in e-. With no sky there is
-     * no noise to hide in (unless sky_noise: the exposure had it, the rates leave it out). */
+     * noise_tolerance x one pixel's sky noise over the exposure, in e-, at the least sky the
+     * SCA has at this pointing on any date (sky_least): every exposure of a pointing, PA,
+     * filter and SCA then draws its static objects alike, whatever its date, so that their
+     * plane can be kept for the next (sim/draw/render.h). With no sky there is no noise to
+     * hide in (unless sky_noise: the exposure had it, the rates leave it out). */
     if (!(setup->noise_tolerance >= 0.0 && setup->noise_tolerance < INFINITY)) {
         st = wf_error(WF_ERR_RANGE, "scene: noise_tolerance %g is not a finite value >= 0", setup->noise_tolerance);
         return st;
@@ -544,7 +551,7 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
     }
     const double kp = s->ppsf.kmax * s->acc.pixel_scale / (2.0 * M_PI), modes = M_PI * kp * kp;
     const int sky_noise = setup->sky_on || setup->sky_noise;
-    const double sky_sigma = sky_noise && s->stats.sky_min > 0.0 ? sqrt(s->stats.sky_min * setup->exptime) : 0.0;
+    const double sky_sigma = sky_noise && s->stats.sky_least > 0.0 ? sqrt(s->stats.sky_least * setup->exptime) : 0.0;
     const double tol_rate = setup->noise_tolerance > 0.0 ? setup->noise_tolerance * sky_sigma / setup->exptime : 0.0;
     for (size_t i = 0; i < s->nobj; i++) {
         object *o = &s->obj[i];

@@ -55,7 +55,9 @@ typedef struct wf_scene_setup {
                              * WF_SCENE_KVALUE_MAX), the knot lattice's accuracy (up to
                              * WF_SCENE_KNOT_MAX), knots drawn as the smooth disk (when the
                              * knots' flux x the PSF's pixel_max is below it) and the split
-                             * PSF's wing; 0: the same knobs for all [1] */
+                             * PSF's wing; 0: the same knobs for all [1]. The sky noise is
+                             * at the least sky the pointing has on any date (stats.sky_least),
+                             * so the knobs do not depend on mjd */
     double exptime;         /* s, for noise_tolerance [300] */
     size_t pool_bytes;      /* stamp pool per renderer (float stamps) [24 MiB] */
     int threads;            /* renderers to prepare [1] */
@@ -85,6 +87,9 @@ typedef struct wf_scene_stats {
     long galaxies, stars, sne; /* drawn (reach the SCA) */
     long split;                /* of the galaxies, drawn with the split PSF (noise_tolerance) */
     double sky_min, sky_max;   /* e-/pixel/s over the SCA */
+    double sky_least;          /* e-/pixel/s: the least over the SCA at the least zodiacal light
+                                  of its centre within the field of regard (any date,
+                                  wf_sky_zodiacal_least): noise_tolerance's scale */
     double zodi;               /* e-/s/arcsec^2 at the SCA centre */
     double psf_lambda_nm;
     double psf_image_sum;      /* the PSF image's share of the light before normalising */

@@ -329,6 +329,32 @@ wf_status wf_sky_zodiacal(const wf_sky_model *m, wf_filter f, double ra_deg, dou
     return st;
 }
 
+wf_status wf_sky_zodiacal_least(const wf_sky_model *m, wf_filter f, double ra_deg, double dec_deg,
+                                double *e_per_s_per_arcsec2)
+{
+    double lon, lat;
+    wf_status st = wf_sky_ecliptic(ra_deg, dec_deg, &lon, &lat);
+    if (st) return st;
+    /* the allowed |dlon| form one interval [a, b]: cos(elongation) = cos(lat) cos(dlon) */
+    const double cb = cos(lat * DEG);
+    const double ca = fmin(1.0, cos(WF_SKY_REGARD_MIN_DEG * DEG) / cb), cz = fmax(-1.0, cos(WF_SKY_REGARD_MAX_DEG * DEG) / cb);
+    const double a = acos(ca) / DEG, b = acos(cz) / DEG;
+    double best = INFINITY;
+    /* its ends, and the steps between (every table node among them: the table is linear in
+     * dlon between nodes, so its least is exact) */
+    for (int k = -1; k <= 180 * 8 + 1; k++) {
+        double dl = k < 0 ? a : k > 180 * 8 ? b : k / 8.0, z;
+        if (dl < a || dl > b) continue;
+        if ((st = wf_sky_zodiacal_ecliptic(m, f, dl, lat, &z))) return st;
+        if (z < best) best = z;
+    }
+    if (!(best < INFINITY)) /* cannot happen: quadrature, k = 720, is always in */
+        return wf_error(WF_ERR_INTERNAL, "sky: no elongation within the field of regard toward RA %.4f Dec %.4f",
+                        ra_deg, dec_deg);
+    *e_per_s_per_arcsec2 = best;
+    return WF_OK;
+}
+
 wf_status wf_sky_thermal(wf_filter f, double *e_per_pix_per_s)
 {
     if (!filter_ok(f)) return wf_error(WF_ERR_RANGE, "sky: %d is not a filter", (int)f);

@@ -76,6 +76,19 @@ wf_status wf_sky_zodiacal_ecliptic(const wf_sky_model *m, wf_filter f, double dl
 wf_status wf_sky_zodiacal(const wf_sky_model *m, wf_filter f, double ra_deg, double dec_deg,
                           double mjd, double *e_per_s_per_arcsec2);
 
+/* Roman's field of regard in solar elongation (the angle between target and Sun). */
+#define WF_SKY_REGARD_MIN_DEG 54.0
+#define WF_SKY_REGARD_MAX_DEG 126.0
+
+/* The least zodiacal light toward (ra, dec), e-/s/arcsec², over the year's positions of the
+ * Sun that leave the target within the field of regard: a level that depends on no date
+ * (what scales the per-object accuracy knobs of scene.noise_tolerance, so that every
+ * exposure of a pointing draws its static objects alike). Quadrature (elongation 90°) is
+ * always among them. The minimum over the interval of allowed |Δλ|: its ends and steps of
+ * 1/8° (exact for the table, linear in Δλ between its 4° nodes). */
+wf_status wf_sky_zodiacal_least(const wf_sky_model *m, wf_filter f, double ra_deg, double dec_deg,
+                                double *e_per_s_per_arcsec2);
+
 /* Thermal background of the filter, e-/pixel/s (SPEC §2, GalSim thermal_backgrounds). */
 wf_status wf_sky_thermal(wf_filter f, double *e_per_pix_per_s);
 
