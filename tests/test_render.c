@@ -102,7 +102,7 @@ START_TEST(tile_height_and_pool_do_not_matter)
     static gauss g[N];
     static wf_render_object o[N];
     make_objects(N, W, H, g, o, 7);
-    wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL, NULL, NULL, NULL, 0.0};
     counter c = {0, 0};
     float *ref = render_all(&cfg, o, N, H, &c);
     const int tiles[] = {1, 7, 64};
@@ -140,7 +140,7 @@ START_TEST(halo_objects)
         o[i].bnx = o[i].bny = 2 * hb + 2;
         o[i].halo = 1;
     }
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL, 0.0};
     counter c = {0, 0};
     float *ref = render_all(&cfg, o, N, H, &c);
     const int tiles[] = {1, 9, 40};
@@ -192,7 +192,7 @@ START_TEST(halo_clipped)
     enum { W = 40, H = 30 };
     static gauss g[1] = {{20.3, 14.6, 1.2, 500.0, 0.0, 0.5}};
     wf_render_object o = {1, 5, 2, 30, 26, &g[0], 0.0, 1, 15, 10, 12, 10, 0, 0};
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 20, 0, halo_dip, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 20, 0, halo_dip, NULL, NULL, NULL, NULL, NULL, 0.0};
     counter c = {0, 0};
     float *img = render_all(&cfg, &o, 1, 7, &c);
     int zero = 0, positive_halo = 0;
@@ -232,7 +232,7 @@ START_TEST(negatives_clipped_in_the_sum)
     static double val[2] = {5.0, -3.0};
     wf_render_object o[2] = {{1, 2, 3, 12, 10, &val[0], 0.0, 0, 0, 0, 0, 0, 0, 0},
                              {2, 8, 6, 15, 9, &val[1], 0.0, 0, 0, 0, 0, 0, 0, 0}};
-    wf_renderer_config cfg = {W, H, 1.0, NULL, NULL, 1u << 20, 0, NULL, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 1.0, NULL, NULL, 1u << 20, 0, NULL, NULL, NULL, NULL, NULL, NULL, 0.0};
     wf_renderer *r;
     ck_assert_int_eq(wf_renderer_create(&cfg, o, 2, draw_const, NULL, &r), WF_OK);
     wf_scene_source src;
@@ -264,7 +264,7 @@ START_TEST(flux_conserved_and_off_sca_skipped)
     o[0].x0 = W + 5;
     o[1].y0 = -o[1].ny - 3;
     o[2].x0 = -o[2].nx;
-    wf_renderer_config cfg = {W, H, 0.25, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.25, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL, NULL, NULL, NULL, 0.0};
     counter c = {0, 0};
     wf_renderer *r;
     ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
@@ -296,7 +296,7 @@ START_TEST(crowded_tile_and_empty_scene)
     gauss *g = malloc(N * sizeof *g);
     wf_render_object *o = malloc(N * sizeof *o);
     make_objects(N, W, 8, g, o, 3); /* 10,000 objects on the first rows */
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0, NULL, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0, NULL, NULL, NULL, NULL, NULL, NULL, 0.0};
     counter c = {0, 0};
     float *img = render_all(&cfg, o, N, 64, &c);
     double sum = 0;
@@ -308,7 +308,7 @@ START_TEST(crowded_tile_and_empty_scene)
     ck_assert_msg(c.calls <= N, "%ld draws for %d objects", c.calls, N);
     free(img);
     /* empty: the sky and nothing else */
-    wf_renderer_config e = {W, H, 1.5, NULL, NULL, 0, 0, NULL, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config e = {W, H, 1.5, NULL, NULL, 0, 0, NULL, NULL, NULL, NULL, NULL, NULL, 0.0};
     float *sky = render_all(&e, NULL, 0, 16, &c);
     for (int i = 0; i < W * H; i++) ck_assert(sky[i] == 1.5f);
     free(sky);
@@ -323,7 +323,7 @@ START_TEST(each_stamp_drawn_once)
     static gauss g[N];
     static wf_render_object o[N];
     make_objects(N, W, H, g, o, 5);
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0, NULL, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 1u << 24, 0, NULL, NULL, NULL, NULL, NULL, NULL, 0.0};
     counter c = {0, 0};
     wf_renderer *r;
     ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
@@ -347,7 +347,7 @@ START_TEST(pool_kept_near_live_stamps)
     static wf_render_object o[N];
     make_objects(N, W, H, g, o, 9);
     const size_t mib = (size_t)1 << 20;
-    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 64 * mib, 0, NULL, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config cfg = {W, H, 0.0, NULL, NULL, 64 * mib, 0, NULL, NULL, NULL, NULL, NULL, NULL, 0.0};
     counter c = {0, 0};
     wf_renderer *r;
     ck_assert_int_eq(wf_renderer_create(&cfg, o, N, draw_gauss, &c, &r), WF_OK);
@@ -390,7 +390,7 @@ START_TEST(passed_rows_leave_the_pool)
         g[i] = (gauss){12.0 + 0.5 * NX + 0.37 * i, 60.0 * i + 0.5 * NY + 0.21 * i, 9.0 + 0.3 * i, 1000.0 + i, 0, 0};
         o[i] = (wf_render_object){(uint64_t)i, 12 + (i % 3), 60 * i, NX, NY, &g[i], 0.0, 0, 0, 0, 0, 0, 0, 0};
     }
-    wf_renderer_config big = {W, H, 0.1, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config big = {W, H, 0.1, NULL, NULL, 1u << 22, 0, NULL, NULL, NULL, NULL, NULL, NULL, 0.0};
     counter c = {0, 0};
     float *ref = render_all(&big, o, N, 10, &c);
     wf_renderer_config cfg = big;
@@ -460,16 +460,16 @@ START_TEST(layer_is_the_flagged_objects_alone)
     static float limg[W * H];
     static unsigned char seen[H];
     counter c = {0, 0};
-    wf_renderer_config plain = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config plain = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL, 0.0};
     float *want_all = render_all(&plain, o, N, H, &c);
-    wf_renderer_config alone = {W, H, 0.0, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config alone = {W, H, 0.0, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL, 0.0};
     float *want_layer = render_all(&alone, ob, nb, H, &c);
     const int tiles[] = {1, 7, H};
     for (int t = 0; t < 3; t++) {
         layer_img l = {W, limg, seen, 0};
         memset(limg, 0, sizeof limg);
         memset(seen, 0, sizeof seen);
-        wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l, NULL, NULL, NULL};
+        wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l, NULL, NULL, NULL, 0.0};
         float *img = render_all(&cfg, o, N, tiles[t], &c);
         ck_assert_msg(!memcmp(img, want_all, sizeof limg), "tile %d: the layer changed the rates", tiles[t]);
         for (int y = 0; y < H; y++) ck_assert_msg(seen[y], "tile %d: row %d never came", tiles[t], y);
@@ -481,6 +481,21 @@ START_TEST(layer_is_the_flagged_objects_alone)
     double sum = 0.0;
     for (int k = 0; k < W * H; k++) sum += want_layer[k];
     ck_assert_msg(sum > 0.0 && nb > 50, "an empty layer proves nothing (%d objects, %g)", nb, sum);
+    /* a floor: the layer's rates below it come as 0, the others as they were; the rates unmoved */
+    {
+        layer_img l = {W, limg, seen, 0};
+        wf_renderer_config cfg = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l, NULL, NULL, NULL, 5.0};
+        float *img = render_all(&cfg, o, N, 7, &c);
+        ck_assert(!memcmp(img, want_all, sizeof limg));
+        int below = 0, above = 0;
+        for (int k = 0; k < W * H; k++) {
+            ck_assert(limg[k] == (want_layer[k] >= 5.0f ? want_layer[k] : 0.0f));
+            below += want_layer[k] > 0.0f && want_layer[k] < 5.0f;
+            above += want_layer[k] >= 5.0f;
+        }
+        ck_assert_msg(below > 100 && above > 10, "the floor leaves %d pixels out and %d in", below, above);
+        free(img);
+    }
     free(want_all);
     free(want_layer);
 }
@@ -544,9 +559,9 @@ START_TEST(plane_handed_over)
     plane_img p = {W, H, pl, ly, seen, 0, 0};
     counter c = {0, 0};
     layer_img l0 = {W, want_layer, lseen, 0};
-    wf_renderer_config first = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l0, NULL, plane_put, &p};
+    wf_renderer_config first = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l0, NULL, plane_put, &p, 0.0};
     float *a = render_all(&first, o, N, 7, &c);
-    wf_renderer_config plain = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL};
+    wf_renderer_config plain = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL, 0.0};
     float *a_plain = render_all(&plain, o, N, H, &c);
     ck_assert_msg(!memcmp(a, a_plain, sizeof pl), "handing the plane over changed the rates");
     for (int y = 0; y < H; y++) ck_assert_msg(seen[y], "plane row %d never came", y);
@@ -559,7 +574,7 @@ START_TEST(plane_handed_over)
         layer_img l = {W, limg, lseen, 0};
         memset(limg, 0, sizeof limg);
         memset(lseen, 0, sizeof lseen);
-        wf_renderer_config later = {W, H, 0.9, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l, plane_get, NULL, &p};
+        wf_renderer_config later = {W, H, 0.9, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l, plane_get, NULL, &p, 0.0};
         counter c2 = {0, 0};
         float *b = render_all(&later, o2, N, tiles[t], &c2);
         ck_assert_msg(!memcmp(b, want, sizeof pl), "tile %d: the plane given back changes the rates", tiles[t]);

@@ -923,11 +923,11 @@ END_TEST
 
 /* A plan and a star catalog with a saturating star (AB 16) on SCA 3 in each of exposures 0..5,
  * so that the histories hold pixels. */
-static void history_inputs(const char *bin, const char *d, char *plan, char *stars, size_t cap)
+static void history_inputs(const char *bin, const char *d, char *plan, char *stars, size_t cap, int visits)
 {
     snprintf(plan, cap, "%s/plan.fits", d);
     snprintf(stars, cap, "%s/stars.csv", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=%d --out %s", bin, visits, plan), 0);
     wf_survey_row *rows;
     size_t nrows;
     ck_assert_int_eq(wf_survey_read_plan(plan, &rows, &nrows), WF_OK);
@@ -952,7 +952,7 @@ static void history_inputs(const char *bin, const char *d, char *plan, char *sta
 static void history_setup(const char *bin, const char **d, char *plan, char *stars, char *log, size_t cap)
 {
     *d = wf_test_tmpdir();
-    history_inputs(bin, *d, plan, stars, cap);
+    history_inputs(bin, *d, plan, stars, cap, 1);
     snprintf(log, cap, "%s/log", *d);
 }
 
@@ -1114,6 +1114,62 @@ END_TEST
  * one drew, and the one before it made, in the cache (at the default depth, 8, the cache's
  * size per SCA, which a least-recently-used eviction emptied of the newest ones: 22 of 24
  * drawn). The products are those of a run with the cache off. */
+/* The scene cache (run.scene_cache): a plan's second visit takes the static scenes its first
+ * one stored instead of drawing them, in one process, with each item in a process of its own
+ * (--isolate) and under MPI, and the products are those of a run without it, persistence
+ * included (exposure 65's history holds exposure 64's saturating star, from the stored
+ * layer). */
+START_TEST(scene_cache_same_bytes)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], stars[4200], log[4200];
+    history_inputs(bin, d, plan, stars, sizeof plan, 2);
+    snprintf(log, sizeof log, "%s/log", d);
+    wf_survey_row *rows;
+    size_t nrows;
+    ck_assert_int_eq(wf_survey_read_plan(plan, &rows, &nrows), WF_OK);
+    ck_assert_int_gt(nrows, 65);
+    for (int e = 0; e <= 1; e++) /* the same pointing, PA and filter a visit later */
+        ck_assert(rows[e].ra == rows[e + 64].ra && rows[e].pa == rows[e + 64].pa && !strcmp(rows[e].filter, rows[e + 64].filter) &&
+                  rows[e].mjd_mid < rows[e + 64].mjd_mid - 1.0);
+    free(rows);
+#define CACHED "--scas 3 --mode single " SMALL " --set scene.kind=catalog --set scene.stars=%s"
+    long found, made;
+    ck_assert_int_eq(wf_test_run("%s survey run --plan %s --exposures 0:1 " CACHED " --set run.scene_cache=%s/cache "
+                                 "--out %s/first 2>%s", bin, plan, stars, d, d, log), 0);
+    logged(log, "static scenes: %ld of the %ld", 2, &found, &made);
+    ck_assert(found == 0 && made == 2);
+    ck_assert_int_eq(wf_test_run("%s survey run --plan %s --exposures 64:65 " CACHED " --set run.scene_cache=none "
+                                 "--out %s/none 2>%s", bin, plan, stars, d, log), 0);
+    logged(log, "static scenes: %ld of the %ld", 2, &found, &made);
+    ck_assert(found == 0 && made == 2);
+    char x[4300], y[4300], v[FLEN_VALUE];
+    snprintf(x, sizeof x, "%s/none/wfisim_e000065_sca03.fits", d);
+    header(x, "PERSISTN", v);
+    ck_assert_int_eq(atoi(v), 1);
+    const char *how[3] = {"", "--isolate", NULL};
+    const char *mpi = mpi_program();
+    for (int k = 0; k < 3; k++) {
+        if (k == 2 && !mpi) break; /* CI has it */
+        char cmd[600];
+        snprintf(cmd, sizeof cmd, "%s%s survey run %s", k == 2 ? MPIRUN " " : "", k == 2 ? mpi : bin, how[k] ? how[k] : "");
+        ck_assert_int_eq(wf_test_run("%s --plan %s --exposures 64:65 " CACHED " --set run.scene_cache=%s/cache "
+                                     "--out %s/again%d 2>%s", cmd, plan, stars, d, d, k, log), 0);
+        logged(log, "static scenes: %ld of the %ld", 2, &found, &made);
+        ck_assert_msg(found == 2 && made == 2, "%s: %ld of %ld from the cache", cmd, found, made);
+        for (int e = 64; e <= 65; e++)
+            for (int t = 0; t < 2; t++) {
+                snprintf(x, sizeof x, "%s/none/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
+                snprintf(y, sizeof y, "%s/again%d/wfisim_e%06d_sca03%s.fits", d, k, e, t ? "_truth" : "");
+                wf_test_assert_same_file(x, y);
+            }
+    }
+#undef CACHED
+}
+END_TEST
+
 START_TEST(history_cache_mid_plan)
 {
     const char *bin = wf_test_program();
@@ -1225,6 +1281,7 @@ static Suite *suite(void)
     tcase_add_test(tc, history_cache_any_process);
     tcase_add_test(tc, walks_cover_items);
     tcase_add_test(tc, history_cache_mid_plan);
+    tcase_add_test(tc, scene_cache_same_bytes);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -158,6 +158,12 @@ static const key_desc keys[] = {
     {.name = "products.border", .type = KT_BOOL, .unit = "", .def = "false", FIELD(products.border),
      DIGEST(KD_CORR),
      .doc = "With detector.effects.refpix: write the 4-pixel reference border as it was downlinked, HDUs REFROWS (uint16 ADU [resultant][8][ncols + 8]: full-frame rows 0-3, then the last four) and REFCOLS ([resultant][nrows][8]: full-frame columns 0-3, then the last four, of each active row); SCI, ERR, DQ, RESULTANTS and their WCS stay the active area's."},
+    {.name = "run.scene_cache", .type = KT_STRING, .unit = "", .def = "auto", .nonempty = 1, FIELD(scene_cache),
+     DIGEST(KD_RUN),
+     .doc = "Folder that keeps each static scene's plane (the galaxies' and stars' rates summed, 4 bytes a pixel: 67 MB a full SCA) for the later exposures of the same pointing, PA, filter and SCA, which then draw only the supernovae (sim/draw/plane_cache.h); the products are the same bytes either way. `auto`: <run.out>/scene_cache for survey run, none for expose and demo (which use a folder named here); `none`: off."},
+    {.name = "run.scene_cache_gib", .type = KT_DOUBLE, .unit = "GiB", .def = "8", MIN(0), FIELD(scene_cache_gib),
+     DIGEST(KD_RUN),
+     .doc = "Room the scene cache's planes may take on disk; beyond it the least recently used go. A survey run in plan order reuses a plane after one visit's exposures of the SCA (64 in the deep tier's plan): give each SCA a run works on at once that many planes."},
     {.name = "run.out", .type = KT_STRING, .unit = "", .def = "out", .nonempty = 1,
      FIELD(out_dir), DIGEST(KD_RUN), .doc = "Directory that receives the products."},
 

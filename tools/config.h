@@ -26,6 +26,8 @@ typedef struct wf_config {
     int quiet;                     /* run.quiet [false] */
     int uncached_writes;           /* run.uncached_writes [true] */
     char out_dir[WF_PATH_MAX];     /* run.out ["out"] */
+    char scene_cache[WF_PATH_MAX]; /* run.scene_cache: a folder, "auto" or "none" [auto] */
+    double scene_cache_gib;        /* run.scene_cache_gib [8] */
     struct {                       /* products.*: what a product keeps (docs/SURVEY.md) */
         int compress;              /* WF_COMPRESS_* [auto] */
         double quantize_level;     /* float HDUs' step is noise / this; 0 lossless [16] */

@@ -22,6 +22,7 @@
 #include "sim/survey/skyindex.h"
 #include "sim/survey/synth.h"
 #include "sim/survey/wcs.h"
+#include "sim/draw/plane_cache.h"
 #include "tools/accuracy.h"
 #include "tools/assemble.h"
 #include "tools/config.h"
@@ -220,7 +221,13 @@ static int run_exposure(cli *c, int demo)
     job.version = version;
     char model[WF_PATH_MAX + 32];
     wf_status st = open_injector(c, &job.injector, model, sizeof model);
+    /* a scene cache named (auto is survey run's alone): its digests computed once */
+    if (!st && strcmp(c->cfg.scene_cache, "auto") && strcmp(c->cfg.scene_cache, "none") && !c->replay &&
+        !(st = wf_digest_cache_create(&job.digests)))
+        st = wf_plane_cache_open(c->cfg.scene_cache, c->cfg.scene_cache_gib * 1073741824.0, &job.planes);
     if (!st) st = wf_pipeline_expose(&job);
+    wf_plane_cache_close(job.planes);
+    wf_digest_cache_free(job.digests);
     wf_sn_injector_free(job.injector);
     return st ? fail(demo ? "demo" : "expose", st) : 0;
 }
@@ -388,8 +395,9 @@ static int cmd_survey_run(cli *c)
                 "%ld already done; %ld supernova images%s\n", stats.rendered, stats.redone, stats.changed,
                 stats.skipped, stats.sne_drawn, c->area ? "; SCAs outside --area not made" : "");
     if (!c->cfg.quiet && !stats.silent && stats.rendered)
-        fprintf(stderr, "wfisim survey: PSFs: %ld built (the items of an SCA and filter share one)\n",
-                stats.psf_built);
+        fprintf(stderr, "wfisim survey: PSFs: %ld built (the items of an SCA and filter share one); static "
+                "scenes: %ld of the %ld products' from the scene cache\n", stats.psf_built, stats.planes_found,
+                stats.rendered);
     if (!c->cfg.quiet && !stats.silent && c->cfg.ro.persist.on)
         fprintf(stderr, "wfisim survey: persistence histories: %ld earlier exposures, %ld of them drawn\n",
                 stats.hist_used, stats.hist_drawn);

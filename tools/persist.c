@@ -554,6 +554,12 @@ wf_status wf_persist_layer_flags(wf_persist_layer *l, const wf_catalog *gal, con
     return WF_OK;
 }
 
+double wf_persist_layer_floor(const wf_persist_layer *l)
+{
+    /* keep_pixels keeps rate x exptime >= min_stimulus: a rate below this never is */
+    return l->min_stimulus / l->exptime * (1.0 - 1e-9);
+}
+
 void wf_persist_layer_row(void *ctx, int y, const float *rates, int ncols)
 {
     wf_persist_layer *l = ctx;

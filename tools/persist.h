@@ -70,6 +70,9 @@ void wf_persist_layer_free(wf_persist_layer *l);
 wf_status wf_persist_layer_flags(wf_persist_layer *l, const wf_catalog *gal, const wf_catalog *stars,
                                  double psf_pixel_max, const uint8_t **gal_flags, const uint8_t **star_flags);
 
+/* The rate below which no pixel of the layer is kept (min_stimulus / exptime, a hair lower):
+ * wf_scene_set_layer's floor. */
+double wf_persist_layer_floor(const wf_persist_layer *l);
 /* The layer's row callback (wf_scene_set_layer's fn, with l as ctx). */
 void wf_persist_layer_row(void *ctx, int y, const float *rates, int ncols);
 

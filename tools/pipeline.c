@@ -1,4 +1,6 @@
 #include "tools/pipeline.h"
+
+#include "sim/draw/plane_cache.h"
 #include "tools/persist.h"
 
 #include <errno.h>
@@ -314,11 +316,34 @@ void wf_pipeline_scene_setup(const wf_config *cfg, const wf_clock *clock, int th
     ss->threads = threads;
 }
 
+wf_status wf_pipeline_plane_key(const wf_pipeline_job *pj, char key[65])
+{
+    wf_config *kc = malloc(sizeof *kc);
+    if (!kc) return wf_error(WF_ERR_NOMEM, "out of memory");
+    *kc = *pj->cfg;
+    kc->mjd = 0.0;
+    kc->ro.exposure = 0;
+    /* the caller's header lines (a survey's plan row) carry the date: left out */
+    wf_digest_inputs din = {kc, pj->clock, NULL, pj->replay, pj->injector, NULL, 0, pj->version};
+    wf_digest d;
+    wf_status st = wf_digest_product(pj->digests, &din, &d);
+    free(kc);
+    if (st) return st;
+    wf_sha256 h;
+    wf_sha256_init(&h);
+    char text[160];
+    int n = snprintf(text, sizeof text, "wfisim static plane 1\n%s\nlayer %d\n", d.whole, pj->layer != NULL);
+    wf_sha256_update(&h, text, (size_t)n);
+    wf_sha256_hex(&h, key);
+    return WF_OK;
+}
+
 wf_status wf_pipeline_expose(wf_pipeline_job *pj)
 {
     const wf_config *cfg = pj->cfg;
     pj->image_path[0] = pj->truth_path[0] = '\0';
     pj->nsne_drawn = 0;
+    pj->plane_found = 0;
     int T = cfg->threads < 1 ? 1 : cfg->threads;
     wf_scene_source *scenes = calloc((size_t)T, sizeof *scenes);
     wf_scene_replay *replays = calloc((size_t)T, sizeof *replays);
@@ -362,7 +387,18 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
             if ((st = wf_persist_layer_flags(pj->layer, inputs.have_gal ? &inputs.gal : NULL,
                                              inputs.have_stars ? &inputs.stars : NULL, pre.psf_pixel_max, &gf, &sf)))
                 goto done;
-            wf_scene_set_layer(objscene, gf, sf, wf_persist_layer_row, pj->layer);
+            wf_scene_set_layer(objscene, gf, sf, wf_persist_layer_row, pj->layer, wf_persist_layer_floor(pj->layer));
+        }
+        if (pj->planes) { /* the static plane: from the scene's earlier exposures, or for its later */
+            char key[65];
+            int found;
+            wf_plane_entry *pe;
+            if ((st = wf_pipeline_plane_key(pj, key))) goto done;
+            if ((st = wf_plane_entry_open(pj->planes, key, cfg->ro.ncols, cfg->ro.nrows, pj->layer != NULL, &pe,
+                                          &found)))
+                goto done;
+            wf_scene_set_plane(objscene, pe, found);
+            pj->plane_found = found;
         }
         if ((st = wf_scene_populate(objscene, inputs.have_gal ? &inputs.gal : NULL,
                                     inputs.have_stars ? &inputs.stars : NULL, sne, nsne)))

@@ -49,14 +49,22 @@ typedef struct wf_pipeline_job {
     struct wf_persist_layer *layer;   /* collects this exposure's own persistence slot while it
                                        * is drawn (tools/persist.h), or NULL */
     wf_scene_psf_cache *psfs;    /* PSFs kept from earlier exposures (sim/draw/scene_psf.h), or NULL */
+    struct wf_plane_cache *planes; /* static planes kept for the later exposures of a scene
+                                    * (sim/draw/plane_cache.h), or NULL */
     /* out */
     char image_path[WF_PATH_MAX + 64];
     char truth_path[WF_PATH_MAX + 64];
     size_t nsne_drawn;           /* SNe that reach the SCA */
+    int plane_found;             /* the static plane came from planes */
     wf_digest digest;            /* the inputs that shaped it (WFDIGEST and its parts) */
 } wf_pipeline_job;
 
 wf_status wf_pipeline_expose(wf_pipeline_job *job);
+
+/* The key of the static plane of job's exposure (sim/draw/plane_cache.h): a digest of every
+ * input that shapes the product (tools/digest.h) but its date and exposure id, and of whether
+ * the plane carries the persistence layer. */
+wf_status wf_pipeline_plane_key(const wf_pipeline_job *job, char key[65]);
 
 /* The product names of an exposure and SCA in dir. */
 void wf_pipeline_paths(const char *dir, unsigned exposure, unsigned sca, char *image, char *truth,

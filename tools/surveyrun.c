@@ -1,5 +1,7 @@
 #include "tools/surveyrun.h"
 
+#include "sim/draw/plane_cache.h"
+
 #include <dirent.h>
 #include <fitsio.h>
 #include <math.h>
@@ -266,6 +268,8 @@ struct wf_survey_ctx {
     history *hist;            /* per item, its persistence history's rows (from the plan, once) */
     wf_persist_cache *pcache; /* earlier exposures' bright pixels, for the next items */
     wf_scene_psf_cache *psfs; /* the last items' PSFs, for the next ones of their SCA and filter */
+    wf_plane_cache *planes;   /* run.scene_cache, opened with the first item made (NULL: none) */
+    int planes_tried;
     unsigned char *state;     /* per item, P_* */
     size_t todo;              /* items the check found to make (0: nothing will be written) */
     product *p;               /* the item's configuration and names (large: on the heap) */
@@ -289,6 +293,7 @@ void wf_survey_free(wf_survey_ctx *ctx)
     free(ctx->scratch);
     wf_persist_cache_free(ctx->pcache);
     wf_scene_psf_cache_free(ctx->psfs);
+    wf_plane_cache_close(ctx->planes);
     free(ctx->items);
     free(ctx->state);
     free(ctx->p);
@@ -706,6 +711,19 @@ static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, c
     return WF_OK;
 }
 
+/* The scene cache of run.scene_cache (auto: in the output folder), opened once. */
+static wf_status open_planes(wf_survey_ctx *ctx)
+{
+    if (ctx->planes_tried) return WF_OK;
+    ctx->planes_tried = 1;
+    const wf_config *b = ctx->base;
+    if (!strcmp(b->scene_cache, "none")) return WF_OK;
+    char dir[WF_PATH_MAX + 16];
+    if (!strcmp(b->scene_cache, "auto")) snprintf(dir, sizeof dir, "%s/scene_cache", b->out_dir);
+    else snprintf(dir, sizeof dir, "%s", b->scene_cache);
+    return wf_plane_cache_open(dir, b->scene_cache_gib * 1073741824.0, &ctx->planes);
+}
+
 wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_result *res)
 {
     memset(res, 0, sizeof *res);
@@ -730,6 +748,8 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         job->version = ctx->opt->version;
         job->digests = ctx->cache;
         job->psfs = ctx->psfs;
+        if ((st = open_planes(ctx))) return wf_error(st, "%s: %s", name, wf_error_message());
+        job->planes = ctx->planes;
         p->cfg.quiet = 1;
         wf_persist_history *ph = NULL;
         wf_persist_source src;
@@ -753,6 +773,7 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         if (!st && layer) st = wf_persist_layer_finish(layer, ctx->pcache, p->cfg.ro.exposure, (int)p->cfg.ro.sca);
         wf_persist_layer_free(layer);
         job->layer = NULL;
+        res->plane_found = job->plane_found;
         wf_persist_history_free(ph);
         if (st) {
             char msg[1024];
@@ -804,6 +825,7 @@ static void tally(const wf_survey_ctx *ctx, const wf_survey_item_result *res, wf
         stats->hist_used += res[i].hist_used;
         stats->hist_drawn += res[i].hist_drawn;
         stats->psf_built += res[i].psf_built;
+        stats->planes_found += res[i].plane_found;
     }
 }
 

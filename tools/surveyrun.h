@@ -66,6 +66,7 @@ typedef struct wf_survey_run_stats {
     long hist_used, hist_drawn;     /* earlier exposures in the persistence histories, and drawn */
     long psf_built;                 /* PSFs built, for the items and their histories' scenes (the
                                      * other items took theirs from the process's cache) */
+    long planes_found;              /* products whose static scene came from the scene cache */
     int silent;                     /* 1: another process reports this run (MPI ranks > 0) */
 } wf_survey_run_stats;
 
@@ -100,6 +101,7 @@ typedef struct wf_survey_item_result {
     int32_t hist_drawn;    /* of them drawn for it (the others were in the process's cache) */
     int32_t psf_built;     /* PSFs built for it (by its process, or by the parent before the
                             * fork); 0: it found its PSF kept from an earlier item */
+    int32_t plane_found;   /* 1: its static scene came from the scene cache (run.scene_cache) */
     wf_survey_index_row row;
 } wf_survey_item_result;
 

@@ -81,6 +81,9 @@ typedef struct wf_renderer_config {
      * [NULL] */
     void (*plane_put)(void *ctx, int y, const float *plane, const float *layer, int ncols);
     void *plane_ctx;
+    /* The layer's rates below this are handed over as 0 (to layer and plane_put alike), for a
+     * layer whose user ignores them: the rows of a plane cache then stay holes [0: none] */
+    double layer_floor;
 } wf_renderer_config;
 
 typedef struct wf_renderer_stats {

@@ -16,6 +16,7 @@
 #include "sim/optics/bandpass.h"
 #include "sim/fits/fitsout.h"
 #include "sim/numeric/parallel.h"
+#include "sim/draw/plane_cache.h"
 #include "sim/draw/profile.h"
 #include "sim/draw/render.h"
 #include "sim/draw/scene_psf.h"
@@ -87,6 +88,9 @@ struct wf_scene {
     const uint8_t *layer_gal, *layer_star; /* wf_scene_set_layer */
     void (*layer_fn)(void *, int, const float *, int);
     void *layer_ctx;
+    double layer_floor;
+    wf_plane_entry *plane; /* the static plane's entry (wf_scene_set_plane), owned */
+    int plane_found;       /* 1: the plane comes from it, static objects are not drawn */
     wf_render_object *robj;
     size_t nrobj;            /* objects the renderer draws (SNe of zero flux are not drawn) */
     int time_variable;       /* some drawn object has a flux slope */
@@ -384,6 +388,7 @@ static wf_status plan_range(void *ctx, int task, int slot)
         const object *o = &s->obj[i];
         object_plan *pl = &s->plans[i];
         if (o->kind == OBJ_SN && !(o->flux > 0)) continue;
+        if (s->plane_found && o->kind != OBJ_SN) continue; /* in the plane */
         wf_status st;
         if (o->kind == OBJ_GALAXY) { /* bounds, and a split galaxy's Fourier box (kept in the pool) */
             st = wf_profile_work_tune(w, s->acc.flux_fraction, o->fold, o->kval, o->wing_tol, o->knot_acc);
@@ -503,6 +508,26 @@ bad:
     return st;
 }
 
+/* The counts of the static objects: kept with a plane drawn, taken back with a plane given. */
+static wf_status plane_counts(wf_scene *s)
+{
+    wf_scene_stats *t = &s->stats;
+    if (!s->plane_found) {
+        char note[256];
+        snprintf(note, sizeof note, "galaxies %ld stars %ld split %ld smooth %ld bright %ld", t->galaxies, t->stars,
+                 t->split, t->knots_smooth, t->bright);
+        wf_plane_entry_set_note(s->plane, note);
+        return WF_OK;
+    }
+    long g, st, sp, sm, b, sne_bright = t->bright; /* the supernovae drawn wide, counted above */
+    if (sscanf(wf_plane_entry_note(s->plane), "galaxies %ld stars %ld split %ld smooth %ld bright %ld", &g, &st, &sp,
+               &sm, &b) != 5)
+        return wf_error(WF_ERR_INPUT, "scene: the plane's note \"%s\" does not give its counts",
+                        wf_plane_entry_note(s->plane));
+    t->galaxies = g, t->stars = st, t->split = sp, t->knots_smooth = sm, t->bright = b + sne_bright;
+    return WF_OK;
+}
+
 wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog *stars,
                             const wf_scene_sn *sne, size_t nsne)
 {
@@ -570,7 +595,8 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
             o->kval = fmin(WF_SCENE_KVALUE_MAX, fmax(o->kval, tol_rate / (modes * o->flux)));
         }
         int near = o->x > -reach && o->y > -reach && o->x < setup->ncols + reach && o->y < setup->nrows + reach;
-        if (o->kind != OBJ_GALAXY && o->flux > 0 && o->mag < setup->bright_mag && near) {
+        if (o->kind != OBJ_GALAXY && o->flux > 0 && o->mag < setup->bright_mag && near &&
+            !(s->plane_found && o->kind != OBJ_SN)) {
             o->wide = 1;
             s->stats.bright++;
         }
@@ -603,6 +629,7 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
     for (size_t i = 0; i < s->nobj; i++) {
         object *o = &s->obj[i];
         if (o->kind == OBJ_SN && !(o->flux > 0)) continue; /* nothing to draw; truth only */
+        if (s->plane_found && o->kind != OBJ_SN) continue;    /* in the plane */
         const object_plan *pl = &s->plans[i];
         const wf_stamp b = pl->bounds, box = pl->box;
         uint64_t id = (uint64_t)object_id(s, o);
@@ -626,7 +653,10 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
     free(s->plans);
     s->plans = NULL;
     wf_renderer_config rc = {setup->ncols, setup->nrows, 0.0, sky_row, s, setup->pool_bytes, 0, halo_row,
-                             s->layer_fn, s->layer_ctx, NULL, NULL, NULL};
+                             s->layer_fn, s->layer_ctx, NULL, NULL, s->plane, s->layer_floor};
+    if (s->plane && s->plane_found) rc.plane_get = wf_plane_entry_get;
+    else if (s->plane) rc.plane_put = wf_plane_entry_put;
+    if (s->plane && (st = plane_counts(s))) return st;
     s->nrobj = (size_t)kept;
     for (int t = 0; t < setup->threads; t++)
         if ((st = wf_renderer_create(&rc, s->robj, (size_t)kept, draw_object, &s->ts[t], &s->ts[t].renderer))) return st;
@@ -662,6 +692,7 @@ void wf_scene_destroy(wf_scene *s)
             free(s->ts[t].stamp);
         }
     free(s->ts);
+    wf_plane_entry_close(s->plane);
     free(s->robj);
     free(s->plans);
     free(s->obj);
@@ -680,12 +711,19 @@ wf_status wf_scene_source_for(wf_scene *s, int t, wf_scene_source *out)
 }
 
 void wf_scene_set_layer(wf_scene *s, const uint8_t *gal_flags, const uint8_t *star_flags,
-                        void (*fn)(void *ctx, int y, const float *rates, int ncols), void *ctx)
+                        void (*fn)(void *ctx, int y, const float *rates, int ncols), void *ctx, double floor)
 {
+    s->layer_floor = floor;
     s->layer_gal = gal_flags;
     s->layer_star = star_flags;
     s->layer_fn = fn;
     s->layer_ctx = ctx;
+}
+
+void wf_scene_set_plane(wf_scene *s, wf_plane_entry *entry, int found)
+{
+    s->plane = entry;
+    s->plane_found = entry && found;
 }
 
 void wf_scene_get_stats(const wf_scene *s, wf_scene_stats *out) { *out = s->stats; }

@@ -126,9 +126,19 @@ wf_status wf_scene_populate(wf_scene *scene, const wf_catalog *gal, const wf_cat
  * renderers' layer (sim/draw/render.h): every row the scene's sources fill is also summed
  * over those objects alone, without sky, and handed to fn(ctx, y, rates, ncols), exactly the
  * rates of a scene populated with those objects alone and the sky off (sky_noise set when
- * this one has a sky). The flags must outlive populate. */
+ * this one has a sky), but that rates below floor come as 0 (fn must ignore them: a plane
+ * cache then keeps only the rows that matter). The flags must outlive populate. */
 void wf_scene_set_layer(wf_scene *scene, const uint8_t *gal_flags, const uint8_t *star_flags,
-                        void (*fn)(void *ctx, int y, const float *rates, int ncols), void *ctx);
+                        void (*fn)(void *ctx, int y, const float *rates, int ncols), void *ctx, double floor);
+/* Between prepare and populate: the static plane (sim/draw/render.h) through entry
+ * (sim/draw/plane_cache.h), which the scene then owns (closed with it, which keeps what it
+ * wrote). found: the plane comes from the entry, and populate neither plans nor draws the
+ * galaxies and stars (its counts come from the entry's note; wf_scene_object_count and
+ * wf_scene_draw_object then see the supernovae alone); else the scene hands its plane to the
+ * entry. The rates are the same bits either way when the entry's key covers everything
+ * but the date that shapes the scene. */
+struct wf_plane_entry;
+void wf_scene_set_plane(wf_scene *scene, struct wf_plane_entry *entry, int found);
 void wf_scene_destroy(wf_scene *scene);
 
 /* Scene source for readout thread t (0 <= t < setup.threads). */

@@ -1,0 +1,343 @@
+#include "sim/draw/plane_cache.h"
+
+#include <dirent.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <pthread.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "hal/file.h"
+
+#define HEADER 4096
+#define MAGIC "wfisim plane 1\n"
+#define SUFFIX ".plane"
+
+struct wf_plane_cache {
+    char dir[4096];
+    double max_bytes;
+    pthread_mutex_t lock;
+    unsigned long serial; /* temporary names within this process */
+    wf_plane_cache_stats stats;
+};
+
+struct wf_plane_entry {
+    wf_plane_cache *c;
+    int fd, found, ncols, nrows, layer, failed;
+    char path[4200], tmp[4300];
+    char note[WF_PLANE_NOTE_MAX];
+    pthread_mutex_t lock;
+    unsigned char *seen; /* rows written (being written) */
+    long nseen;
+};
+
+wf_status wf_plane_cache_open(const char *dir, double max_bytes, wf_plane_cache **out)
+{
+    *out = NULL;
+    if (!dir || !dir[0]) return wf_error(WF_ERR_INPUT, "scene cache: no folder given");
+    if (strlen(dir) >= 4000) return wf_error(WF_ERR_INPUT, "scene cache: folder name too long");
+    if (!(max_bytes >= 0.0)) return wf_error(WF_ERR_RANGE, "scene cache: room %g bytes", max_bytes);
+    wf_status st = wf_file_make_dir(dir);
+    if (st) return wf_error(st, "scene cache %s: %s", dir, wf_error_message());
+    struct stat sb;
+    if (stat(dir, &sb) != 0 || !S_ISDIR(sb.st_mode))
+        return wf_error(WF_ERR_IO, "scene cache %s: not a folder", dir);
+    wf_plane_cache *c = calloc(1, sizeof *c);
+    if (!c) return wf_error(WF_ERR_NOMEM, "scene cache: out of memory");
+    snprintf(c->dir, sizeof c->dir, "%s", dir);
+    c->max_bytes = max_bytes;
+    pthread_mutex_init(&c->lock, NULL);
+    *out = c;
+    return WF_OK;
+}
+
+void wf_plane_cache_close(wf_plane_cache *c)
+{
+    if (!c) return;
+    pthread_mutex_destroy(&c->lock);
+    free(c);
+}
+
+void wf_plane_cache_get_stats(wf_plane_cache *c, wf_plane_cache_stats *out)
+{
+    pthread_mutex_lock(&c->lock);
+    *out = c->stats;
+    pthread_mutex_unlock(&c->lock);
+}
+
+static void not_kept(wf_plane_cache *c, const char *what, const char *path, int err)
+{
+    pthread_mutex_lock(&c->lock);
+    if (!c->stats.reason[0])
+        snprintf(c->stats.reason, sizeof c->stats.reason, "%s %.300s: %.100s", what, path, strerror(err));
+    c->stats.not_kept++;
+    pthread_mutex_unlock(&c->lock);
+}
+
+static void header_text(const wf_plane_entry *e, const char *key, char *buf)
+{
+    memset(buf, 0, HEADER);
+    snprintf(buf, HEADER, MAGIC "key = %s\nncols = %d\nnrows = %d\nlayer = %d\nfloat = %zu\nnote = %s\n", key,
+             e->ncols, e->nrows, e->layer, sizeof(float), e->note);
+}
+
+static off_t file_bytes(const wf_plane_entry *e)
+{
+    return (off_t)HEADER + (off_t)(e->layer ? 2 : 1) * e->nrows * (off_t)e->ncols * (off_t)sizeof(float);
+}
+
+static int write_all(int fd, const void *buf, size_t n, off_t at)
+{
+    const char *p = buf;
+    while (n) {
+        ssize_t w = pwrite(fd, p, n, at);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) return w < 0 ? errno : ENOSPC;
+        p += w, n -= (size_t)w, at += w;
+    }
+    return 0;
+}
+
+static int read_all(int fd, void *buf, size_t n, off_t at)
+{
+    char *p = buf;
+    while (n) {
+        ssize_t r = pread(fd, p, n, at);
+        if (r < 0 && errno == EINTR) continue;
+        if (r <= 0) return r < 0 ? errno : EIO;
+        p += r, n -= (size_t)r, at += r;
+    }
+    return 0;
+}
+
+/* An existing file under the key: used only if its header is the one this entry would write
+ * (but for the note) and its size is whole. */
+static int matches(wf_plane_entry *e, const char *key, int fd)
+{
+    struct stat sb;
+    char *have = malloc(HEADER), *want = malloc(HEADER);
+    int ok = have && want && fstat(fd, &sb) == 0 && sb.st_size == file_bytes(e) && !read_all(fd, have, HEADER, 0);
+    if (ok) {
+        header_text(e, key, want);
+        const char *n = strstr(want, "note = ");
+        size_t lead = (size_t)(n - want) + 7;
+        ok = !memcmp(have, want, lead) && memchr(have + lead, '\n', HEADER - lead);
+        if (ok) {
+            const char *end = memchr(have + lead, '\n', HEADER - lead);
+            size_t len = (size_t)(end - (have + lead));
+            if (len >= sizeof e->note) len = sizeof e->note - 1;
+            memcpy(e->note, have + lead, len);
+            e->note[len] = '\0';
+        }
+    }
+    free(have);
+    free(want);
+    return ok;
+}
+
+wf_status wf_plane_entry_open(wf_plane_cache *c, const char *key, int ncols, int nrows, int layer,
+                              wf_plane_entry **out, int *found)
+{
+    *out = NULL;
+    *found = 0;
+    if (strlen(key) != 64 || strspn(key, "0123456789abcdef") != 64)
+        return wf_error(WF_ERR_INTERNAL, "scene cache: key \"%s\" is not 64 hex digits", key);
+    if (ncols < 1 || nrows < 1) return wf_error(WF_ERR_RANGE, "scene cache: %d x %d pixels", ncols, nrows);
+    wf_plane_entry *e = calloc(1, sizeof *e);
+    if (!e || !(e->seen = calloc((size_t)nrows, 1))) {
+        free(e);
+        return wf_error(WF_ERR_NOMEM, "scene cache: out of memory");
+    }
+    e->c = c;
+    e->ncols = ncols, e->nrows = nrows, e->layer = layer != 0;
+    e->fd = -1;
+    pthread_mutex_init(&e->lock, NULL);
+    snprintf(e->path, sizeof e->path, "%s/%s" SUFFIX, c->dir, key);
+    int fd = open(e->path, O_RDONLY | O_CLOEXEC);
+    if (fd >= 0) {
+        if (matches(e, key, fd)) {
+            futimens(fd, NULL); /* used now: the last to be evicted */
+            e->fd = fd;
+            e->found = *found = 1;
+            pthread_mutex_lock(&c->lock);
+            c->stats.hits++;
+            pthread_mutex_unlock(&c->lock);
+            *out = e;
+            return WF_OK;
+        }
+        close(fd);
+        pthread_mutex_lock(&c->lock);
+        c->stats.unusable++;
+        pthread_mutex_unlock(&c->lock);
+    }
+    e->note[0] = '\0';
+    pthread_mutex_lock(&c->lock);
+    unsigned long serial = c->serial++;
+    pthread_mutex_unlock(&c->lock);
+    snprintf(e->tmp, sizeof e->tmp, "%s.tmp.%ld.%lu", e->path, (long)getpid(), serial);
+    e->fd = open(e->tmp, O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    int err = e->fd < 0 ? errno : 0;
+    if (!err && ftruncate(e->fd, file_bytes(e)) != 0) err = errno; /* rows of zeros stay holes */
+    if (err) {
+        not_kept(c, "cannot write", e->tmp, err);
+        e->failed = 1;
+    }
+    *out = e;
+    return WF_OK;
+}
+
+wf_status wf_plane_entry_get(void *entry, int y0, int y1, int ncols, float *plane, float *layer)
+{
+    wf_plane_entry *e = entry;
+    if (!e->found || ncols != e->ncols || y0 < 0 || y1 > e->nrows || y1 < y0 || (layer && !e->layer))
+        return wf_error(WF_ERR_INTERNAL, "scene cache %s: rows %d-%d of %d x %d asked%s", e->path, y0, y1, ncols,
+                        e->nrows, layer && !e->layer ? " with a layer it does not have" : "");
+    size_t n = (size_t)(y1 - y0) * (size_t)ncols * sizeof(float);
+    off_t at = HEADER + (off_t)y0 * ncols * (off_t)sizeof(float);
+    int err = read_all(e->fd, plane, n, at);
+    if (!err && layer) err = read_all(e->fd, layer, n, at + (off_t)e->nrows * ncols * (off_t)sizeof(float));
+    if (err) return wf_error(WF_ERR_IO, "scene cache %s: cannot read rows %d-%d: %s", e->path, y0, y1, strerror(err));
+    return WF_OK;
+}
+
+static int zero_row(const float *r, int n)
+{
+    for (int x = 0; x < n; x++)
+        if (r[x] != 0.0f) return 0;
+    return 1;
+}
+
+void wf_plane_entry_put(void *entry, int y, const float *plane, const float *layer, int ncols)
+{
+    wf_plane_entry *e = entry;
+    if (e->found || ncols != e->ncols || y < 0 || y >= e->nrows || (!layer != !e->layer)) {
+        e->failed = 1; /* not this entry's rows: never kept */
+        return;
+    }
+    pthread_mutex_lock(&e->lock);
+    int skip = e->failed || e->seen[y];
+    if (!skip) e->seen[y] = 1, e->nseen++;
+    pthread_mutex_unlock(&e->lock);
+    if (skip) return;
+    size_t n = (size_t)ncols * sizeof(float);
+    off_t at = HEADER + (off_t)y * (off_t)n;
+    int err = zero_row(plane, ncols) ? 0 : write_all(e->fd, plane, n, at);
+    if (!err && layer && !zero_row(layer, ncols)) err = write_all(e->fd, layer, n, at + (off_t)e->nrows * (off_t)n);
+    if (err) {
+        pthread_mutex_lock(&e->lock);
+        int first = !e->failed;
+        e->failed = 1;
+        pthread_mutex_unlock(&e->lock);
+        if (first) not_kept(e->c, "cannot write", e->tmp, err);
+    }
+}
+
+const char *wf_plane_entry_note(const wf_plane_entry *e) { return e->note; }
+
+void wf_plane_entry_set_note(wf_plane_entry *e, const char *note)
+{
+    snprintf(e->note, sizeof e->note, "%s", note);
+    for (char *p = e->note; *p; p++)
+        if (*p == '\n') *p = ' ';
+}
+
+typedef struct held { char name[80]; time_t used; long nsec; double bytes; } held;
+
+static int older_first(const void *a, const void *b)
+{
+    const held *p = a, *q = b;
+    if (p->used != q->used) return p->used < q->used ? -1 : 1;
+    if (p->nsec != q->nsec) return p->nsec < q->nsec ? -1 : 1;
+    return strcmp(p->name, q->name);
+}
+
+/* Removes the least recently used entries until the rest fit max_bytes (what they take on
+ * disk: holes are free); never `keep`, the one just stored. */
+static void evict(wf_plane_cache *c, const char *keep)
+{
+    DIR *d = opendir(c->dir);
+    if (!d) return;
+    held *h = NULL;
+    size_t n = 0, cap = 0;
+    double total = 0.0;
+    struct dirent *de;
+    while ((de = readdir(d))) {
+        size_t len = strlen(de->d_name);
+        if (len != 64 + strlen(SUFFIX) || strcmp(de->d_name + 64, SUFFIX)) continue;
+        char p[4200];
+        struct stat sb;
+        snprintf(p, sizeof p, "%s/%s", c->dir, de->d_name);
+        if (stat(p, &sb) != 0) continue;
+        if (n == cap) {
+            held *g = realloc(h, (cap = cap ? 2 * cap : 64) * sizeof *h);
+            if (!g) break;
+            h = g;
+        }
+        snprintf(h[n].name, sizeof h[n].name, "%s", de->d_name);
+        h[n].used = sb.st_mtim.tv_sec;
+        h[n].nsec = sb.st_mtim.tv_nsec;
+        h[n].bytes = (double)sb.st_blocks * 512.0;
+        total += h[n++].bytes;
+    }
+    closedir(d);
+    if (total > c->max_bytes && n) {
+        qsort(h, n, sizeof *h, older_first);
+        for (size_t i = 0; i < n && total > c->max_bytes; i++) {
+            char p[4200];
+            snprintf(p, sizeof p, "%s/%s", c->dir, h[i].name);
+            if (!strcmp(p, keep)) continue;
+            if (unlink(p) == 0) {
+                total -= h[i].bytes;
+                pthread_mutex_lock(&c->lock);
+                c->stats.evicted++;
+                pthread_mutex_unlock(&c->lock);
+            }
+        }
+    }
+    free(h);
+}
+
+void wf_plane_entry_close(wf_plane_entry *e)
+{
+    if (!e) return;
+    if (!e->found && e->fd >= 0) {
+        int keep = !e->failed && e->nseen == e->nrows;
+        if (keep) {
+            char *hdr = malloc(HEADER);
+            const char *key = strrchr(e->path, '/') + 1;
+            char k[65];
+            memcpy(k, key, 64);
+            k[64] = '\0';
+            int err = hdr ? 0 : ENOMEM;
+            if (!err) {
+                header_text(e, k, hdr);
+                err = write_all(e->fd, hdr, HEADER, 0);
+            }
+            free(hdr);
+            if (!err && close(e->fd) != 0) err = errno;
+            e->fd = -1;
+            if (!err && rename(e->tmp, e->path) != 0) err = errno;
+            if (err) {
+                not_kept(e->c, "cannot keep", e->tmp, err);
+                unlink(e->tmp);
+            } else {
+                pthread_mutex_lock(&e->c->lock);
+                e->c->stats.stored++;
+                pthread_mutex_unlock(&e->c->lock);
+                evict(e->c, e->path);
+            }
+        } else {
+            unlink(e->tmp);
+        }
+    } else if (!e->found && e->failed && e->tmp[0]) {
+        unlink(e->tmp);
+    }
+    if (e->fd >= 0) close(e->fd);
+    pthread_mutex_destroy(&e->lock);
+    free(e->seen);
+    free(e);
+}
