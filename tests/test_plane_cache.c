@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "sim/draw/plane_cache.h"
@@ -155,6 +156,20 @@ START_TEST(round_trip_damage_and_room)
     ck_assert_int_eq(st.evicted, 1);
     ck_assert_int_eq(st.stored, 3);
     ck_assert_int_eq(st.not_kept, 0);
+    /* a killed writer's temporary file goes once a day old, with the next store; a fresh one stays */
+    char stale[4500], fresh[4500];
+    snprintf(stale, sizeof stale, "%s.tmp.99999.7", path_of(dir, 3, p, sizeof p));
+    snprintf(fresh, sizeof fresh, "%s.tmp.99999.8", path_of(dir, 3, p, sizeof p));
+    FILE *tf = fopen(stale, "w"), *ff = fopen(fresh, "w");
+    ck_assert(tf && ff);
+    fclose(tf);
+    fclose(ff);
+    struct timespec day_old[2] = {{time(NULL) - 25 * 3600, 0}, {time(NULL) - 25 * 3600, 0}};
+    ck_assert_int_eq(utimensat(AT_FDCWD, stale, day_old, 0), 0);
+    store(c, 1);
+    ck_assert_int_ne(access(stale, F_OK), 0);
+    ck_assert_int_eq(access(fresh, F_OK), 0);
+    ck_assert_int_eq(unlink(fresh), 0);
     /* no temporary file is left behind */
     char cmd[4400];
     snprintf(cmd, sizeof cmd, "test -z \"$(ls %s | grep tmp)\"", dir);

@@ -9,6 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "hal/file.h"
@@ -16,6 +17,7 @@
 #define HEADER 4096
 #define MAGIC "wfisim plane 1\n"
 #define SUFFIX ".plane"
+#define STALE_SECONDS (24 * 3600) /* a temporary file untouched this long was abandoned */
 
 struct wf_plane_cache {
     char dir[4096];
@@ -265,13 +267,19 @@ static void evict(wf_plane_cache *c, const char *keep)
     size_t n = 0, cap = 0;
     double total = 0.0;
     struct dirent *de;
+    const time_t now = time(NULL);
     while ((de = readdir(d))) {
         size_t len = strlen(de->d_name);
-        if (len != 64 + strlen(SUFFIX) || strcmp(de->d_name + 64, SUFFIX)) continue;
+        int tmp = len > 64 + strlen(SUFFIX ".tmp.") && !strncmp(de->d_name + 64, SUFFIX ".tmp.", strlen(SUFFIX ".tmp."));
+        if (!tmp && (len != 64 + strlen(SUFFIX) || strcmp(de->d_name + 64, SUFFIX))) continue;
         char p[4200];
         struct stat sb;
         snprintf(p, sizeof p, "%s/%s", c->dir, de->d_name);
         if (stat(p, &sb) != 0) continue;
+        if (tmp) { /* a writer that died (killed mid-item) left it; one alive renames it in minutes */
+            if (sb.st_mtim.tv_sec < now - STALE_SECONDS) unlink(p);
+            continue;
+        }
         if (n == cap) {
             held *g = realloc(h, (cap = cap ? 2 * cap : 64) * sizeof *h);
             if (!g) break;

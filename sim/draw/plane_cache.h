@@ -11,7 +11,8 @@
  * fill the rows, and renamed into place only when every row came and every write succeeded,
  * so a reader sees whole entries or none, whichever processes share the folder (survey run's
  * isolated children, MPI ranks, job arrays). A file that does not match its key is never
- * used. Beyond max_bytes of entries, the least recently used go.
+ * used. Beyond max_bytes of entries, the least recently used go (and temporary files a
+ * killed writer left, once a day old).
  *
  * Failing to keep an entry (a full disk, a folder that cannot be written) never fails the
  * exposure: the plane was drawn anyway; the stats count it and keep the first reason. */
