@@ -1118,7 +1118,8 @@ END_TEST
  * one stored instead of drawing them, in one process, with each item in a process of its own
  * (--isolate) and under MPI, and the products are those of a run without it, persistence
  * included (exposure 65's history holds exposure 64's saturating star, from the stored
- * layer). */
+ * layer); an item alone reads its history's exposures from the cache instead of drawing
+ * them. */
 START_TEST(scene_cache_same_bytes)
 {
     const char *bin = wf_test_program();
@@ -1149,6 +1150,18 @@ START_TEST(scene_cache_same_bytes)
     snprintf(x, sizeof x, "%s/none/wfisim_e000065_sca03.fits", d);
     header(x, "PERSISTN", v);
     ck_assert_int_eq(atoi(v), 1);
+    /* exposure 65 alone: its history, exposure 64, is read from the layer its scene's entry
+     * holds (the first visit's exposure 0) instead of drawn; without the cache it is drawn */
+    long used, drawn;
+    for (int k = 0; k < 2; k++) {
+        ck_assert_int_eq(wf_test_run("%s survey run --plan %s --exposures 65 " CACHED " --set run.scene_cache=%s%s "
+                                     "--out %s/alone%d 2>%s", bin, plan, stars, k ? d : "none", k ? "/cache" : "", d, k, log), 0);
+        logged_counts(log, &used, &drawn);
+        ck_assert_int_eq(used, 1);
+        ck_assert_int_eq(drawn, k ? 0 : 1);
+        snprintf(y, sizeof y, "%s/alone%d/wfisim_e000065_sca03.fits", d, k);
+        wf_test_assert_same_file(x, y);
+    }
     const char *how[3] = {"", "--isolate", NULL};
     const char *mpi = mpi_program();
     for (int k = 0; k < 3; k++) {

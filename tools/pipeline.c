@@ -316,7 +316,7 @@ void wf_pipeline_scene_setup(const wf_config *cfg, const wf_clock *clock, int th
     ss->threads = threads;
 }
 
-wf_status wf_pipeline_plane_key(const wf_pipeline_job *pj, char key[65])
+wf_status wf_pipeline_plane_key(const wf_pipeline_job *pj, int layer, char key[65])
 {
     wf_config *kc = malloc(sizeof *kc);
     if (!kc) return wf_error(WF_ERR_NOMEM, "out of memory");
@@ -332,7 +332,7 @@ wf_status wf_pipeline_plane_key(const wf_pipeline_job *pj, char key[65])
     wf_sha256 h;
     wf_sha256_init(&h);
     char text[160];
-    int n = snprintf(text, sizeof text, "wfisim static plane 1\n%s\nlayer %d\n", d.whole, pj->layer != NULL);
+    int n = snprintf(text, sizeof text, "wfisim static plane 1\n%s\nlayer %d\n", d.whole, layer != 0);
     wf_sha256_update(&h, text, (size_t)n);
     wf_sha256_hex(&h, key);
     return WF_OK;
@@ -393,7 +393,7 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
             char key[65];
             int found;
             wf_plane_entry *pe;
-            if ((st = wf_pipeline_plane_key(pj, key))) goto done;
+            if ((st = wf_pipeline_plane_key(pj, pj->layer != NULL, key))) goto done;
             if ((st = wf_plane_entry_open(pj->planes, key, cfg->ro.ncols, cfg->ro.nrows, pj->layer != NULL, &pe,
                                           &found)))
                 goto done;

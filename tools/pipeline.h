@@ -63,8 +63,8 @@ wf_status wf_pipeline_expose(wf_pipeline_job *job);
 
 /* The key of the static plane of job's exposure (sim/draw/plane_cache.h): a digest of every
  * input that shapes the product (tools/digest.h) but its date and exposure id, and of whether
- * the plane carries the persistence layer. */
-wf_status wf_pipeline_plane_key(const wf_pipeline_job *job, char key[65]);
+ * the plane carries the persistence layer (layer nonzero). */
+wf_status wf_pipeline_plane_key(const wf_pipeline_job *job, int layer, char key[65]);
 
 /* The product names of an exposure and SCA in dir. */
 void wf_pipeline_paths(const char *dir, unsigned exposure, unsigned sca, char *image, char *truth,

@@ -687,8 +687,30 @@ static double history_full_well(const wf_config *cfg)
     return cfg->ro.det.on.saturation ? cfg->ro.det.full_well : INFINITY;
 }
 
+static wf_status open_planes(wf_survey_ctx *ctx);
+
+/* The scene cache's entry of the earlier exposure ctx->scratch describes, when it holds one with
+ * the layer that exposure's own product handed over (*out NULL otherwise). */
+static wf_status history_plane(wf_survey_ctx *ctx, const wf_clock *clock, wf_plane_entry **out)
+{
+    *out = NULL;
+    wf_status st = open_planes(ctx);
+    if (st || !ctx->planes || ctx->scratch->scene_kind == 2) return st;
+    wf_pipeline_job job;
+    memset(&job, 0, sizeof job);
+    job.cfg = ctx->scratch;
+    job.clock = clock;
+    job.injector = ctx->opt->sne;
+    job.version = ctx->opt->version;
+    job.digests = ctx->cache;
+    char key[65];
+    if ((st = wf_pipeline_plane_key(&job, 1, key))) return st;
+    return wf_plane_entry_find(ctx->planes, key, ctx->scratch->ro.ncols, ctx->scratch->ro.nrows, 1, out);
+}
+
 /* The item's history, each earlier exposure drawn as its own product would be (tools/persist.h),
- * or taken from the process's cache; *drawn: how many were drawn. */
+ * taken from the process's cache, or read from the scene cache's layer of that exposure's
+ * scene; *drawn: how many were drawn. */
 static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, const wf_config *cfg,
                                wf_persist_history **out, wf_persist_source *src, int *drawn)
 {
@@ -700,8 +722,12 @@ static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, c
         const wf_survey_row *r = &ctx->plan[h->row[j]];
         wf_clock clock;
         int d = 1;
+        wf_plane_entry *pe = NULL;
         if (!(st = configure(ctx->base, ctx->opt, r, ctx->items[i].sca, ctx->scratch, &clock)))
-            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache, ctx->psfs, &d);
+            st = history_plane(ctx, &clock, &pe);
+        if (!st)
+            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache, ctx->psfs, pe, &d);
+        wf_plane_entry_close(pe);
         if (st) st = wf_error(st, "persistence history from exposure %d: %s", r->expid, wf_error_message());
         *drawn += d;
     }

@@ -141,8 +141,10 @@ static int matches(wf_plane_entry *e, const char *key, int fd)
     return ok;
 }
 
-wf_status wf_plane_entry_open(wf_plane_cache *c, const char *key, int ncols, int nrows, int layer,
-                              wf_plane_entry **out, int *found)
+void wf_plane_entry_close(wf_plane_entry *e);
+
+static wf_status entry_open(wf_plane_cache *c, const char *key, int ncols, int nrows, int layer, int create,
+                            wf_plane_entry **out, int *found)
 {
     *out = NULL;
     *found = 0;
@@ -176,6 +178,10 @@ wf_status wf_plane_entry_open(wf_plane_cache *c, const char *key, int ncols, int
         c->stats.unusable++;
         pthread_mutex_unlock(&c->lock);
     }
+    if (!create) {
+        wf_plane_entry_close(e);
+        return WF_OK;
+    }
     e->note[0] = '\0';
     pthread_mutex_lock(&c->lock);
     unsigned long serial = c->serial++;
@@ -192,6 +198,19 @@ wf_status wf_plane_entry_open(wf_plane_cache *c, const char *key, int ncols, int
     return WF_OK;
 }
 
+wf_status wf_plane_entry_open(wf_plane_cache *c, const char *key, int ncols, int nrows, int layer,
+                              wf_plane_entry **out, int *found)
+{
+    return entry_open(c, key, ncols, nrows, layer, 1, out, found);
+}
+
+wf_status wf_plane_entry_find(wf_plane_cache *c, const char *key, int ncols, int nrows, int layer,
+                              wf_plane_entry **out)
+{
+    int found;
+    return entry_open(c, key, ncols, nrows, layer, 0, out, &found);
+}
+
 wf_status wf_plane_entry_get(void *entry, int y0, int y1, int ncols, float *plane, float *layer)
 {
     wf_plane_entry *e = entry;
@@ -200,7 +219,7 @@ wf_status wf_plane_entry_get(void *entry, int y0, int y1, int ncols, float *plan
                         e->nrows, layer && !e->layer ? " with a layer it does not have" : "");
     size_t n = (size_t)(y1 - y0) * (size_t)ncols * sizeof(float);
     off_t at = HEADER + (off_t)y0 * ncols * (off_t)sizeof(float);
-    int err = read_all(e->fd, plane, n, at);
+    int err = plane ? read_all(e->fd, plane, n, at) : 0;
     if (!err && layer) err = read_all(e->fd, layer, n, at + (off_t)e->nrows * ncols * (off_t)sizeof(float));
     if (err) return wf_error(WF_ERR_IO, "scene cache %s: cannot read rows %d-%d: %s", e->path, y0, y1, strerror(err));
     return WF_OK;
@@ -239,6 +258,20 @@ void wf_plane_entry_put(void *entry, int y, const float *plane, const float *lay
 }
 
 const char *wf_plane_entry_note(const wf_plane_entry *e) { return e->note; }
+
+int wf_plane_entry_has_layer(const wf_plane_entry *e) { return e->found && e->layer; }
+
+static wf_status layer_rows(void *ctx, int y0, int y1, int ncols, float *rate)
+{
+    return wf_plane_entry_get(ctx, y0, y1, ncols, NULL, rate);
+}
+
+void wf_plane_entry_layer_source(wf_plane_entry *e, wf_scene_source *out)
+{
+    memset(out, 0, sizeof *out);
+    out->ctx = e;
+    out->fill_rate = layer_rows;
+}
 
 void wf_plane_entry_set_note(wf_plane_entry *e, const char *note)
 {

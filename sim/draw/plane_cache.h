@@ -21,6 +21,7 @@
 
 #include <stddef.h>
 
+#include "hal/scene.h"
 #include "hal/status.h"
 
 #define WF_PLANE_NOTE_MAX 1024
@@ -48,9 +49,19 @@ typedef struct wf_plane_entry wf_plane_entry;
  * (wf_plane_entry_get) and the note; 0: it takes them (wf_plane_entry_put). */
 wf_status wf_plane_entry_open(wf_plane_cache *c, const char *key, int ncols, int nrows, int layer,
                               wf_plane_entry **out, int *found);
-/* The renderer's plane_get and plane_put (sim/draw/render.h), with the entry as ctx. */
+/* The entry of key when the folder holds it whole, to read (*out NULL when not): nothing is
+ * written. */
+wf_status wf_plane_entry_find(wf_plane_cache *c, const char *key, int ncols, int nrows, int layer,
+                              wf_plane_entry **out);
+/* The renderer's plane_get (plane may be NULL: the layer alone) and plane_put
+ * (sim/draw/render.h), with the entry as ctx. */
 wf_status wf_plane_entry_get(void *entry, int y0, int y1, int ncols, float *plane, float *layer);
 void wf_plane_entry_put(void *entry, int y, const float *plane, const float *layer, int ncols);
+/* 1 when the entry was found and has the layer's rows. */
+int wf_plane_entry_has_layer(const wf_plane_entry *e);
+/* A found entry's layer rows as a scene source's rates (a persistence history's earlier
+ * exposure read instead of drawn, tools/persist.h); valid while e is open. */
+void wf_plane_entry_layer_source(wf_plane_entry *e, wf_scene_source *out);
 /* A found entry's note. */
 const char *wf_plane_entry_note(const wf_plane_entry *e);
 /* The note an entry being written will keep. */
