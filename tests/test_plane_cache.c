@@ -1,8 +1,9 @@
 /* The scene cache's files (sim/draw/plane_cache.h): rows written by several threads in any
  * order come back the same bits, the note with them; zero rows cost no disk; an entry missing
- * a row, or whose file was damaged or is another SCA's, is never used; entries beyond the
+ * a row, or whose file was damaged (header, size or rows) or is another SCA's, is never used; entries beyond the
  * room go least recently used first; a folder that cannot be written fails no exposure. */
 #include <fcntl.h>
+#include <stdint.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -94,7 +95,8 @@ START_TEST(round_trip_damage_and_room)
     char dir[4200], p[4400];
     snprintf(dir, sizeof dir, "%s/planes", wf_test_tmpdir());
     wf_plane_cache *c;
-    const double entry = 4096.0 + 2.0 * W * H * sizeof(float);
+    /* the text header and a CRC-32 a row, to whole 4096 bytes, then the rows */
+    const double entry = (double)((4096 + 2 * H * sizeof(uint32_t) + 4095) / 4096 * 4096) + 2.0 * W * H * sizeof(float);
     ck_assert_int_eq(wf_plane_cache_open(dir, 1e9, &c), WF_OK);
     ck_assert_int_eq(lookup(c, 0, 1), 0);
     store(c, 0);
@@ -130,12 +132,41 @@ START_TEST(round_trip_damage_and_room)
     ck_assert_int_eq(pwrite(fd, "X", 1, 30), 1);
     close(fd);
     ck_assert_int_eq(lookup(c, 0, 1), 0);
+    /* damage within the rows (a crash before the blocks reached the disk, a bad sector): the
+     * header matches, but the rows read fail the exposure, never feed it, and the file goes */
+    store(c, 0);
+    const off_t rows_at = (off_t)((4096 + 2 * H * sizeof(uint32_t) + 4095) / 4096 * 4096);
+    fd = open(p, O_WRONLY);
+    ck_assert_int_ge(fd, 0);
+    const float odd = 12345.0f;
+    ck_assert_int_eq(pwrite(fd, &odd, sizeof odd, rows_at + (off_t)(10 * W + 8) * (off_t)sizeof(float)), sizeof odd);
+    close(fd);
+    ck_assert_int_eq(wf_plane_entry_open(c, key_of(0), W, H, 1, &e, &found), WF_OK);
+    ck_assert_int_eq(found, 1);
+    static float rows[W * H];
+    ck_assert_int_eq(wf_plane_entry_get(e, 0, 9, W, rows, NULL), WF_OK); /* rows above it are whole */
+    ck_assert_int_eq(wf_plane_entry_get(e, 8, 12, W, rows, NULL), WF_ERR_IO);
+    printf("plane cache: %s\n", wf_error_message());
+    ck_assert(strstr(wf_error_message(), "row 10") != NULL);
+    wf_plane_entry_close(e);
+    ck_assert_int_ne(access(p, F_OK), 0);
+    store(c, 0);
+    ck_assert_int_eq(lookup(c, 0, 1), 1);
+    fd = open(p, O_WRONLY);
+    ck_assert_int_ge(fd, 0);
+    ck_assert_int_eq(pwrite(fd, &odd, sizeof odd, rows_at + (off_t)(H + 50) * W * (off_t)sizeof(float) + 420), sizeof odd);
+    close(fd);
+    ck_assert_int_eq(wf_plane_entry_open(c, key_of(0), W, H, 1, &e, &found), WF_OK);
+    static float lrows[W * H];
+    ck_assert_int_eq(wf_plane_entry_get(e, 40, 60, W, rows, lrows), WF_ERR_IO); /* the layer's row 50 */
+    wf_plane_entry_close(e);
+    ck_assert_int_eq(lookup(c, 0, 1), 0);
     wf_plane_cache_stats st;
     wf_plane_cache_get_stats(c, &st);
-    /* asked for another size, and without the layer; the truncated file, looked up and then
-     * replaced; the altered one */
-    ck_assert_int_eq(st.unusable, 5);
-    ck_assert_int_eq(st.stored, 2);
+    /* asked for another size, and without the layer; the truncated file and the altered one,
+     * each looked up and then replaced (damaged rows are found by their checksums instead) */
+    ck_assert_int_eq(st.unusable, 6);
+    ck_assert_int_eq(st.stored, 4);
     ck_assert_int_eq(st.evicted, 0);
     wf_plane_cache_close(c);
     /* room for two entries as they lie on disk: storing a third removes the least recently

@@ -544,9 +544,16 @@ START_TEST(plane_handed_over)
             o[i].halo = 1;
         }
         o[i].variable = i % 7 == 0;
-        o[i].layer = !o[i].variable && i % 3 == 0;
-        if (i % 14 == 0) o[i].rel_slope = 1e-4; /* and some vary within the exposure */
+        /* and some vary within the exposure, which makes them variable */
+        if (i % 11 == 0) o[i].rel_slope = 1e-4, o[i].layer = 0;
+        o[i].layer = !o[i].variable && o[i].rel_slope == 0.0 && i % 3 == 0;
     }
+    /* the layer's objects alone, without sky, floored as the later renderers are */
+    static wf_render_object ob[N];
+    int nb = 0;
+    for (int i = 0; i < N; i++)
+        if (o[i].layer) ob[nb++] = o[i];
+    const double floor = 2.0;
     /* the next exposure: other variable objects (brighter), another sky */
     memcpy(g2, g, sizeof g);
     memcpy(o2, o, sizeof o);
@@ -558,15 +565,25 @@ START_TEST(plane_handed_over)
     static unsigned char seen[H], lseen[H];
     plane_img p = {W, H, pl, ly, seen, 0, 0};
     counter c = {0, 0};
-    layer_img l0 = {W, want_layer, lseen, 0};
-    wf_renderer_config first = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l0, NULL, plane_put, &p, 0.0};
+    layer_img l0 = {W, limg, lseen, 0};
+    wf_renderer_config first = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l0, NULL, plane_put, &p, floor};
     float *a = render_all(&first, o, N, 7, &c);
     wf_renderer_config plain = {W, H, 0.4, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL, 0.0};
     float *a_plain = render_all(&plain, o, N, H, &c);
     ck_assert_msg(!memcmp(a, a_plain, sizeof pl), "handing the plane over changed the rates");
     for (int y = 0; y < H; y++) ck_assert_msg(seen[y], "plane row %d never came", y);
     ck_assert_msg(!p.mismatch && p.layers > 0, "a plane row came twice, differently (or no layer came)");
-    ck_assert_msg(!memcmp(ly, want_layer, sizeof ly), "the layer handed over is not the layer");
+    wf_renderer_config alone = {W, H, 0.0, NULL, NULL, 1u << 22, 0, halo_gauss, NULL, NULL, NULL, NULL, NULL, 0.0};
+    float *lay = render_all(&alone, ob, nb, H, &c);
+    int floored = 0;
+    for (int k = 0; k < W * H; k++) {
+        want_layer[k] = lay[k] >= floor ? lay[k] : 0.0f;
+        floored += lay[k] > 0.0f && lay[k] < floor;
+    }
+    free(lay);
+    ck_assert_msg(floored > 100 && nb > 50, "%d pixels under the floor, %d layer objects: nothing tested", floored, nb);
+    ck_assert_msg(!memcmp(ly, want_layer, sizeof ly), "the layer handed over is not the floored layer objects alone");
+    ck_assert_msg(!memcmp(limg, want_layer, sizeof ly), "the layer's user did not get the floored layer");
     plain.sky = 0.9;
     float *want = render_all(&plain, o2, N, H, &c);
     const int tiles[] = {1, 7, H};
@@ -574,13 +591,14 @@ START_TEST(plane_handed_over)
         layer_img l = {W, limg, lseen, 0};
         memset(limg, 0, sizeof limg);
         memset(lseen, 0, sizeof lseen);
-        wf_renderer_config later = {W, H, 0.9, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l, plane_get, NULL, &p, 0.0};
+        wf_renderer_config later = {W, H, 0.9, NULL, NULL, 1u << 22, 0, halo_gauss, layer_row, &l, plane_get, NULL, &p, floor};
         counter c2 = {0, 0};
         float *b = render_all(&later, o2, N, tiles[t], &c2);
         ck_assert_msg(!memcmp(b, want, sizeof pl), "tile %d: the plane given back changes the rates", tiles[t]);
         ck_assert_msg(!memcmp(limg, want_layer, sizeof limg), "tile %d: the layer given back differs", tiles[t]);
         long drawn_variable = 0;
         for (int i = 0; i < N; i++) drawn_variable += o[i].variable || o[i].rel_slope != 0.0;
+        ck_assert(drawn_variable > (N + 6) / 7); /* rel_slope alone made some variable */
         if (tiles[t] == H) /* one request: each stamp drawn once */
             ck_assert_msg(c2.calls <= drawn_variable && c2.calls > 0,
                           "%ld draws for %ld variable objects: static ones were drawn", c2.calls, drawn_variable);

@@ -117,7 +117,6 @@ START_TEST(test_ecliptic_rotation)
 }
 END_TEST
 
-/* The deep field against GalSim (which uses the obliquity of 2025: 0.003 deg less). */
 /* wf_sky_zodiacal_least is the least level over the dates of a year on which the target is
  * within the field of regard (54-126 degrees from the Sun), found by stepping the date
  * (0.02 day, ~0.02 degree of the Sun's path): for a target near the ecliptic pole (the deep
@@ -163,6 +162,7 @@ START_TEST(test_zodiacal_least_over_a_year)
 }
 END_TEST
 
+/* The deep field against GalSim (which uses the obliquity of 2025: 0.003 deg less). */
 START_TEST(test_ecliptic_deep_field)
 {
     double lon, lat;

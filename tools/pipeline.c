@@ -4,7 +4,9 @@
 #include "tools/persist.h"
 
 #include <errno.h>
+#include <fftw3.h>
 #include <fitsio.h>
+#include <gnu/libc-version.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -331,8 +333,14 @@ wf_status wf_pipeline_plane_key(const wf_pipeline_job *pj, int layer, char key[6
     if (st) return st;
     wf_sha256 h;
     wf_sha256_init(&h);
-    char text[160];
-    int n = snprintf(text, sizeof text, "wfisim static plane 1\n%s\nlayer %d\n", d.whole, layer != 0);
+    char text[1024];
+    /* and the build: the source digest is in the version, but a compiler, libm or FFTW of
+     * another version may round differently (ranks on nodes that share a folder) */
+    const uint32_t one = 1;
+    int n = snprintf(text, sizeof text, "wfisim static plane 1\n%s\nlayer %d\ncc %s\nfftw %s\nlibc %s\n%s-endian\n",
+                     d.whole, layer != 0, __VERSION__, fftw_version, gnu_get_libc_version(),
+                     *(const unsigned char *)&one ? "little" : "big");
+    if (n < 0 || (size_t)n >= sizeof text) return wf_error(WF_ERR_INTERNAL, "plane key: text too long");
     wf_sha256_update(&h, text, (size_t)n);
     wf_sha256_hex(&h, key);
     return WF_OK;

@@ -270,6 +270,8 @@ struct wf_survey_ctx {
     wf_scene_psf_cache *psfs; /* the last items' PSFs, for the next ones of their SCA and filter */
     wf_plane_cache *planes;   /* run.scene_cache, opened with the first item made (NULL: none) */
     int planes_tried;
+    wf_status planes_st;      /* and why it could not be */
+    char planes_msg[600];
     unsigned char *state;     /* per item, P_* */
     size_t todo;              /* items the check found to make (0: nothing will be written) */
     product *p;               /* the item's configuration and names (large: on the heap) */
@@ -737,17 +739,20 @@ static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, c
     return WF_OK;
 }
 
-/* The scene cache of run.scene_cache (auto: in the output folder), opened once. */
+/* The scene cache of run.scene_cache (auto: in the output folder), opened once; a folder that
+ * cannot be made fails every item alike, with the same message. */
 static wf_status open_planes(wf_survey_ctx *ctx)
 {
-    if (ctx->planes_tried) return WF_OK;
+    if (ctx->planes_tried) return ctx->planes_st ? wf_error(ctx->planes_st, "%s", ctx->planes_msg) : WF_OK;
     ctx->planes_tried = 1;
     const wf_config *b = ctx->base;
     if (!strcmp(b->scene_cache, "none")) return WF_OK;
     char dir[WF_PATH_MAX + 16];
     if (!strcmp(b->scene_cache, "auto")) snprintf(dir, sizeof dir, "%s/scene_cache", b->out_dir);
     else snprintf(dir, sizeof dir, "%s", b->scene_cache);
-    return wf_plane_cache_open(dir, b->scene_cache_gib * 1073741824.0, &ctx->planes);
+    if ((ctx->planes_st = wf_plane_cache_open(dir, b->scene_cache_gib * 1073741824.0, &ctx->planes)))
+        snprintf(ctx->planes_msg, sizeof ctx->planes_msg, "run.scene_cache: %s", wf_error_message());
+    return ctx->planes_st ? wf_error(ctx->planes_st, "%s", ctx->planes_msg) : WF_OK;
 }
 
 wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_result *res)

@@ -3,6 +3,7 @@
 #include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <libdeflate.h>
 #include <pthread.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -14,8 +15,8 @@
 
 #include "hal/file.h"
 
-#define HEADER 4096
-#define MAGIC "wfisim plane 1\n"
+#define TEXT 4096 /* the text header; then a CRC-32 per row of the plane, then of the layer */
+#define MAGIC "wfisim plane 2\n"
 #define SUFFIX ".plane"
 #define STALE_SECONDS (24 * 3600) /* a temporary file untouched this long was abandoned */
 
@@ -29,13 +30,22 @@ struct wf_plane_cache {
 
 struct wf_plane_entry {
     wf_plane_cache *c;
-    int fd, found, ncols, nrows, layer, failed;
-    char path[4200], tmp[4300];
+    int fd, found, ncols, nrows, layer, failed, created;
+    char path[4200], tmp[4400];
     char note[WF_PLANE_NOTE_MAX];
     pthread_mutex_t lock;
     unsigned char *seen; /* rows written (being written) */
     long nseen;
+    uint32_t *crc;       /* per row, the plane's then the layer's (found: as stored) */
 };
+
+static size_t rows_kept(const wf_plane_entry *e) { return (size_t)(e->layer ? 2 : 1) * (size_t)e->nrows; }
+
+/* The header: the text, then the rows' CRC-32s, to a whole 4096 bytes. */
+static off_t header_bytes(const wf_plane_entry *e)
+{
+    return (off_t)((TEXT + rows_kept(e) * sizeof(uint32_t) + 4095) / 4096 * 4096);
+}
 
 wf_status wf_plane_cache_open(const char *dir, double max_bytes, wf_plane_cache **out)
 {
@@ -82,14 +92,14 @@ static void not_kept(wf_plane_cache *c, const char *what, const char *path, int 
 
 static void header_text(const wf_plane_entry *e, const char *key, char *buf)
 {
-    memset(buf, 0, HEADER);
-    snprintf(buf, HEADER, MAGIC "key = %s\nncols = %d\nnrows = %d\nlayer = %d\nfloat = %zu\nnote = %s\n", key,
+    memset(buf, 0, TEXT);
+    snprintf(buf, TEXT, MAGIC "key = %s\nncols = %d\nnrows = %d\nlayer = %d\nfloat = %zu\nnote = %s\n", key,
              e->ncols, e->nrows, e->layer, sizeof(float), e->note);
 }
 
 static off_t file_bytes(const wf_plane_entry *e)
 {
-    return (off_t)HEADER + (off_t)(e->layer ? 2 : 1) * e->nrows * (off_t)e->ncols * (off_t)sizeof(float);
+    return header_bytes(e) + (off_t)rows_kept(e) * (off_t)e->ncols * (off_t)sizeof(float);
 }
 
 static int write_all(int fd, const void *buf, size_t n, off_t at)
@@ -116,24 +126,27 @@ static int read_all(int fd, void *buf, size_t n, off_t at)
     return 0;
 }
 
+static uint32_t row_crc(const float *r, int n) { return (uint32_t)libdeflate_crc32(0, r, (size_t)n * sizeof *r); }
+
 /* An existing file under the key: used only if its header is the one this entry would write
  * (but for the note) and its size is whole. */
 static int matches(wf_plane_entry *e, const char *key, int fd)
 {
     struct stat sb;
-    char *have = malloc(HEADER), *want = malloc(HEADER);
-    int ok = have && want && fstat(fd, &sb) == 0 && sb.st_size == file_bytes(e) && !read_all(fd, have, HEADER, 0);
+    char *have = malloc(TEXT), *want = malloc(TEXT);
+    int ok = have && want && fstat(fd, &sb) == 0 && sb.st_size == file_bytes(e) && !read_all(fd, have, TEXT, 0);
     if (ok) {
         header_text(e, key, want);
         const char *n = strstr(want, "note = ");
         size_t lead = (size_t)(n - want) + 7;
-        ok = !memcmp(have, want, lead) && memchr(have + lead, '\n', HEADER - lead);
+        const char *end = memchr(have + lead, '\n', TEXT - lead);
+        ok = !memcmp(have, want, lead) && end;
         if (ok) {
-            const char *end = memchr(have + lead, '\n', HEADER - lead);
             size_t len = (size_t)(end - (have + lead));
             if (len >= sizeof e->note) len = sizeof e->note - 1;
             memcpy(e->note, have + lead, len);
             e->note[len] = '\0';
+            ok = !read_all(fd, e->crc, rows_kept(e) * sizeof *e->crc, TEXT);
         }
     }
     free(have);
@@ -152,12 +165,14 @@ static wf_status entry_open(wf_plane_cache *c, const char *key, int ncols, int n
         return wf_error(WF_ERR_INTERNAL, "scene cache: key \"%s\" is not 64 hex digits", key);
     if (ncols < 1 || nrows < 1) return wf_error(WF_ERR_RANGE, "scene cache: %d x %d pixels", ncols, nrows);
     wf_plane_entry *e = calloc(1, sizeof *e);
-    if (!e || !(e->seen = calloc((size_t)nrows, 1))) {
+    if (e) e->layer = layer != 0, e->nrows = nrows;
+    if (!e || !(e->seen = calloc((size_t)nrows, 1)) || !(e->crc = calloc(rows_kept(e), sizeof *e->crc))) {
+        if (e) free(e->seen);
         free(e);
         return wf_error(WF_ERR_NOMEM, "scene cache: out of memory");
     }
     e->c = c;
-    e->ncols = ncols, e->nrows = nrows, e->layer = layer != 0;
+    e->ncols = ncols;
     e->fd = -1;
     pthread_mutex_init(&e->lock, NULL);
     snprintf(e->path, sizeof e->path, "%s/%s" SUFFIX, c->dir, key);
@@ -183,12 +198,24 @@ static wf_status entry_open(wf_plane_cache *c, const char *key, int ncols, int n
         return WF_OK;
     }
     e->note[0] = '\0';
-    pthread_mutex_lock(&c->lock);
-    unsigned long serial = c->serial++;
-    pthread_mutex_unlock(&c->lock);
-    snprintf(e->tmp, sizeof e->tmp, "%s.tmp.%ld.%lu", e->path, (long)getpid(), serial);
-    e->fd = open(e->tmp, O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-    int err = e->fd < 0 ? errno : 0;
+    /* a name no other writer has, whichever host or process (the folder may be shared) */
+    char host[64] = "";
+    gethostname(host, sizeof host - 1);
+    for (char *h = host; *h; h++)
+        if (*h == '/') *h = '_';
+    int err = EEXIST;
+    for (int tries = 0; tries < 16 && err == EEXIST; tries++) {
+        struct timespec ts;
+        clock_gettime(CLOCK_REALTIME, &ts);
+        pthread_mutex_lock(&c->lock);
+        unsigned long serial = c->serial++;
+        pthread_mutex_unlock(&c->lock);
+        snprintf(e->tmp, sizeof e->tmp, "%s.tmp.%.60s.%ld.%lu.%09ld", e->path, host, (long)getpid(), serial,
+                 (long)ts.tv_nsec);
+        e->fd = open(e->tmp, O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+        err = e->fd < 0 ? errno : 0;
+    }
+    e->created = !err;
     if (!err && ftruncate(e->fd, file_bytes(e)) != 0) err = errno; /* rows of zeros stay holes */
     if (err) {
         not_kept(c, "cannot write", e->tmp, err);
@@ -218,12 +245,25 @@ wf_status wf_plane_entry_get(void *entry, int y0, int y1, int ncols, float *plan
         return wf_error(WF_ERR_INTERNAL, "scene cache %s: rows %d-%d of %d x %d asked%s", e->path, y0, y1, ncols,
                         e->nrows, layer && !e->layer ? " with a layer it does not have" : "");
     size_t n = (size_t)(y1 - y0) * (size_t)ncols * sizeof(float);
-    off_t at = HEADER + (off_t)y0 * ncols * (off_t)sizeof(float);
+    off_t at = header_bytes(e) + (off_t)y0 * ncols * (off_t)sizeof(float);
     int err = plane ? read_all(e->fd, plane, n, at) : 0;
     if (!err && layer) err = read_all(e->fd, layer, n, at + (off_t)e->nrows * ncols * (off_t)sizeof(float));
     if (err) return wf_error(WF_ERR_IO, "scene cache %s: cannot read rows %d-%d: %s", e->path, y0, y1, strerror(err));
+    /* every row against the CRC its writer took: a file damaged after it was kept (a crash
+     * before its blocks reached the disk, a bad sector) fails the exposure, never draws it */
+    for (int y = y0; y < y1; y++) {
+        size_t off = (size_t)(y - y0) * (size_t)ncols;
+        int bad = (plane && row_crc(plane + off, ncols) != e->crc[y]) ||
+                  (layer && row_crc(layer + off, ncols) != e->crc[e->nrows + y]);
+        if (bad) {
+            unlink(e->path); /* the next exposure of the scene draws it again */
+            return wf_error(WF_ERR_IO, "scene cache %s: row %d does not match its checksum (the file is damaged; "
+                            "removed, so that a rerun draws the scene again)", e->path, y);
+        }
+    }
     return WF_OK;
 }
+
 
 static int zero_row(const float *r, int n)
 {
@@ -235,17 +275,17 @@ static int zero_row(const float *r, int n)
 void wf_plane_entry_put(void *entry, int y, const float *plane, const float *layer, int ncols)
 {
     wf_plane_entry *e = entry;
-    if (e->found || ncols != e->ncols || y < 0 || y >= e->nrows || (!layer != !e->layer)) {
-        e->failed = 1; /* not this entry's rows: never kept */
-        return;
-    }
+    const int foreign = e->found || ncols != e->ncols || y < 0 || y >= e->nrows || (!layer != !e->layer);
     pthread_mutex_lock(&e->lock);
+    if (foreign) e->failed = 1; /* not this entry's rows: never kept */
     int skip = e->failed || e->seen[y];
     if (!skip) e->seen[y] = 1, e->nseen++;
     pthread_mutex_unlock(&e->lock);
     if (skip) return;
+    e->crc[y] = row_crc(plane, ncols); /* its own row: no other thread writes it */
+    if (layer) e->crc[e->nrows + y] = row_crc(layer, ncols);
     size_t n = (size_t)ncols * sizeof(float);
-    off_t at = HEADER + (off_t)y * (off_t)n;
+    off_t at = header_bytes(e) + (off_t)y * (off_t)n;
     int err = zero_row(plane, ncols) ? 0 : write_all(e->fd, plane, n, at);
     if (!err && layer && !zero_row(layer, ncols)) err = write_all(e->fd, layer, n, at + (off_t)e->nrows * (off_t)n);
     if (err) {
@@ -345,40 +385,41 @@ static void evict(wf_plane_cache *c, const char *keep)
 void wf_plane_entry_close(wf_plane_entry *e)
 {
     if (!e) return;
-    if (!e->found && e->fd >= 0) {
-        int keep = !e->failed && e->nseen == e->nrows;
+    if (!e->found && e->created) {
+        int keep = !e->failed && e->nseen == e->nrows, err = 0;
         if (keep) {
-            char *hdr = malloc(HEADER);
+            /* text, CRCs, then the blocks on the disk before the name: a crash leaves the old
+             * name or a whole file, never a kept file with rows missing */
+            char *hdr = calloc(1, TEXT);
             const char *key = strrchr(e->path, '/') + 1;
             char k[65];
             memcpy(k, key, 64);
             k[64] = '\0';
-            int err = hdr ? 0 : ENOMEM;
+            err = hdr ? 0 : ENOMEM;
             if (!err) {
                 header_text(e, k, hdr);
-                err = write_all(e->fd, hdr, HEADER, 0);
+                err = write_all(e->fd, hdr, TEXT, 0);
             }
             free(hdr);
-            if (!err && close(e->fd) != 0) err = errno;
-            e->fd = -1;
-            if (!err && rename(e->tmp, e->path) != 0) err = errno;
-            if (err) {
-                not_kept(e->c, "cannot keep", e->tmp, err);
-                unlink(e->tmp);
-            } else {
-                pthread_mutex_lock(&e->c->lock);
-                e->c->stats.stored++;
-                pthread_mutex_unlock(&e->c->lock);
-                evict(e->c, e->path);
-            }
-        } else {
-            unlink(e->tmp);
+            if (!err) err = write_all(e->fd, e->crc, rows_kept(e) * sizeof *e->crc, TEXT);
+            if (!err && fdatasync(e->fd) != 0) err = errno;
         }
-    } else if (!e->found && e->failed && e->tmp[0]) {
-        unlink(e->tmp);
+        if (close(e->fd) != 0 && keep && !err) err = errno;
+        e->fd = -1;
+        if (keep && !err && rename(e->tmp, e->path) != 0) err = errno;
+        if (keep && err) not_kept(e->c, "cannot keep", e->tmp, err);
+        if (!keep || err) {
+            unlink(e->tmp);
+        } else {
+            pthread_mutex_lock(&e->c->lock);
+            e->c->stats.stored++;
+            pthread_mutex_unlock(&e->c->lock);
+            evict(e->c, e->path);
+        }
     }
     if (e->fd >= 0) close(e->fd);
     pthread_mutex_destroy(&e->lock);
     free(e->seen);
+    free(e->crc);
     free(e);
 }

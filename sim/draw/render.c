@@ -375,8 +375,10 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
         if ((st = add_objects(r, y0, y1, ncols, 0, sacc, lacc))) return st;
         for (size_t k = 0; k < npix; k++) r->plane[k] = (float)sacc[k];
         if (layer)
-            for (size_t k = 0; k < npix; k++)
-                r->lplane[k] = lacc[k] > 0.0 && lacc[k] >= r->cfg.layer_floor ? (float)lacc[k] : 0.0f;
+            for (size_t k = 0; k < npix; k++) { /* the floor on the float its user sees */
+                float f = lacc[k] > 0.0 ? (float)lacc[k] : 0.0f;
+                r->lplane[k] = f >= r->cfg.layer_floor ? f : 0.0f;
+            }
         if (r->cfg.plane_put)
             for (int y = y0; y < y1; y++) {
                 size_t off = (size_t)(y - y0) * ncols;

@@ -91,6 +91,7 @@ struct wf_scene {
     double layer_floor;
     wf_plane_entry *plane; /* the static plane's entry (wf_scene_set_plane), owned */
     int plane_found;       /* 1: the plane comes from it, static objects are not drawn */
+    long sne_wide;         /* supernovae drawn with the wide PSF (not the plane's) */
     wf_render_object *robj;
     size_t nrobj;            /* objects the renderer draws (SNe of zero flux are not drawn) */
     int time_variable;       /* some drawn object has a flux slope */
@@ -515,16 +516,16 @@ static wf_status plane_counts(wf_scene *s)
     if (!s->plane_found) {
         char note[256];
         snprintf(note, sizeof note, "galaxies %ld stars %ld split %ld smooth %ld bright %ld", t->galaxies, t->stars,
-                 t->split, t->knots_smooth, t->bright);
+                 t->split, t->knots_smooth, t->bright - s->sne_wide);
         wf_plane_entry_set_note(s->plane, note);
         return WF_OK;
     }
-    long g, st, sp, sm, b, sne_bright = t->bright; /* the supernovae drawn wide, counted above */
+    long g, st, sp, sm, b;
     if (sscanf(wf_plane_entry_note(s->plane), "galaxies %ld stars %ld split %ld smooth %ld bright %ld", &g, &st, &sp,
                &sm, &b) != 5)
         return wf_error(WF_ERR_INPUT, "scene: the plane's note \"%s\" does not give its counts",
                         wf_plane_entry_note(s->plane));
-    t->galaxies = g, t->stars = st, t->split = sp, t->knots_smooth = sm, t->bright = b + sne_bright;
+    t->galaxies = g, t->stars = st, t->split = sp, t->knots_smooth = sm, t->bright = b + s->sne_wide;
     return WF_OK;
 }
 
@@ -599,6 +600,7 @@ wf_status wf_scene_populate(wf_scene *s, const wf_catalog *gal, const wf_catalog
             !(s->plane_found && o->kind != OBJ_SN)) {
             o->wide = 1;
             s->stats.bright++;
+            s->sne_wide += o->kind == OBJ_SN;
         }
     }
     if (s->stats.bright) { /* built once, and only when a bright source is drawn */

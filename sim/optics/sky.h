@@ -85,7 +85,10 @@ wf_status wf_sky_zodiacal(const wf_sky_model *m, wf_filter f, double ra_deg, dou
  * (what scales the per-object accuracy knobs of scene.noise_tolerance, so that every
  * exposure of a pointing draws its static objects alike). Quadrature (elongation 90°) is
  * always among them. The minimum over the interval of allowed |Δλ|: its ends and steps of
- * 1/8° (exact for the table, linear in Δλ between its 4° nodes). */
+ * 1/8° (exact for the table, linear in Δλ between its 4° nodes). An exposure at a date that
+ * puts the target outside the field of regard (`wfisim expose` allows any date; a plan never
+ * does) can have less zodiacal light than this near the ecliptic: its faint objects are then
+ * drawn to a tolerance above noise_tolerance x its own sky noise. */
 wf_status wf_sky_zodiacal_least(const wf_sky_model *m, wf_filter f, double ra_deg, double dec_deg,
                                 double *e_per_s_per_arcsec2);
 
