@@ -1192,6 +1192,62 @@ START_TEST(scene_cache_same_bytes)
 }
 END_TEST
 
+/* The scene cache with supernovae: a second visit's SN, the exposure's variable object, is
+ * drawn on the first visit's stored plane, and the products are those of a run without the
+ * cache (the SN at its own flux and phase in each exposure). */
+START_TEST(scene_cache_with_supernovae)
+{
+    const char *bin = wf_test_program(), *data = wf_test_data_dir();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    WF_SKIP_UNLESS(data, "the data folder (SALT model)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], stars[4200], log[4200], sne[4200];
+    history_inputs(bin, d, plan, stars, sizeof plan, 2);
+    snprintf(log, sizeof log, "%s/log", d);
+    snprintf(sne, sizeof sne, "%s/sne.fits", d);
+    wf_survey_row *rows;
+    size_t nrows;
+    ck_assert_int_eq(wf_survey_read_plan(plan, &rows, &nrows), WF_OK);
+    ck_assert_int_gt(nrows, 65);
+    wf_focal_plane fp;
+    wf_wcs w;
+    double ra, dec;
+    ck_assert_int_eq(wf_wcs_focal_plane(NULL, &fp), WF_OK);
+    ck_assert_int_eq(wf_wcs_for_sca(&fp, rows[64].ra, rows[64].dec, rows[64].pa, 3, &w), WF_OK);
+    ck_assert_int_eq(wf_wcs_pix2world(&w, 64.0, 30.0, &ra, &dec), WF_OK);
+    write_sample(sne, ra, dec, rows[64].mjd_mid, 0.3); /* at peak on the second visit, rising on the first */
+    free(rows);
+#define SNRUN(range, cache, out)                                                                                   \
+    wf_test_run("%s survey run --plan %s --exposures " range " --scas 3 --mode single " SMALL                       \
+                " --set scene.kind=catalog --set scene.stars=%s --data %s --model %s/salt3/salt3-k21 --sne %s "     \
+                "--set run.scene_cache=%s --out %s/" out " 2>%s", bin, plan, stars, data, data, sne, cache, d, log)
+    char cache[4300];
+    snprintf(cache, sizeof cache, "%s/cache", d);
+    long found, made, n;
+    ck_assert_int_eq(SNRUN("0:1", cache, "first"), 0);
+    ck_assert_int_eq(SNRUN("64:65", "none", "none"), 0);
+    logged(log, "static scenes: %ld of the %ld", 2, &found, &made);
+    ck_assert(found == 0 && made == 2);
+    ck_assert_int_eq(SNRUN("64:65", cache, "again"), 0);
+    logged(log, "static scenes: %ld of the %ld", 2, &found, &made);
+    ck_assert_msg(found == 2 && made == 2, "%ld of %ld from the cache", found, made);
+    char *text = wf_test_slurp(log, NULL);
+    ck_assert_ptr_nonnull(text);
+    const char *at = strstr(text, "already done; ");
+    ck_assert(at && sscanf(at, "already done; %ld supernova images", &n) == 1);
+    free(text);
+    ck_assert_msg(n == 1, "the SN is on %ld of the 2 images, not on exposure 64's alone (65 points elsewhere)", n);
+#undef SNRUN
+    for (int e = 64; e <= 65; e++)
+        for (int t = 0; t < 2; t++) {
+            char x[4300], y[4300];
+            snprintf(x, sizeof x, "%s/none/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
+            snprintf(y, sizeof y, "%s/again/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
+            wf_test_assert_same_file(x, y);
+        }
+}
+END_TEST
+
 /* A run that begins mid-plan (a job array's task; an MPI walk) draws its first item's whole
  * history and then none: each later item of the SCA finds the earlier exposures the first
  * one drew, and the one before it made, in the cache (at the default depth, 8, the cache's
@@ -1309,6 +1365,7 @@ static Suite *suite(void)
     tcase_add_test(tc, walks_cover_items);
     tcase_add_test(tc, history_cache_mid_plan);
     tcase_add_test(tc, scene_cache_same_bytes);
+    tcase_add_test(tc, scene_cache_with_supernovae);
     suite_add_tcase(s, tc);
     return s;
 }
