@@ -152,16 +152,20 @@ void wf_renderer_destroy(wf_renderer *r)
 
 void wf_renderer_get_stats(const wf_renderer *r, wf_renderer_stats *out) { *out = r->stats; }
 
-static wf_status grow(double **buf, size_t *cap, size_t count, const char *what)
+/* Makes *bufp (a pointer to elements of `size` bytes) hold count of them. */
+static wf_status grow_to(void *bufp, size_t *cap, size_t count, size_t size, const char *what)
 {
     if (count <= *cap) return WF_OK;
     /* the contents need not survive: every use writes before it reads */
-    double *p = wf_arena_host_realloc(*buf, 0, count * sizeof *p);
-    if (!p) return wf_error(WF_ERR_NOMEM, "renderer: cannot grow the %s to %zu values", what, count);
-    *buf = p;
+    void *old, *p;
+    memcpy(&old, bufp, sizeof old);
+    if (!(p = wf_arena_host_realloc(old, 0, count * size)))
+        return wf_error(WF_ERR_NOMEM, "renderer: cannot grow the %s to %zu values", what, count);
+    memcpy(bufp, &p, sizeof p);
     *cap = count;
     return WF_OK;
 }
+#define grow(buf, cap, count, what) grow_to((buf), (cap), (count), sizeof **(buf), (what))
 
 /* Moves the live stamps' kept rows to the front of the pool (they are plain arrays: offsets
  * change, contents do not). Live stamps belong to active objects only. */
@@ -301,16 +305,6 @@ static wf_status add_objects(wf_renderer *r, int y0, int y1, int ncols, int vari
     return WF_OK;
 }
 
-static wf_status grow_float(float **buf, size_t *cap, size_t count)
-{
-    if (count <= *cap) return WF_OK;
-    float *p = wf_arena_host_realloc(*buf, 0, count * sizeof *p);
-    if (!p) return wf_error(WF_ERR_NOMEM, "renderer: cannot grow the plane rows to %zu values", count);
-    *buf = p;
-    *cap = count;
-    return WF_OK;
-}
-
 static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
 {
     wf_renderer *r = ctx;
@@ -355,9 +349,9 @@ static wf_status fill(void *ctx, int y0, int y1, int ncols, float *rate)
     size_t rows = (size_t)(y1 - y0), npix = rows * (size_t)ncols;
     wf_status st = grow(&r->acc, &r->acc_cap, npix, "row accumulator");
     if (st) return st;
-    if ((st = grow_float(&r->plane, &r->plane_cap, npix))) return st;
+    if ((st = grow(&r->plane, &r->plane_cap, npix, "plane rows"))) return st;
     const int layer = r->cfg.layer != NULL, got = r->cfg.plane_get != NULL;
-    if (layer && (st = grow_float(&r->lplane, &r->lplane_cap, npix))) return st;
+    if (layer && (st = grow(&r->lplane, &r->lplane_cap, npix, "layer rows"))) return st;
     /* the static objects into the plane (and the layer), from 0.0 as a scene without sky
      * starts, or both from plane_get */
     double *sacc = NULL, *lacc = NULL;
