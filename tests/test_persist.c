@@ -474,7 +474,7 @@ START_TEST(history_cache_keeps_held)
     ck_assert_int_eq(wf_persist_history_new(48, 40, cfg.persist.min_stimulus, 1e5, &fill), WF_OK);
     for (int e = 27; e >= 20; e--) {
         cfg.ro.exposure = (uint32_t)e;
-        ck_assert_int_eq(wf_persist_history_add_exposure(fill, &cfg, &clock, 100.0 * (28 - e), cache, NULL, NULL, &drawn), WF_OK);
+        ck_assert_int_eq(wf_persist_history_add_exposure(fill, &cfg, &clock, 100.0 * (28 - e), cache, NULL, NULL, NULL, &drawn), WF_OK);
         ck_assert_int_eq(drawn, 1);
     }
     wf_persist_history_free(fill);
@@ -483,9 +483,9 @@ START_TEST(history_cache_keeps_held)
     const int ids[2] = {5, 9};
     for (int j = 0; j < 2; j++) {
         cfg.ro.exposure = (uint32_t)ids[j];
-        ck_assert_int_eq(wf_persist_history_add_exposure(h, &cfg, &clock, 60.0 + 400.0 * j, cache, NULL, NULL, &drawn), WF_OK);
+        ck_assert_int_eq(wf_persist_history_add_exposure(h, &cfg, &clock, 60.0 + 400.0 * j, cache, NULL, NULL, NULL, &drawn), WF_OK);
         ck_assert_int_eq(drawn, 1);
-        ck_assert_int_eq(wf_persist_history_add_exposure(ref, &cfg, &clock, 60.0 + 400.0 * j, NULL, NULL, NULL, &drawn), WF_OK);
+        ck_assert_int_eq(wf_persist_history_add_exposure(ref, &cfg, &clock, 60.0 + 400.0 * j, NULL, NULL, NULL, NULL, &drawn), WF_OK);
     }
     wf_persist_source a, b;
     wf_persist_history_source(h, &a);

@@ -412,29 +412,35 @@ static wf_status exposure_list(const wf_persist_history *h, const wf_config *cfg
     return st;
 }
 
-/* An earlier exposure's slot: from its scene cache entry's layer when given, else drawn. */
+/* An earlier exposure's slot: from its scene cache entry's layer when find gives one, else
+ * drawn. */
 static wf_status slot_of(const wf_persist_history *h, const wf_config *cfg, const wf_clock *clock,
-                         wf_scene_psf_cache *psfs, wf_plane_entry *plane, int *drawn, slot_list *out)
+                         wf_scene_psf_cache *psfs, wf_persist_plane_fn find, void *find_ctx, int *drawn,
+                         slot_list *out)
 {
-    if (plane && wf_plane_entry_has_layer(plane)) {
-        wf_scene_source src;
-        wf_plane_entry_layer_source(plane, &src);
-        *drawn = 0;
-        return scan(h, &src, wf_pipeline_exptime(cfg, clock), out);
-    }
-    return exposure_list(h, cfg, clock, psfs, out);
+    wf_plane_entry *plane = NULL;
+    wf_status st = find ? find(find_ctx, &plane) : WF_OK;
+    if (st) return st;
+    if (!plane) return exposure_list(h, cfg, clock, psfs, out);
+    wf_scene_source src;
+    wf_plane_entry_layer_source(plane, &src);
+    *drawn = 0;
+    st = scan(h, &src, wf_pipeline_exptime(cfg, clock), out);
+    wf_plane_entry_close(plane);
+    return st;
 }
 
 wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config *cfg,
                                           const wf_clock *clock, double dt, wf_persist_cache *cache,
-                                          wf_scene_psf_cache *psfs, wf_plane_entry *plane, int *drawn)
+                                          wf_scene_psf_cache *psfs, wf_persist_plane_fn find, void *find_ctx,
+                                          int *drawn)
 {
     long long expid = cfg->ro.exposure;
     int sca = (int)cfg->ro.sca;
     *drawn = 1;
     if (!cache || sca < 0 || sca >= CACHE_SCAS) {
         slot_list list;
-        wf_status st = slot_of(h, cfg, clock, psfs, plane, drawn, &list);
+        wf_status st = slot_of(h, cfg, clock, psfs, find, find_ctx, drawn, &list);
         return st ? st : add_slot(h, list, 1, dt);
     }
     if (!h->depth) h->held = cache->tick; /* its first slot */
@@ -444,7 +450,7 @@ wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config
         e->used = ++cache->tick;
     } else {
         slot_list list;
-        wf_status st = slot_of(h, cfg, clock, psfs, plane, drawn, &list);
+        wf_status st = slot_of(h, cfg, clock, psfs, find, find_ctx, drawn, &list);
         if (st) return st;
         cache_put(cache, slot, expid, list);
         e = slot;

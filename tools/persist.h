@@ -47,15 +47,19 @@ wf_status wf_persist_cache_import(wf_persist_cache *c, const void *buf, size_t s
 
 /* The next slot from the exposure cfg describes (its scene as `wfisim expose` would draw it,
  * bright objects only; the grid scene whole), clock its read pattern; through cache when not
- * NULL (which must outlive h); a scene drawn takes its PSF through psfs when not NULL. plane:
- * that exposure's entry in the scene cache (sim/draw/plane_cache.h), when it was found with
- * the layer its own drawing handed over: the slot is read from the layer's rows instead of
- * drawn (the same list: the layer is exactly the bright objects' rates). *drawn: 1 when it
- * was drawn, 0 when a cache held it. */
+ * NULL (which must outlive h); a scene drawn takes its PSF through psfs when not NULL. When
+ * cache does not hold the slot and find (may be NULL) gives that exposure's entry in a scene
+ * cache (sim/draw/plane_cache.h), holding the layer its own drawing handed over, the slot is
+ * read from the layer's rows instead of drawn (the same list: the layer is exactly the bright
+ * objects' rates). *drawn: 1 when it was drawn, 0 when a cache held it. */
 struct wf_plane_entry;
+/* Looks for an earlier exposure's entry in a scene cache: *out the entry (closed by the
+ * caller of this) or NULL. */
+typedef wf_status (*wf_persist_plane_fn)(void *ctx, struct wf_plane_entry **out);
 wf_status wf_persist_history_add_exposure(wf_persist_history *h, const wf_config *cfg,
                                           const wf_clock *clock, double dt, wf_persist_cache *cache,
-                                          wf_scene_psf_cache *psfs, struct wf_plane_entry *plane, int *drawn);
+                                          wf_scene_psf_cache *psfs, wf_persist_plane_fn find, void *find_ctx,
+                                          int *drawn);
 
 /* An exposure's own slot, collected while that exposure is drawn for its product: its bright
  * objects (those wf_persist_history_add_exposure would draw) form the scene's layer

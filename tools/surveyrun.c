@@ -691,17 +691,22 @@ static double history_full_well(const wf_config *cfg)
 
 static wf_status open_planes(wf_survey_ctx *ctx);
 
-/* The scene cache's entry of the earlier exposure ctx->scratch describes, when it holds one with
- * the layer that exposure's own product handed over (*out NULL otherwise). */
-static wf_status history_plane(wf_survey_ctx *ctx, const wf_clock *clock, wf_plane_entry **out)
+typedef struct history_find { wf_survey_ctx *ctx; const wf_clock *clock; } history_find;
+
+/* wf_persist_plane_fn: the scene cache's entry of the earlier exposure ctx->scratch
+ * describes, when it holds one with the layer that exposure's own product handed over.
+ * Asked only for a slot the process's persistence cache does not hold. */
+static wf_status history_plane(void *arg, wf_plane_entry **out)
 {
+    history_find *f = arg;
+    wf_survey_ctx *ctx = f->ctx;
     *out = NULL;
     wf_status st = open_planes(ctx);
     if (st || !ctx->planes || ctx->scratch->scene_kind == 2) return st;
     wf_pipeline_job job;
     memset(&job, 0, sizeof job);
     job.cfg = ctx->scratch;
-    job.clock = clock;
+    job.clock = f->clock;
     job.injector = ctx->opt->sne;
     job.version = ctx->opt->version;
     job.digests = ctx->cache;
@@ -724,12 +729,10 @@ static wf_status build_history(wf_survey_ctx *ctx, size_t i, const history *h, c
         const wf_survey_row *r = &ctx->plan[h->row[j]];
         wf_clock clock;
         int d = 1;
-        wf_plane_entry *pe = NULL;
+        history_find f = {ctx, &clock};
         if (!(st = configure(ctx->base, ctx->opt, r, ctx->items[i].sca, ctx->scratch, &clock)))
-            st = history_plane(ctx, &clock, &pe);
-        if (!st)
-            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache, ctx->psfs, pe, &d);
-        wf_plane_entry_close(pe);
+            st = wf_persist_history_add_exposure(ph, ctx->scratch, &clock, h->dt[j], ctx->pcache, ctx->psfs,
+                                                 history_plane, &f, &d);
         if (st) st = wf_error(st, "persistence history from exposure %d: %s", r->expid, wf_error_message());
         *drawn += d;
     }

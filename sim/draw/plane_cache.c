@@ -299,8 +299,6 @@ void wf_plane_entry_put(void *entry, int y, const float *plane, const float *lay
 
 const char *wf_plane_entry_note(const wf_plane_entry *e) { return e->note; }
 
-int wf_plane_entry_has_layer(const wf_plane_entry *e) { return e->found && e->layer; }
-
 static wf_status layer_rows(void *ctx, int y0, int y1, int ncols, float *rate)
 {
     return wf_plane_entry_get(ctx, y0, y1, ncols, NULL, rate);

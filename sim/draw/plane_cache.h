@@ -57,10 +57,9 @@ wf_status wf_plane_entry_find(wf_plane_cache *c, const char *key, int ncols, int
  * (sim/draw/render.h), with the entry as ctx. */
 wf_status wf_plane_entry_get(void *entry, int y0, int y1, int ncols, float *plane, float *layer);
 void wf_plane_entry_put(void *entry, int y, const float *plane, const float *layer, int ncols);
-/* 1 when the entry was found and has the layer's rows. */
-int wf_plane_entry_has_layer(const wf_plane_entry *e);
 /* A found entry's layer rows as a scene source's rates (a persistence history's earlier
- * exposure read instead of drawn, tools/persist.h); valid while e is open. */
+ * exposure read instead of drawn, tools/persist.h); valid while e is open. An entry without
+ * the layer fails the first fill. */
 void wf_plane_entry_layer_source(wf_plane_entry *e, wf_scene_source *out);
 /* A found entry's note. */
 const char *wf_plane_entry_note(const wf_plane_entry *e);
