@@ -1248,6 +1248,40 @@ START_TEST(scene_cache_with_supernovae)
 }
 END_TEST
 
+/* A scene cache that cannot keep a plane (a file-size limit, as a full disk: the plane's file
+ * cannot grow to its 100 KB while the 55 KB products can) fails no product: they are those of
+ * a run without the cache, and the run warns, naming the file and the reason. */
+START_TEST(scene_cache_cannot_keep)
+{
+    const char *bin = wf_test_program();
+    WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
+    const char *d = wf_test_tmpdir();
+    char plan[4200], log[4200];
+    snprintf(plan, sizeof plan, "%s/plan.fits", d);
+    snprintf(log, sizeof log, "%s/log", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+#define LIMITED(cache, out)                                                                                       \
+    wf_test_run("ulimit -f 150; trap '' XFSZ; %s survey run --plan %s --exposures 0:1 --scas 3 --mode single " SMALL \
+                " --set run.scene_cache=%s --out %s/" out " 2>%s", bin, plan, cache, d, log)
+    ck_assert_int_eq(LIMITED("none", "none"), 0);
+    ck_assert_msg(!wf_test_file_contains(log, "warning"), "a run without the cache warns");
+    ck_assert_int_eq(LIMITED("auto", "full"), 0);
+#undef LIMITED
+    ck_assert_msg(wf_test_file_contains(log, "could not keep the scenes of 2 products"), "no warning");
+    ck_assert_msg(wf_test_file_contains(log, "File too large"), "the warning does not say why");
+    for (int e = 0; e <= 1; e++)
+        for (int t = 0; t < 2; t++) {
+            char x[4300], y[4300];
+            snprintf(x, sizeof x, "%s/none/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
+            snprintf(y, sizeof y, "%s/full/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
+            wf_test_assert_same_file(x, y);
+        }
+    char cmd[4400];
+    snprintf(cmd, sizeof cmd, "test -z \"$(ls %s/full/scene_cache)\"", d); /* no file left behind */
+    ck_assert_int_eq(system(cmd), 0);
+}
+END_TEST
+
 /* A run that begins mid-plan (a job array's task; an MPI walk) draws its first item's whole
  * history and then none: each later item of the SCA finds the earlier exposures the first
  * one drew, and the one before it made, in the cache (at the default depth, 8, the cache's
@@ -1366,6 +1400,7 @@ static Suite *suite(void)
     tcase_add_test(tc, history_cache_mid_plan);
     tcase_add_test(tc, scene_cache_same_bytes);
     tcase_add_test(tc, scene_cache_with_supernovae);
+    tcase_add_test(tc, scene_cache_cannot_keep);
     suite_add_tcase(s, tc);
     return s;
 }

@@ -398,6 +398,10 @@ static int cmd_survey_run(cli *c)
         fprintf(stderr, "wfisim survey: PSFs: %ld built (the items of an SCA and filter share one); static "
                 "scenes: %ld of the %ld products' from the scene cache\n", stats.psf_built, stats.planes_found,
                 stats.rendered);
+    if (!stats.silent && stats.planes_not_kept) /* not a failure, but the user must know: a warning */
+        fprintf(stderr, "wfisim survey: warning: the scene cache could not keep the scenes of %ld products (%s); "
+                "the products are whole, later exposures of those scenes draw them again\n", stats.planes_not_kept,
+                stats.planes_reason[0] ? stats.planes_reason : "the reason is in the processes that drew them");
     if (!c->cfg.quiet && !stats.silent && c->cfg.ro.persist.on)
         fprintf(stderr, "wfisim survey: persistence histories: %ld earlier exposures, %ld of them drawn\n",
                 stats.hist_used, stats.hist_drawn);

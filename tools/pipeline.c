@@ -351,7 +351,9 @@ wf_status wf_pipeline_expose(wf_pipeline_job *pj)
     const wf_config *cfg = pj->cfg;
     pj->image_path[0] = pj->truth_path[0] = '\0';
     pj->nsne_drawn = 0;
-    pj->plane_found = 0;
+    pj->plane_found = pj->plane_not_kept = 0;
+    wf_plane_cache_stats before;
+    if (pj->planes) wf_plane_cache_get_stats(pj->planes, &before);
     int T = cfg->threads < 1 ? 1 : cfg->threads;
     wf_scene_source *scenes = calloc((size_t)T, sizeof *scenes);
     wf_scene_replay *replays = calloc((size_t)T, sizeof *replays);
@@ -547,7 +549,12 @@ done:
         if (!st && !cfg->quiet) fprintf(stderr, "wfisim: wrote %s\n", tpath);
     }
     if (st) wf_file_unmake_dir(cfg->out_dir, made_dir);
-    wf_scene_destroy(objscene);
+    wf_scene_destroy(objscene); /* which closes its plane's entry: kept now, or not */
+    if (pj->planes) {
+        wf_plane_cache_stats after;
+        wf_plane_cache_get_stats(pj->planes, &after);
+        pj->plane_not_kept = after.not_kept > before.not_kept;
+    }
     wf_pipeline_inputs_free(&inputs);
     free(sne);
     free(extra);

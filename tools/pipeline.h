@@ -56,6 +56,7 @@ typedef struct wf_pipeline_job {
     char truth_path[WF_PATH_MAX + 64];
     size_t nsne_drawn;           /* SNe that reach the SCA */
     int plane_found;             /* the static plane came from planes */
+    int plane_not_kept;          /* it was drawn, and planes could not keep it */
     wf_digest digest;            /* the inputs that shaped it (WFDIGEST and its parts) */
 } wf_pipeline_job;
 

@@ -808,6 +808,7 @@ wf_status wf_survey_make_item(wf_survey_ctx *ctx, size_t i, wf_survey_item_resul
         wf_persist_layer_free(layer);
         job->layer = NULL;
         res->plane_found = job->plane_found;
+        res->plane_not_kept = job->plane_not_kept;
         wf_persist_history_free(ph);
         if (st) {
             char msg[1024];
@@ -860,12 +861,18 @@ static void tally(const wf_survey_ctx *ctx, const wf_survey_item_result *res, wf
         stats->hist_drawn += res[i].hist_drawn;
         stats->psf_built += res[i].psf_built;
         stats->planes_found += res[i].plane_found;
+        stats->planes_not_kept += res[i].plane_not_kept;
     }
 }
 
 wf_status wf_survey_end(wf_survey_ctx *ctx, const wf_survey_item_result *res, wf_survey_run_stats *stats)
 {
     tally(ctx, res, stats);
+    if (ctx->planes) {
+        wf_plane_cache_stats ps;
+        wf_plane_cache_get_stats(ctx->planes, &ps);
+        snprintf(stats->planes_reason, sizeof stats->planes_reason, "%s", ps.reason);
+    }
     wf_survey_index_row *rows = malloc(ctx->nitems * sizeof *rows);
     if (!rows) return wf_error(WF_ERR_NOMEM, "out of memory for the index");
     for (size_t i = 0; i < ctx->nitems; i++) rows[i] = res[i].row;

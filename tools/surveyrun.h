@@ -67,6 +67,9 @@ typedef struct wf_survey_run_stats {
     long psf_built;                 /* PSFs built, for the items and their histories' scenes (the
                                      * other items took theirs from the process's cache) */
     long planes_found;              /* products whose static scene came from the scene cache */
+    long planes_not_kept;           /* products whose drawn scene the cache could not keep */
+    char planes_reason[512];        /* the first reason this process saw ("" when none, or when
+                                     * only child processes or other ranks saw one) */
     int silent;                     /* 1: another process reports this run (MPI ranks > 0) */
 } wf_survey_run_stats;
 
@@ -102,6 +105,7 @@ typedef struct wf_survey_item_result {
     int32_t psf_built;     /* PSFs built for it (by its process, or by the parent before the
                             * fork); 0: it found its PSF kept from an earlier item */
     int32_t plane_found;   /* 1: its static scene came from the scene cache (run.scene_cache) */
+    int32_t plane_not_kept; /* 1: its scene was drawn, and the cache could not keep it */
     wf_survey_index_row row;
 } wf_survey_item_result;
 
