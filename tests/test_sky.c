@@ -152,10 +152,29 @@ START_TEST(test_zodiacal_least_over_a_year)
             printf("  zodiacal least (%s) at (%g, %g): %.12g, over the year's dates %.12g (%d in the field of regard)\n",
                    model ? "table" : "law", pos[p][0], pos[p][1], least, brute, in);
             ck_assert_int_gt(in, 100);
-            /* the table is linear between nodes, so its least is exact; the law's lies between
-             * the 1/8 degree steps */
-            ck_assert_msg(least <= brute * (1 + (model ? 1e-12 : 1e-5)), "least %.12g above a date's %.12g", least, brute);
-            ck_assert_msg(least >= brute * (1 - 2e-3), "least %g well below every date's %g", least, brute);
+            /* The bounds, from the model's steepest slope in dlon over the field of regard (per
+             * degree, differences over 0.05 degree): the dates step the Sun by at most 0.0204
+             * degree (0.02 day at 1.019 degree a day), so the least over the year lies within
+             * slope x 0.0204 below the dates' (at an end of the interval); the table is linear
+             * between nodes, so its least is exact and at most the dates'; the law's lies within
+             * half a 1/8 degree step of its true least, so at most slope / 16 above the dates'. */
+            double lon, lat, slope = 0.0, prev = NAN;
+            ck_assert_int_eq(wf_sky_ecliptic(pos[p][0], pos[p][1], &lon, &lat), WF_OK);
+            for (double dl = 0.0; dl <= 180.0; dl += 0.05) {
+                double ce = cos(lat * M_PI / 180.0) * cos(dl * M_PI / 180.0), z;
+                if (ce > cos(WF_SKY_REGARD_MIN_DEG * M_PI / 180.0) || ce < cos(WF_SKY_REGARD_MAX_DEG * M_PI / 180.0)) {
+                    prev = NAN;
+                    continue;
+                }
+                ck_assert_int_eq(wf_sky_zodiacal_ecliptic(m, WF_Y106, dl, lat, &z), WF_OK);
+                if (prev == prev) slope = fmax(slope, fabs(z - prev) / 0.05);
+                prev = z;
+            }
+            const double below = slope * 0.0204, above = model ? brute * 1e-12 : slope / 16.0;
+            printf("  zodiacal least: steepest slope %.4g per degree: bounds -%.3g, +%.3g\n", slope, below, above);
+            ck_assert_msg(least <= brute + above, "least %.12g above a date's %.12g", least, brute);
+            ck_assert_msg(least >= brute - below, "least %.12g below every date's %.12g by more than %g", least, brute,
+                          below);
         }
         free(m);
     }
