@@ -1043,6 +1043,18 @@ static void assert_same_history_products(const char *d, const char *a, const cha
             }
 }
 
+/* The images and truth of SCA 3, exposures e0..e1, the same bytes in d/a and d/b. */
+static void assert_same_sca3(const char *d, const char *a, const char *b, int e0, int e1)
+{
+    for (int e = e0; e <= e1; e++)
+        for (int t = 0; t < 2; t++) {
+            char x[4400], y[4400];
+            snprintf(x, sizeof x, "%s/%s/wfisim_e%06d_sca03%s.fits", d, a, e, t ? "_truth" : "");
+            snprintf(y, sizeof y, "%s/%s/wfisim_e%06d_sca03%s.fits", d, b, e, t ? "_truth" : "");
+            wf_test_assert_same_file(x, y);
+        }
+}
+
 /* The cache of histories changes no byte, only what is drawn: with it off
  * (WFISIM_TEST_PERSIST_CACHE=off) every earlier exposure of every history is drawn (D = U);
  * with it on an exposure the run makes gives its own slot as it is drawn (tools/persist.h,
@@ -1181,12 +1193,9 @@ START_TEST(scene_cache_same_bytes)
                                      "--out %s/again%d 2>%s", cmd, plan, stars, d, d, k, log), 0);
         logged(log, "static scenes: %ld of the %ld", 2, &found, &made);
         ck_assert_msg(found == 2 && made == 2, "%s: %ld of %ld from the cache", cmd, found, made);
-        for (int e = 64; e <= 65; e++)
-            for (int t = 0; t < 2; t++) {
-                snprintf(x, sizeof x, "%s/none/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
-                snprintf(y, sizeof y, "%s/again%d/wfisim_e%06d_sca03%s.fits", d, k, e, t ? "_truth" : "");
-                wf_test_assert_same_file(x, y);
-            }
+        char again[16];
+        snprintf(again, sizeof again, "again%d", k);
+        assert_same_sca3(d, "none", again, 64, 65);
     }
 #undef CACHED
 }
@@ -1238,13 +1247,7 @@ START_TEST(scene_cache_with_supernovae)
     free(text);
     ck_assert_msg(n == 1, "the SN is on %ld of the 2 images, not on exposure 64's alone (65 points elsewhere)", n);
 #undef SNRUN
-    for (int e = 64; e <= 65; e++)
-        for (int t = 0; t < 2; t++) {
-            char x[4300], y[4300];
-            snprintf(x, sizeof x, "%s/none/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
-            snprintf(y, sizeof y, "%s/again/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
-            wf_test_assert_same_file(x, y);
-        }
+    assert_same_sca3(d, "none", "again", 64, 65);
 }
 END_TEST
 
@@ -1269,13 +1272,7 @@ START_TEST(scene_cache_cannot_keep)
 #undef LIMITED
     ck_assert_msg(wf_test_file_contains(log, "could not keep the scenes of 2 products"), "no warning");
     ck_assert_msg(wf_test_file_contains(log, "File too large"), "the warning does not say why");
-    for (int e = 0; e <= 1; e++)
-        for (int t = 0; t < 2; t++) {
-            char x[4300], y[4300];
-            snprintf(x, sizeof x, "%s/none/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
-            snprintf(y, sizeof y, "%s/full/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
-            wf_test_assert_same_file(x, y);
-        }
+    assert_same_sca3(d, "none", "full", 0, 1);
     char cmd[4400];
     snprintf(cmd, sizeof cmd, "test -z \"$(ls %s/full/scene_cache)\"", d); /* no file left behind */
     ck_assert_int_eq(system(cmd), 0);
@@ -1308,13 +1305,7 @@ START_TEST(history_cache_mid_plan)
     ck_assert_int_eq(lu, 3 * 8);
     ck_assert_int_eq(ld, 3 * 8);
 #undef MID
-    for (int e = 12; e <= 14; e++)
-        for (int t = 0; t < 2; t++) {
-            char x[4300], y[4300];
-            snprintf(x, sizeof x, "%s/mid/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
-            snprintf(y, sizeof y, "%s/midoff/wfisim_e%06d_sca03%s.fits", d, e, t ? "_truth" : "");
-            wf_test_assert_same_file(x, y);
-        }
+    assert_same_sca3(d, "mid", "midoff", 12, 14);
 }
 END_TEST
 
