@@ -480,7 +480,8 @@ START_TEST(test_rice_matches_cfitsio)
                         ck_assert_msg(nref > 0 && (size_t)nref == len && !memcmp(ours, theirs, len),
                                       "%d-byte pixels, n %ld, block %d, kind %d, sigma %g: %zu bytes against cfitsio's %d",
                                       bp, n, block, kind, sigmas[si], len, nref);
-                        ck_assert_msg(len <= wf_fits_rice_bound(n, bp), "n %ld: %zu bytes over the bound", n, len);
+                        /* the coder stores a word's 4 bytes past its output's end as it goes */
+                        ck_assert_msg(len + 4 <= wf_fits_rice_bound(n, bp), "n %ld: %zu bytes + 4 over the bound", n, len);
                         long_runs += kind == 4 && n >= 300 && block == 32;
                         cases++;
                     }

@@ -3,7 +3,10 @@
 #include <string.h>
 
 /* A bit stream written most significant bit first: the pending bits are the low nb bits of
- * acc (nb < 32 between calls), flushed 32 at a time. */
+ * acc (nb < 32 between calls), flushed 32 at a time. The flush is branch-free: 4 bytes are
+ * stored after every put and kept only when 32 bits were ready (the bit count's branch was
+ * mispredicted about once a pixel); so the output needs 4 bytes of room beyond its last word,
+ * which wf_fits_rice_bound's 16 bytes of slack give. */
 typedef struct bits {
     uint64_t acc;
     int nb;
@@ -14,15 +17,14 @@ static inline void put(bits *b, uint64_t v, int n) /* n <= 32, v < 2^n */
 {
     b->acc = (b->acc << n) | v;
     b->nb += n;
-    if (b->nb >= 32) {
-        b->nb -= 32;
-        uint32_t w = (uint32_t)(b->acc >> b->nb);
-        b->p[0] = (unsigned char)(w >> 24);
-        b->p[1] = (unsigned char)(w >> 16);
-        b->p[2] = (unsigned char)(w >> 8);
-        b->p[3] = (unsigned char)w;
-        b->p += 4;
-    }
+    const int full = b->nb >= 32;
+    uint32_t w = (uint32_t)(b->acc >> (b->nb & 31));
+#if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_BIG_ENDIAN__
+    w = __builtin_bswap32(w);
+#endif
+    memcpy(b->p, &w, 4);
+    b->nb -= 32 * full;
+    b->p += 4 * full;
 }
 
 /* The last bits, the final byte padded with zeros. */
@@ -106,7 +108,17 @@ wf_status wf_fits_rice_code(const void *pix, long n, int bytepix, uint32_t flip,
             } else {
                 put(&b, (uint64_t)fs + 1, fsbits);
                 const uint32_t mask = (1u << fs) - 1u;
-                for (int j = 0; j < nb; j++) {
+                int j = 0;
+                /* two codes at once while both are short (nearly always): one put, half the
+                 * serial chain through the bit buffer */
+                for (; j + 1 < nb; j += 2) {
+                    const uint32_t t0 = v[j] >> fs, t1 = v[j + 1] >> fs;
+                    const uint32_t n0 = t0 + 1 + (uint32_t)fs, n1 = t1 + 1 + (uint32_t)fs;
+                    if (n0 + n1 > 32) break;
+                    const uint64_t k0 = (1ull << fs) | (v[j] & mask), k1 = (1ull << fs) | (v[j + 1] & mask);
+                    put(&b, (k0 << n1) | k1, (int)(n0 + n1));
+                }
+                for (; j < nb; j++) {
                     uint32_t top = v[j] >> fs;
                     if (top + 1 + (uint32_t)fs <= 32) {
                         put(&b, (1ull << fs) | (v[j] & mask), (int)top + 1 + fs);
