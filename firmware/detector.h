@@ -51,8 +51,15 @@ static inline double wf_det_nonlinearity(double q, double beta) { return q + bet
  * q (q / (t f0))^(alpha / ln 10); q <= 0 is left unchanged (GalSim would give NaN). */
 double wf_det_reciprocity(double q, double exptime, double alpha, double f0);
 
-/* The same law on a rate: r (r / f0)^(alpha / ln 10), so q = r t obeys it at every t. */
+/* The same law on a rate: r (r / f0)^(alpha / ln 10), so q = r t obeys it at every t
+ * (within a few ulp of pow's: hal/vmath.h). */
 double wf_det_reciprocity_rate(double rate, double alpha, double f0);
+
+/* A row's expected electrons per frame time from the scene's rates (negative ones as 0):
+ * mean = (reciprocity-failed rate + dark current) frame_time, each as det switches them,
+ * and expm = exp(-mean) (wf_vexp: 0 beyond a mean of 708). */
+void wf_det_expected_row(const wf_detector *det, const float *rate, int n, double frame_time, double *mean,
+                         double *expm);
 
 /* One output row of IPC: out[x] = sum_ab K[a][b] in_{a}[x+b-1], in_0 = row above (y-1),
  * in_1 = this row, in_2 = row below (y+1); a NULL row and columns outside [0, ncols) are

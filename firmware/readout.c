@@ -484,13 +484,7 @@ static void expected_per_frame(wf_readout *ro, int npix)
 {
     const wf_detector *d = &ro->cfg.det;
     double ft = ro->clock.frame_time;
-    for (int i = 0; i < npix; i++) {
-        double r = ro->rate[i] > 0.0f ? ro->rate[i] : 0.0;
-        if (d->on.reciprocity) r = wf_det_reciprocity_rate(r, d->recip_alpha, d->recip_f0);
-        if (d->on.dark) r += d->dark_current;
-        ro->mean[i] = r * ft;
-        ro->expm[i] = exp(-ro->mean[i]);
-    }
+    wf_det_expected_row(d, ro->rate, npix, ft, ro->mean, ro->expm);
     if (!ro->slope_any) return;
     for (int i = 0; i < npix; i++) {
         /* reciprocity failure scales a source by f(r)/r at its mid-time rate; the slope rides

@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "hal/simd.h"
+#include "hal/vmath.h"
 
 /* ---- branch-free arithmetic for the row loops ------------------------------------------------
  * Every clone gives the same bits: IEEE +, -, *, /, sqrt only, no contraction under -std=c11,
@@ -57,20 +58,6 @@ static void sqrt_clamped(const double *in, double lo, int n, double *out)
 }
 #endif
 
-WF_INLINE uint64_t bits_of(double x)
-{
-    uint64_t u;
-    memcpy(&u, &x, sizeof u);
-    return u;
-}
-
-WF_INLINE double double_of(uint64_t u)
-{
-    double x;
-    memcpy(&x, &u, sizeof x);
-    return x;
-}
-
 /* floor(x), exactly, from the adding-and-removing 1.5 * 2^52 trick (round to nearest, then
  * one down where that went up): libm's floor is a call in the baseline target. */
 WF_INLINE double vfloor(double x)
@@ -81,34 +68,11 @@ WF_INLINE double vfloor(double x)
     return x > -big && x < big ? r : x; /* beyond 2^51 every double is whole */
 }
 
-/* log(x) for finite x > 0, fdlibm's e_log.c algorithm (error < 1 ulp) without its branches
- * for special inputs and without libm: x = z 2^e with z in [sqrt(2)/2, sqrt(2)), then
- * log(z) from s = (z-1)/(z+1). Only +, -, *, / and bit moves on 64-bit lanes (no int64 to
- * double conversion, which AVX2 lacks). Zero, negative, subnormal and non-finite x give
- * values the callers mask out. */
-WF_INLINE double vlog(double x)
-{
-    const double ln2_hi = 6.93147180369123816490e-01, ln2_lo = 1.90821492927058770002e-10;
-    const double Lg1 = 6.666666666666735130e-01, Lg2 = 3.999999999940941908e-01,
-                 Lg3 = 2.857142874366239149e-01, Lg4 = 2.222219843214978396e-01,
-                 Lg5 = 1.818357216161805012e-01, Lg6 = 1.531383769920937332e-01,
-                 Lg7 = 1.479819860511658591e-01;
-    const uint64_t off = 0x3fe6a09e667f3bcdull; /* sqrt(2)/2 */
-    uint64_t ix = bits_of(x), tmp = ix - off;
-    /* the exponent e, a signed 12-bit field, as a double: offset binary in a 2^52 mantissa */
-    double dk = double_of(0x4330000000000000ull | ((tmp >> 52) ^ 0x800u)) - 4503599627372544.0;
-    double z = double_of(ix - (tmp & 0xfff0000000000000ull));
-    double f = z - 1.0, hfsq = 0.5 * f * f, s = f / (2.0 + f), s2 = s * s, w = s2 * s2;
-    double t1 = w * (Lg2 + w * (Lg4 + w * Lg6));
-    double t2 = s2 * (Lg1 + w * (Lg3 + w * (Lg5 + w * Lg7)));
-    return s * (hfsq + (t1 + t2)) + dk * ln2_lo - hfsq + f + dk * ln2_hi;
-}
-
 /* log(1 + x) for x > -1 to full relative precision: the rounding of 1 + x is put back. */
 WF_INLINE double vlog1p(double x)
 {
     double u = 1.0 + x;
-    return vlog(u) - ((u - 1.0) - x) / u;
+    return wf_vlog(u) - ((u - 1.0) - x) / u;
 }
 
 /* ---- Philox row batches --------------------------------------------------------------------- */
@@ -264,7 +228,7 @@ wf_status wf_noise_stream_blocks(const wf_noise *noise, uint32_t pixel, uint32_t
 
 /* The tails (p < 0.02425 or p > 0.97575, ~5% of words) of wf_norm_from_u32: wf_norm_ppf's
  * tail formula, q = sqrt(-2 log p) into a rational function, on the words gathered a chunk at
- * a time, so that it runs in SIMD lanes too. Its log is vlog, not libm's; the result, rounded
+ * a time, so that it runs in SIMD lanes too. Its log is wf_vlog, not libm's; the result, rounded
  * to float, is the same for every one of the 2^32 words (checked exhaustively when this was
  * written, and on a sample by tests/test_single_fast.c). */
 _Static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "norm_tails reads its flags' bytes in little-endian order");
@@ -295,7 +259,7 @@ WF_INLINE void norm_tails(const uint32_t *w, int n, float *out)
         }
         for (int j = 0; j < m; j++) {
             const double p = ((double)w[at[j]] + 0.5) * (1.0 / 4294967296.0);
-            t[j] = -2.0 * vlog(p < plow ? p : 1.0 - p);
+            t[j] = -2.0 * wf_vlog(p < plow ? p : 1.0 - p);
         }
         sqrt_clamped(t, 0.0, m, t);
         for (int j = 0; j < m; j++) {
@@ -379,7 +343,7 @@ WF_INLINE double ptrs_lane(double mu, double smu, double u01, double v)
     const double kk = k >= 1.0 ? k : 1.0;
     /* log(v inv_alpha / (a / us^2 + b)) + log(2 pi k) / 2, in one division */
     const double num = v * inv_alpha * (us * us), den = a + b * (us * us);
-    const double lhs = 0.5 * vlog((num * num) * ((2.0 * M_PI) * kk) / (den * den));
+    const double lhs = 0.5 * wf_vlog((num * num) * ((2.0 * M_PI) * kk) / (den * den));
     const double ik = 1.0 / kk, ik2 = ik * ik;
     double rest = (1.0 / 12.0 - (1.0 / 360.0 - ik2 * (1.0 / 1260.0)) * ik2) * ik;
 #pragma GCC unroll 9

@@ -23,6 +23,7 @@
 #include <string.h>
 
 #include "firmware/detector.h"
+#include "hal/vmath.h"
 #include "tests/testutil.h"
 
 #define NREF 64
@@ -481,6 +482,37 @@ START_TEST(test_nonlinearity_points)
 }
 END_TEST
 
+/* A row of expected electrons is the scalar law, bit for bit, for every switch of reciprocity
+ * and dark current: negative, zero, NaN and huge rates included. */
+START_TEST(test_expected_row_as_scalar)
+{
+    enum { N = 37 };
+    float rate[N];
+    double mean[N], expm[N];
+    for (int i = 0; i < N; i++) rate[i] = (float)(pow(10.0, -3.0 + 0.25 * i) * (i % 5 == 3 ? -1.0 : 1.0));
+    rate[0] = 0.0f;
+    rate[1] = NAN;
+    rate[2] = 3e38f;
+    for (int c = 0; c < 4; c++) {
+        wf_detector d;
+        wf_detector_defaults(&d);
+        d.on.reciprocity = c & 1;
+        d.on.dark = (c >> 1) & 1;
+        const double ft = 3.04;
+        wf_det_expected_row(&d, rate, N, ft, mean, expm);
+        for (int i = 0; i < N; i++) {
+            double r = rate[i] > 0.0f ? rate[i] : 0.0;
+            if (d.on.reciprocity) r = wf_det_reciprocity_rate(r, d.recip_alpha, d.recip_f0);
+            if (d.on.dark) r += d.dark_current;
+            ck_assert_msg(mean[i] == r * ft, "case %d pixel %d: %.17g vs %.17g", c, i, mean[i], r * ft);
+            ck_assert_msg(expm[i] == wf_vexp(-r * ft), "case %d pixel %d", c, i);
+            /* and exp within an ulp, or 0 past a mean of 708 */
+            ck_assert(r * ft > 708.0 ? expm[i] == 0.0 : fabs(expm[i] - exp(-r * ft)) <= 2.3e-16 * exp(-r * ft));
+        }
+    }
+}
+END_TEST
+
 START_TEST(test_reciprocity_points)
 {
     const double alpha = 0.0065, f0 = 1.0, a = alpha / log(10.0);
@@ -701,6 +733,7 @@ static Suite *detector_suite(void)
     tcase_add_test(cf, test_ipc_flat_edges);
     tcase_add_test(cf, test_nonlinearity_points);
     tcase_add_test(cf, test_reciprocity_points);
+    tcase_add_test(cf, test_expected_row_as_scalar);
     tcase_add_test(cf, test_quantize_half_even);
     tcase_add_test(cf, test_saturation_adu);
     tcase_add_test(cf, test_ramp_read_row);
