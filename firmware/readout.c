@@ -964,21 +964,19 @@ static inline double draw_at(const uint32_t *words, size_t nc, int x, int *c, do
  * read). The inversion runs the pixels in lockstep, one
  * term of every pixel's sum per pass, so that it vectorises: a pixel's count is the number of
  * partial sums below its uniform, the smallest k with u <= F_k, as a scalar search gives.
- * A pixel whose uniform is no longer above its sum is done (the sums only grow), so once
- * most of the chunk is done the pixels still going are packed together and only they go on
- * (a chunk's passes run to its largest count, ~mean + 3.5 sqrt(mean) over 256 pixels, where
- * the average pixel stops near its mean). Each pixel's terms are the same operations in the
- * same order whether packed or not, so its count is too; at most 200 terms. */
+ * A pixel whose uniform is no longer above its sum is done (the sums only grow); the passes
+ * run over the whole chunk to its largest count (~mean + 3.5 sqrt(mean) over 256 pixels),
+ * at most 200 terms. Packing the pixels still going, as this did until session 35, cost more
+ * than the passes it saved: its scalar, mispredicted copy was half of this function. */
 enum { MOMENTS_CHUNK = 256 };
 
-/* Passes over the pixels at [0, n), terms k0 (<= INV_K_MAX), k0 + 1, ..., at least one,
- * until a pass finds fewer than `until` of them still counting, or none; returns the next
- * term's k. */
-WF_CLONES static int moments_passes(int n, int k0, int until, const double *restrict u, double *restrict p,
-                                    double *restrict cdf, double *restrict cnt, const double *restrict mean,
-                                    const double *restrict inv_k)
+/* Passes over the pixels at [0, n), terms 1, 2, ..., until none still counts or term
+ * INV_K_MAX is done. */
+WF_CLONES static void moments_passes(int n, const double *restrict u, double *restrict p, double *restrict cdf,
+                                     double *restrict cnt, const double *restrict mean,
+                                     const double *restrict inv_k)
 {
-    int k = k0, na;
+    int k = 1, na;
     do {
         na = 0;
         for (int x = 0; x < n; x++) {
@@ -989,59 +987,30 @@ WF_CLONES static int moments_passes(int n, int k0, int until, const double *rest
             cdf[x] += p[x];
         }
         k++;
-    } while (k <= INV_K_MAX && na >= until && na > 0);
-    return k;
+    } while (k <= INV_K_MAX && na > 0);
 }
 
 WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, const float *restrict z, int big,
                                             const double *restrict mean, const double *restrict e0,
                                             const double *restrict inv_k, double *restrict out)
 {
-    /* the pixels still counting, packed (uniform, term, partial sum, count so far, mean, and
-     * where each sits in the chunk); a finished pixel's count goes to cnt */
-    double pu[MOMENTS_CHUNK], pp[MOMENTS_CHUNK], pc[MOMENTS_CHUNK], pn[MOMENTS_CHUNK], pm[MOMENTS_CHUNK];
-    double cnt[MOMENTS_CHUNK];
-    int at[MOMENTS_CHUNK];
+    /* per pixel: uniform, term, partial sum, count so far, mean */
+    double pu[MOMENTS_CHUNK], pp[MOMENTS_CHUNK], pc[MOMENTS_CHUNK], cnt[MOMENTS_CHUNK], pm[MOMENTS_CHUNK];
     /* every comparison and load made whatever the branch: a conditional one (a possible
      * trap, to the compiler) keeps these loops scalar */
     for (int x = 0; x < n; x++) {
         const double mx = mean[x], ex = e0[x], ux = ((double)w[x] + 0.5) * (1.0 / 4294967296.0);
         const int small = (mx > 0.0) & (mx < 10.0);
-        at[x] = x;
         pu[x] = small ? ux : 0.0; /* 0: never counts */
         pp[x] = pc[x] = small ? ex : 1.0;
-        pn[x] = 0.0;
+        cnt[x] = 0.0;
         pm[x] = small ? mx : 0.0; /* so a negative mean's sums stay at 1: it counts 0 */
     }
     for (int x = n; x < MOMENTS_CHUNK; x++) { /* never read; set so that no compiler doubts it */
-        at[x] = x;
-        pu[x] = pn[x] = pm[x] = 0.0;
+        pu[x] = cnt[x] = pm[x] = 0.0;
         pp[x] = pc[x] = 1.0;
     }
-    /* all pixels until fewer than a quarter still count, then those alone, repacked as they
-     * thin out; every pixel leaves the pack, at the latest after term INV_K_MAX */
-    int m = n, k = 1;
-    while (m > 0 && k <= INV_K_MAX) {
-        k = moments_passes(m, k, m / 4 > 8 ? m / 4 : 8, pu, pp, pc, pn, pm, inv_k);
-        /* branch-free: every pixel's count so far is stored (a pixel still counting stores
-         * its final one later) and copied down to j, which moves on only for those still
-         * counting (j <= i: nothing unread is overwritten); a branch here was mispredicted
-         * for about one pixel in five, half of this function's time */
-        int j = 0;
-        const int more = k <= INV_K_MAX;
-        for (int i = 0; i < m; i++) {
-            const int keep = (pu[i] > pc[i]) & more;
-            cnt[at[i]] = pn[i];
-            at[j] = at[i];
-            pu[j] = pu[i];
-            pp[j] = pp[i];
-            pc[j] = pc[i];
-            pn[j] = pn[i];
-            pm[j] = pm[i];
-            j += keep;
-        }
-        m = j;
-    }
+    moments_passes(n, pu, pp, pc, cnt, pm, inv_k);
     if (!big) { /* no mean reaches 10 (z was not made): the counts, 0 for a mean <= 0 or NaN */
         memcpy(out, cnt, (size_t)n * sizeof *out);
         return;
