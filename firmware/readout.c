@@ -971,10 +971,10 @@ static inline double draw_at(const uint32_t *words, size_t nc, int x, int *c, do
 enum { MOMENTS_CHUNK = 256 };
 
 /* Passes over the pixels at [0, n), terms 1, 2, ..., until none still counts or term
- * INV_K_MAX is done. */
-WF_CLONES static void moments_passes(int n, const double *restrict u, double *restrict p, double *restrict cdf,
-                                     double *restrict cnt, const double *restrict mean,
-                                     const double *restrict inv_k)
+ * INV_K_MAX is done: one term of every pixel per pass, through memory. */
+WF_CLONES static void moments_passes_lockstep(int n, const double *restrict u, double *restrict p,
+                                              double *restrict cdf, double *restrict cnt,
+                                              const double *restrict mean, const double *restrict inv_k)
 {
     int k = 1, na;
     do {
@@ -990,9 +990,71 @@ WF_CLONES static void moments_passes(int n, const double *restrict u, double *re
     } while (k <= INV_K_MAX && na > 0);
 }
 
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
+#include <immintrin.h>
+#define MOMENTS_PASSES_AVX512 1
+enum { MOMENTS_BLOCKS = 2 }; /* vectors of 8 in flight: their chains' latencies overlap */
+/* The same terms eight pixels at a time: a block's uniforms, terms, sums and counts stay in
+ * registers through all its terms, and it stops at its own largest count, not the chunk's
+ * (the sums only grow, so a block none of whose pixels counts at a term is done). The same
+ * operations in the same order on each pixel as the lockstep passes: the same counts. */
+__attribute__((target("avx512f"))) static void moments_passes_avx512(int n, const double *u, const double *p,
+                                                                      const double *cdf, double *cnt,
+                                                                      const double *mean, const double *inv_k)
+{
+    const __m512d one = _mm512_set1_pd(1.0);
+    int x = 0;
+    for (; x + 8 * MOMENTS_BLOCKS <= n; x += 8 * MOMENTS_BLOCKS) {
+        __m512d vu[MOMENTS_BLOCKS], vm[MOMENTS_BLOCKS], vp[MOMENTS_BLOCKS], vc[MOMENTS_BLOCKS], vn[MOMENTS_BLOCKS];
+        for (int j = 0; j < MOMENTS_BLOCKS; j++) {
+            vu[j] = _mm512_loadu_pd(u + x + 8 * j);
+            vm[j] = _mm512_loadu_pd(mean + x + 8 * j);
+            vp[j] = _mm512_loadu_pd(p + x + 8 * j);
+            vc[j] = _mm512_loadu_pd(cdf + x + 8 * j);
+            vn[j] = _mm512_loadu_pd(cnt + x + 8 * j);
+        }
+        for (int k = 1; k <= INV_K_MAX; k++) {
+            const __m512d ik = _mm512_set1_pd(inv_k[k]);
+            unsigned any = 0;
+            for (int j = 0; j < MOMENTS_BLOCKS; j++) {
+                const __mmask8 above = _mm512_cmp_pd_mask(vu[j], vc[j], _CMP_GT_OQ);
+                any |= above;
+                vn[j] = _mm512_mask_add_pd(vn[j], above, vn[j], one);
+                vp[j] = _mm512_mul_pd(vp[j], _mm512_mul_pd(vm[j], ik));
+                vc[j] = _mm512_add_pd(vc[j], vp[j]);
+            }
+            if (!any) break;
+        }
+        for (int j = 0; j < MOMENTS_BLOCKS; j++) _mm512_storeu_pd(cnt + x + 8 * j, vn[j]);
+    }
+    if (x < n) {
+        double tp[8 * MOMENTS_BLOCKS], tc[8 * MOMENTS_BLOCKS];
+        memcpy(tp, p + x, (size_t)(n - x) * sizeof *tp);
+        memcpy(tc, cdf + x, (size_t)(n - x) * sizeof *tc);
+        moments_passes_lockstep(n - x, u + x, tp, tc, cnt + x, mean + x, inv_k);
+    }
+}
+#endif
+
+/* The count of every pixel at [0, n) into cnt (which starts at 0); p and cdf are scratch;
+ * simd: the AVX-512 variant may run. */
+static void moments_passes(int n, const double *u, double *p, double *cdf, double *cnt, const double *mean,
+                           const double *inv_k, int simd)
+{
+#ifdef MOMENTS_PASSES_AVX512
+    if (simd && __builtin_cpu_supports("avx512f")) {
+        moments_passes_avx512(n, u, p, cdf, cnt, mean, inv_k);
+        return;
+    }
+#else
+    (void)simd;
+#endif
+    moments_passes_lockstep(n, u, p, cdf, cnt, mean, inv_k);
+}
+
 WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, const float *restrict z, int big,
                                             const double *restrict mean, const double *restrict e0,
-                                            const double *restrict inv_k, double *restrict out)
+                                            const double *restrict inv_k, int simd, double *restrict out)
 {
     /* per pixel: uniform, term, partial sum, count so far, mean */
     double pu[MOMENTS_CHUNK], pp[MOMENTS_CHUNK], pc[MOMENTS_CHUNK], cnt[MOMENTS_CHUNK], pm[MOMENTS_CHUNK];
@@ -1010,7 +1072,7 @@ WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, c
         pu[x] = cnt[x] = pm[x] = 0.0;
         pp[x] = pc[x] = 1.0;
     }
-    moments_passes(n, pu, pp, pc, cnt, pm, inv_k);
+    moments_passes(n, pu, pp, pc, cnt, pm, inv_k, simd);
     if (!big) { /* no mean reaches 10 (z was not made): the counts, 0 for a mean <= 0 or NaN */
         memcpy(out, cnt, (size_t)n * sizeof *out);
         return;
@@ -1111,8 +1173,8 @@ static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double 
         const int big1 = count_at_least(c, lm + x0, 10.0), big2 = count_at_least(c, mu + x0, 10.0);
         if (big1) wf_norm_from_u32(w + nc + x0, c, z1 + x0);
         if (big2) wf_norm_from_u32(w + 2 * (size_t)nc + x0, c, z2 + x0);
-        moments_poisson_chunk(c, w + nc + x0, z1 + x0, big1, lm + x0, le + x0, ro->inv_k, ld + x0);
-        moments_poisson_chunk(c, w + 2 * (size_t)nc + x0, z2 + x0, big2, mu + x0, me + x0, ro->inv_k, t + x0);
+        moments_poisson_chunk(c, w + nc + x0, z1 + x0, big1, lm + x0, le + x0, ro->inv_k, !ro->cfg.portable, ld + x0);
+        moments_poisson_chunk(c, w + 2 * (size_t)nc + x0, z2 + x0, big2, mu + x0, me + x0, ro->inv_k, !ro->cfg.portable, t + x0);
     }
     moments_finish(nc, n > 1, ld, t, ab, cv, z3, g->vu, g->bs, q, a, sp);
 }

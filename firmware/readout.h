@@ -62,6 +62,8 @@ typedef struct wf_readout_config {
                           * integrates to its mid-time value times the exposure time. */
     wf_detector det;
     wf_persist_config persist; /* persistence: off unless on and given a history */
+    int portable;        /* 1: the portable kernels only, never a hand-written AVX-512 one
+                          * (the same bits: tests compare the two) */
 } wf_readout_config;
 
 typedef struct wf_readout wf_readout;
