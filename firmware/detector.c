@@ -318,8 +318,22 @@ static inline __attribute__((always_inline)) void group_row_body(
     p.sigma = det->read_noise_e / sqrt((double)nreads);
     /* 0 without nonlinearity: last + 0 last^2 is last (last <= fw is never +inf) */
     const double beta = det->on.nonlinearity ? det->nl_beta : 0.0;
-    /* two passes, the flags and the words, as each vectorises alone and together do not */
-    if (p.satur)
+    /* two passes, the flags and the words, as each vectorises alone and together do not.
+     * The flags' pass only where a pixel of the row could clip: a charge at the well or whose
+     * last read reaches the ceiling (as below), or a signal within the read noise's reach of
+     * it. A normal from a 32-bit word is below 6.37 (a larger z, from elsewhere, counts as
+     * a clip), and rounding adds at most 1/2, so e < (adc - bias - 1) gain - 6.5 sigma keeps
+     * adu below adc - 1/2. Most rows hold no such pixel, and this check is half the pass. */
+    int maybe = 0;
+    if (p.satur) {
+        const double ethr = (p.adc - p.bias - 1.0) * p.gain - (p.rn ? p.sigma * 6.5 : 0.0);
+        for (int i = 0; i < n; i++) {
+            double last = q[i] < p.fw ? q[i] : p.fw;
+            last = last + beta * last * last;
+            maybe |= (q[i] >= p.fw) | (last / p.gain + p.bias >= p.adc) | (e[i] >= ethr) | (z[i] > 6.5f);
+        }
+    }
+    if (maybe)
         for (int i = 0; i < n; i++) {
             /* the last read's own signal, clipped at the well, against the ceiling: a charge
              * that reaches it counts as the full well's */

@@ -23,6 +23,7 @@
 #include <string.h>
 
 #include "firmware/detector.h"
+#include "hal/noise.h"
 #include "hal/vmath.h"
 #include "tests/testutil.h"
 
@@ -710,6 +711,48 @@ START_TEST(test_group_row)
 }
 END_TEST
 
+/* wf_det_group_row skips its flags' pass in a row no pixel of which could clip: a pixel alone
+ * in its row, with the largest normal a word gives (z of 0xffffffff) or a larger one, steps
+ * through the ceiling's neighbourhood (signal and charge), and each flag is the hand-made
+ * one: the skip's bound never hides a clip. */
+START_TEST(test_group_row_skip_bound)
+{
+    const uint32_t top = 0xffffffffu;
+    float zmax;
+    wf_norm_from_u32(&top, 1, &zmax);
+    int clips = 0, clear = 0;
+    for (int sw = 0; sw < 4; sw++) {
+        wf_detector det;
+        wf_detector_defaults(&det);
+        det.gain = sw & 1 ? 1.7 : 1.0;
+        det.adc_max = sw & 1 ? 50000.0 : 65535.0;
+        det.on.nonlinearity = sw >> 1;
+        const int n = 4;
+        const double sigma = det.read_noise_e / sqrt((double)n);
+        for (int zi = 0; zi < 3; zi++) {
+            const float z = zi == 0 ? zmax : zi == 1 ? 0.0f : 9.0f;
+            const double e0 = (det.adc_max - det.bias_adu) * det.gain - sigma * (double)z;
+            for (int k = -40; k <= 40; k++) {
+                double e = e0 + 0.05 * det.gain * k, q = 0.5 * det.full_well;
+                uint8_t first = 255;
+                uint16_t out;
+                float zz = z;
+                wf_det_group_row(&det, &e, &q, &zz, 1, n, 3, &first, &out);
+                double adu = nearbyint((e + sigma * (double)z) / det.gain + det.bias_adu);
+                const int want = adu >= det.adc_max;
+                clips += want;
+                clear += !want;
+                ck_assert_msg(first == (want ? 3 : 255), "switches %d, z %g, step %d: flag %u, adu %.3f", sw,
+                              (double)z, k, first, adu);
+            }
+        }
+    }
+    ck_assert(clips > 0 && clear > 0);
+    printf("group row skip: largest normal %.4f; %d clipped and %d clear pixels at the ceiling\n", (double)zmax,
+           clips, clear);
+}
+END_TEST
+
 static Suite *detector_suite(void)
 {
     Suite *s = suite_create("detector");
@@ -739,6 +782,7 @@ static Suite *detector_suite(void)
     tcase_add_test(cf, test_ramp_read_row);
     tcase_add_test(cf, test_resultant_row);
     tcase_add_test(cf, test_group_row);
+    tcase_add_test(cf, test_group_row_skip_bound);
     suite_add_tcase(s, cf);
     return s;
 }
