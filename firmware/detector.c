@@ -300,6 +300,15 @@ static inline __attribute__((always_inline)) uint16_t u16_lane(double v)
     return (uint16_t)v;
 }
 
+/* u16_lane of a value already whole (or NaN, or beyond 2^51, which u16_lane keeps too): the
+ * same word without the rounding */
+static inline __attribute__((always_inline)) uint16_t u16_whole_lane(double v)
+{
+    v = v >= 0.0 ? v : 0.0; /* NaN too */
+    v = v > 65535.0 ? 65535.0 : v;
+    return (uint16_t)v;
+}
+
 WF_CLONES
 void wf_det_resultant_row(double *sum, int n, int nreads, uint16_t *out)
 {
@@ -345,10 +354,18 @@ static inline __attribute__((always_inline)) void group_row_body(
             uint8_t cand = (uint8_t)(r | (uint8_t)(clipped - 1u)); /* r, else 255 */
             first[i] = first[i] < cand ? first[i] : cand;
         }
-    for (int i = 0; i < n; i++) {
-        uint8_t clipped;
-        out[i] = u16_lane(adc_lane(&p, e[i], q[i], z[i], unit_gain, &clipped));
-    }
+    /* adc_lane rounded, and clipped at a whole ceiling: u16_lane's rounding would give each
+     * value back (a ceiling with a fraction, which the config allows, is rounded there) */
+    if (p.quant && (!p.satur || floor(p.adc) == p.adc))
+        for (int i = 0; i < n; i++) {
+            uint8_t clipped;
+            out[i] = u16_whole_lane(adc_lane(&p, e[i], q[i], z[i], unit_gain, &clipped));
+        }
+    else
+        for (int i = 0; i < n; i++) {
+            uint8_t clipped;
+            out[i] = u16_lane(adc_lane(&p, e[i], q[i], z[i], unit_gain, &clipped));
+        }
 }
 
 WF_CLONES
