@@ -994,24 +994,30 @@ WF_CLONES static void moments_passes_lockstep(int n, const double *restrict u, d
 #include <immintrin.h>
 #define MOMENTS_PASSES_AVX512 1
 enum { MOMENTS_BLOCKS = 2 }; /* vectors of 8 in flight: their chains' latencies overlap */
-/* The same terms eight pixels at a time: a block's uniforms, terms, sums and counts stay in
- * registers through all its terms, and it stops at its own largest count, not the chunk's
- * (the sums only grow, so a block none of whose pixels counts at a term is done). The same
- * operations in the same order on each pixel as the lockstep passes: the same counts. */
-__attribute__((target("avx512f"))) static void moments_passes_avx512(int n, const double *u, const double *p,
-                                                                      const double *cdf, double *cnt,
-                                                                      const double *mean, const double *inv_k)
+/* The counts of the pixels at [0, n) from their words, means and starts, 16 at a time (what
+ * is left over, below 16, is not done: the count returned is of those done). Two blocks of 8
+ * pixels' uniforms, terms, sums and counts stay in registers through all their terms, and
+ * stop at their own largest count, not the chunk's (the sums only grow, so a block none of
+ * whose pixels counts at a term is done). The same operations in the same order on each
+ * pixel as moments_counts_lockstep: the same counts. */
+__attribute__((target("avx512f"))) static int moments_counts_avx512(int n, const uint32_t *w, const double *mean,
+                                                                     const double *e0, const double *inv_k,
+                                                                     double *cnt)
 {
-    const __m512d one = _mm512_set1_pd(1.0);
+    const __m512d one = _mm512_set1_pd(1.0), zero = _mm512_setzero_pd(), ten = _mm512_set1_pd(10.0);
+    const __m512d half = _mm512_set1_pd(0.5), scale = _mm512_set1_pd(1.0 / 4294967296.0);
     int x = 0;
     for (; x + 8 * MOMENTS_BLOCKS <= n; x += 8 * MOMENTS_BLOCKS) {
         __m512d vu[MOMENTS_BLOCKS], vm[MOMENTS_BLOCKS], vp[MOMENTS_BLOCKS], vc[MOMENTS_BLOCKS], vn[MOMENTS_BLOCKS];
         for (int j = 0; j < MOMENTS_BLOCKS; j++) {
-            vu[j] = _mm512_loadu_pd(u + x + 8 * j);
-            vm[j] = _mm512_loadu_pd(mean + x + 8 * j);
-            vp[j] = _mm512_loadu_pd(p + x + 8 * j);
-            vc[j] = _mm512_loadu_pd(cdf + x + 8 * j);
-            vn[j] = _mm512_loadu_pd(cnt + x + 8 * j);
+            const __m512d mx = _mm512_loadu_pd(mean + x + 8 * j), ex = _mm512_loadu_pd(e0 + x + 8 * j);
+            const __m256i wx = _mm256_loadu_si256((const __m256i *)(w + x + 8 * j));
+            const __m512d ux = _mm512_mul_pd(_mm512_add_pd(_mm512_cvtepu32_pd(wx), half), scale);
+            const __mmask8 small = _mm512_cmp_pd_mask(mx, zero, _CMP_GT_OQ) & _mm512_cmp_pd_mask(mx, ten, _CMP_LT_OQ);
+            vu[j] = _mm512_maskz_mov_pd(small, ux); /* 0: never counts */
+            vp[j] = vc[j] = _mm512_mask_blend_pd(small, one, ex);
+            vm[j] = _mm512_maskz_mov_pd(small, mx);
+            vn[j] = zero;
         }
         for (int k = 1; k <= INV_K_MAX; k++) {
             const __m512d ik = _mm512_set1_pd(inv_k[k]);
@@ -1027,37 +1033,18 @@ __attribute__((target("avx512f"))) static void moments_passes_avx512(int n, cons
         }
         for (int j = 0; j < MOMENTS_BLOCKS; j++) _mm512_storeu_pd(cnt + x + 8 * j, vn[j]);
     }
-    if (x < n) {
-        double tp[8 * MOMENTS_BLOCKS], tc[8 * MOMENTS_BLOCKS];
-        memcpy(tp, p + x, (size_t)(n - x) * sizeof *tp);
-        memcpy(tc, cdf + x, (size_t)(n - x) * sizeof *tc);
-        moments_passes_lockstep(n - x, u + x, tp, tc, cnt + x, mean + x, inv_k);
-    }
+    return x;
 }
 #endif
 
-/* The count of every pixel at [0, n) into cnt (which starts at 0); p and cdf are scratch;
- * simd: the AVX-512 variant may run. */
-static void moments_passes(int n, const double *u, double *p, double *cdf, double *cnt, const double *mean,
-                           const double *inv_k, int simd)
+/* The counts of the pixels at [0, n) (n <= MOMENTS_CHUNK) from their words, means and
+ * starts, by the lockstep passes. */
+WF_CLONES static void moments_counts_lockstep(int n, const uint32_t *restrict w, const double *restrict mean,
+                                              const double *restrict e0, const double *restrict inv_k,
+                                              double *restrict cnt)
 {
-#ifdef MOMENTS_PASSES_AVX512
-    if (simd && __builtin_cpu_supports("avx512f")) {
-        moments_passes_avx512(n, u, p, cdf, cnt, mean, inv_k);
-        return;
-    }
-#else
-    (void)simd;
-#endif
-    moments_passes_lockstep(n, u, p, cdf, cnt, mean, inv_k);
-}
-
-WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, const float *restrict z, int big,
-                                            const double *restrict mean, const double *restrict e0,
-                                            const double *restrict inv_k, int simd, double *restrict out)
-{
-    /* per pixel: uniform, term, partial sum, count so far, mean */
-    double pu[MOMENTS_CHUNK], pp[MOMENTS_CHUNK], pc[MOMENTS_CHUNK], cnt[MOMENTS_CHUNK], pm[MOMENTS_CHUNK];
+    /* per pixel: uniform, term, partial sum, mean */
+    double pu[MOMENTS_CHUNK], pp[MOMENTS_CHUNK], pc[MOMENTS_CHUNK], pm[MOMENTS_CHUNK];
     /* every comparison and load made whatever the branch: a conditional one (a possible
      * trap, to the compiler) keeps these loops scalar */
     for (int x = 0; x < n; x++) {
@@ -1069,10 +1056,24 @@ WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, c
         pm[x] = small ? mx : 0.0; /* so a negative mean's sums stay at 1: it counts 0 */
     }
     for (int x = n; x < MOMENTS_CHUNK; x++) { /* never read; set so that no compiler doubts it */
-        pu[x] = cnt[x] = pm[x] = 0.0;
+        pu[x] = pm[x] = 0.0;
         pp[x] = pc[x] = 1.0;
     }
-    moments_passes(n, pu, pp, pc, cnt, pm, inv_k, simd);
+    moments_passes_lockstep(n, pu, pp, pc, cnt, pm, inv_k);
+}
+
+WF_CLONES static void moments_poisson_chunk(int n, const uint32_t *restrict w, const float *restrict z, int big,
+                                            const double *restrict mean, const double *restrict e0,
+                                            const double *restrict inv_k, int simd, double *restrict out)
+{
+    double cnt[MOMENTS_CHUNK];
+    int done = 0;
+#ifdef MOMENTS_PASSES_AVX512
+    if (simd && __builtin_cpu_supports("avx512f")) done = moments_counts_avx512(n, w, mean, e0, inv_k, cnt);
+#else
+    (void)simd;
+#endif
+    if (done < n) moments_counts_lockstep(n - done, w + done, mean + done, e0 + done, inv_k, cnt + done);
     if (!big) { /* no mean reaches 10 (z was not made): the counts, 0 for a mean <= 0 or NaN */
         memcpy(out, cnt, (size_t)n * sizeof *out);
         return;
