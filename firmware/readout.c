@@ -571,16 +571,13 @@ WF_CLONES static void spread_row(int n, double *restrict meas, const double *res
     for (int x = 0; x < n; x++) meas[x] = sat && charge[x] >= fw ? meas[x] : meas[x] + beta * spread[x];
 }
 
-/* Moments: a row's lead and group means and the group's weights, for pixels of constant rate. */
-WF_CLONES static void moments_means(int n, const double *restrict m, double lead, double span, double abar,
-                                    double cvar, double *restrict lm, double *restrict mu, double *restrict ab,
-                                    double *restrict cv)
+/* Moments: a row's lead and group means, for pixels of constant rate. */
+WF_CLONES static void moments_means(int n, const double *restrict m, double lead, double span, double *restrict lm,
+                                    double *restrict mu)
 {
     for (int x = 0; x < n; x++) {
         lm[x] = m[x] * lead;
         mu[x] = m[x] * span;
-        ab[x] = abar;
-        cv[x] = cvar;
     }
 }
 
@@ -1112,18 +1109,29 @@ WF_CLONES static void moments_powers(int nc, const double *restrict em, int lead
 
 /* The group's draws into the charge q, the group mean a and the spread sp (moments_row);
  * grows: 0 for a one-read group, which has no increment within it. */
+/* ab and cv: each pixel's (a pixel whose rate changes in time has its own), or NULL for the
+ * group's abar and cvar everywhere (then no row of them is written or read) */
 WF_CLONES static void moments_finish(int nc, int grows, const double *restrict ld, const double *restrict t,
-                                     const double *restrict ab, const double *restrict cv,
-                                     const float *restrict z3, double vu, double bs, double *restrict q,
-                                     double *restrict a, double *restrict sp)
+                                     const double *restrict ab, const double *restrict cv, double abar,
+                                     double cvar, const float *restrict z3, double vu, double bs,
+                                     double *restrict q, double *restrict a, double *restrict sp)
 {
-    for (int x = 0; x < nc; x++) {
-        const double tc = grows ? t[x] : 0.0, v = tc * cv[x];
-        q[x] += ld[x];
-        a[x] = q[x] + tc * ab[x] + (v > 0.0 ? sqrt(v) : 0.0) * (double)z3[x];
-        q[x] += tc;
-        sp[x] = tc * (tc * vu + bs);
-    }
+    if (ab)
+        for (int x = 0; x < nc; x++) {
+            const double tc = grows ? t[x] : 0.0, v = tc * cv[x];
+            q[x] += ld[x];
+            a[x] = q[x] + tc * ab[x] + (v > 0.0 ? sqrt(v) : 0.0) * (double)z3[x];
+            q[x] += tc;
+            sp[x] = tc * (tc * vu + bs);
+        }
+    else
+        for (int x = 0; x < nc; x++) {
+            const double tc = grows ? t[x] : 0.0, v = tc * cvar;
+            q[x] += ld[x];
+            a[x] = q[x] + tc * abar + (v > 0.0 ? sqrt(v) : 0.0) * (double)z3[x];
+            q[x] += tc;
+            sp[x] = tc * (tc * vu + bs);
+        }
 }
 
 /* Group r of row y by moments (photon noise on): the lead, then A and T as above, from the
@@ -1148,8 +1156,13 @@ static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double 
     if (n > 1) wf_norm_from_u32(w + 3 * (size_t)nc, nc, z3);
     else memset(z3, 0, (size_t)nc * sizeof *z3);
     const double abar = g->abar, cvar = g->cvar; /* copies: g could alias the stores */
-    moments_means(nc, m, lead, span, abar, cvar, lm, mu, ab, cv);
+    moments_means(nc, m, lead, span, lm, mu);
     moments_powers(nc, em, (int)lead, span, le, me);
+    if (ro->slope_any) /* the group's shape, which the pixels whose rate changes replace */
+        for (int x = 0; x < nc; x++) {
+            ab[x] = abar;
+            cv[x] = cvar;
+        }
     for (int x = 0; ro->slope_any && x < nc; x++) {
         if (ro->dmean[row0 + (size_t)x] == 0.0) continue;
         const size_t i = row0 + (size_t)x;
@@ -1177,7 +1190,7 @@ static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double 
         moments_poisson_chunk(c, w + nc + x0, z1 + x0, big1, lm + x0, le + x0, ro->inv_k, !ro->cfg.portable, ld + x0);
         moments_poisson_chunk(c, w + 2 * (size_t)nc + x0, z2 + x0, big2, mu + x0, me + x0, ro->inv_k, !ro->cfg.portable, t + x0);
     }
-    moments_finish(nc, n > 1, ld, t, ab, cv, z3, g->vu, g->bs, q, a, sp);
+    moments_finish(nc, n > 1, ld, t, ro->slope_any ? ab : NULL, cv, abar, cvar, z3, g->vu, g->bs, q, a, sp);
 }
 
 /* Resultant r (a group of n reads) of tile row y from the measured rows around it: IPC,
