@@ -507,6 +507,12 @@ START_TEST(test_expected_row_as_scalar)
             if (d.on.dark) r += d.dark_current;
             ck_assert_msg(mean[i] == r * ft, "case %d pixel %d: %.17g vs %.17g", c, i, mean[i], r * ft);
             ck_assert_msg(expm[i] == wf_vexp(-r * ft), "case %d pixel %d", c, i);
+            /* against libm's pow (the law itself, not its lane): within a few ulp */
+            double rp = rate[i] > 0.0f ? rate[i] : 0.0;
+            if (d.on.reciprocity && rp > 0.0) rp *= pow(rp / d.recip_f0, d.recip_alpha / M_LN10);
+            if (d.on.dark) rp += d.dark_current;
+            ck_assert_msg(isnan(rp) || fabs(mean[i] - rp * ft) <= 1e-15 * rp * ft, "case %d pixel %d: %.17g vs pow's %.17g",
+                          c, i, mean[i], rp * ft);
             /* and exp within an ulp, or 0 past a mean of 708 */
             ck_assert(r * ft > 708.0 ? expm[i] == 0.0 : fabs(expm[i] - exp(-r * ft)) <= 2.3e-16 * exp(-r * ft));
         }
@@ -734,13 +740,19 @@ START_TEST(test_group_row_skip_bound)
             const float z = zi == 0 ? zmax : zi == 1 ? 0.0f : 9.0f;
             const double e0 = (det.adc_max - det.bias_adu) * det.gain - sigma * (double)z;
             for (int k = -40; k <= 40; k++) {
-                double e = e0 + 0.05 * det.gain * k, q = 0.5 * det.full_well;
+                /* the charge: far from the well; at the last read's ceiling; at the well */
+                const double qs[4] = {0.5 * det.full_well, (det.adc_max - det.bias_adu) * det.gain * (1.0 + 1e-4 * k),
+                                      det.full_well + 0.5 * k, 0.0};
+                const int qi = (k + 40) % 4;
+                double e = e0 + 0.05 * det.gain * k, q = qs[qi];
                 uint8_t first = 255;
                 uint16_t out;
                 float zz = z;
                 wf_det_group_row(&det, &e, &q, &zz, 1, n, 3, &first, &out);
                 double adu = nearbyint((e + sigma * (double)z) / det.gain + det.bias_adu);
-                const int want = adu >= det.adc_max;
+                double last = q < det.full_well ? q : det.full_well;
+                if (det.on.nonlinearity) last += det.nl_beta * last * last;
+                const int want = adu >= det.adc_max || q >= det.full_well || last / det.gain + det.bias_adu >= det.adc_max;
                 clips += want;
                 clear += !want;
                 ck_assert_msg(first == (want ? 3 : 255), "switches %d, z %g, step %d: flag %u, adu %.3f", sw,
@@ -748,7 +760,29 @@ START_TEST(test_group_row_skip_bound)
             }
         }
     }
-    ck_assert(clips > 0 && clear > 0);
+    /* a faint signal whose charge is at the well, or whose last read is at the ceiling */
+    int by_charge = 0;
+    for (int sw = 0; sw < 4; sw++) {
+        wf_detector det;
+        wf_detector_defaults(&det);
+        det.gain = sw & 1 ? 1.7 : 1.0;
+        det.adc_max = sw & 1 ? 50000.0 : 65535.0;
+        det.on.nonlinearity = sw >> 1;
+        for (int k = -8; k <= 8; k++)
+            for (int at = 0; at < 2; at++) {
+                double e = 100.0, q = at ? det.full_well + k : (det.adc_max - det.bias_adu) * det.gain * (1.0 + 1e-3 * k);
+                uint8_t first = 255;
+                uint16_t out;
+                float zz = 0.5f;
+                wf_det_group_row(&det, &e, &q, &zz, 1, 4, 3, &first, &out);
+                double last = q < det.full_well ? q : det.full_well;
+                if (det.on.nonlinearity) last += det.nl_beta * last * last;
+                const int want = q >= det.full_well || last / det.gain + det.bias_adu >= det.adc_max;
+                by_charge += want;
+                ck_assert_msg(first == (want ? 3 : 255), "switches %d, charge %.17g: flag %u", sw, q, first);
+            }
+    }
+    ck_assert(clips > 0 && clear > 0 && by_charge > 0);
     printf("group row skip: largest normal %.4f; %d clipped and %d clear pixels at the ceiling\n", (double)zmax,
            clips, clear);
 }

