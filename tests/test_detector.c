@@ -718,6 +718,31 @@ START_TEST(test_group_row)
 }
 END_TEST
 
+static wf_detector skip_detector(int sw) /* unit gain or 1.7 (its ceiling below the well), NL off or on */
+{
+    wf_detector det;
+    wf_detector_defaults(&det);
+    det.gain = sw & 1 ? 1.7 : 1.0;
+    det.adc_max = sw & 1 ? 50000.0 : 65535.0;
+    det.on.nonlinearity = sw >> 1;
+    return det;
+}
+
+/* one pixel of a 4-read group as resultant 3: whether its flag is set, and whether by hand */
+static int skip_pixel(const wf_detector *det, double e, double q, float z, int *want)
+{
+    const double sigma = det->read_noise_e / 2.0;
+    uint8_t first = 255;
+    uint16_t out;
+    wf_det_group_row(det, &e, &q, &z, 1, 4, 3, &first, &out);
+    double adu = nearbyint((e + sigma * (double)z) / det->gain + det->bias_adu);
+    double last = q < det->full_well ? q : det->full_well;
+    if (det->on.nonlinearity) last += det->nl_beta * last * last;
+    *want = adu >= det->adc_max || q >= det->full_well || last / det->gain + det->bias_adu >= det->adc_max;
+    ck_assert(first == 3 || first == 255);
+    return first == 3;
+}
+
 /* wf_det_group_row skips its flags' pass in a row no pixel of which could clip: a pixel alone
  * in its row, with the largest normal a word gives (z of 0xffffffff) or a larger one, steps
  * through the ceiling's neighbourhood (signal and charge), and each flag is the hand-made
@@ -727,64 +752,34 @@ START_TEST(test_group_row_skip_bound)
     const uint32_t top = 0xffffffffu;
     float zmax;
     wf_norm_from_u32(&top, 1, &zmax);
-    int clips = 0, clear = 0;
+    int clips = 0, clear = 0, by_charge = 0, want;
     for (int sw = 0; sw < 4; sw++) {
-        wf_detector det;
-        wf_detector_defaults(&det);
-        det.gain = sw & 1 ? 1.7 : 1.0;
-        det.adc_max = sw & 1 ? 50000.0 : 65535.0;
-        det.on.nonlinearity = sw >> 1;
-        const int n = 4;
-        const double sigma = det.read_noise_e / sqrt((double)n);
+        const wf_detector det = skip_detector(sw);
+        const double sigma = det.read_noise_e / 2.0, ceiling_q = (det.adc_max - det.bias_adu) * det.gain;
         for (int zi = 0; zi < 3; zi++) {
             const float z = zi == 0 ? zmax : zi == 1 ? 0.0f : 9.0f;
-            const double e0 = (det.adc_max - det.bias_adu) * det.gain - sigma * (double)z;
+            const double e0 = ceiling_q - sigma * (double)z;
             for (int k = -40; k <= 40; k++) {
                 /* the charge: far from the well; at the last read's ceiling; at the well */
-                const double qs[4] = {0.5 * det.full_well, (det.adc_max - det.bias_adu) * det.gain * (1.0 + 1e-4 * k),
-                                      det.full_well + 0.5 * k, 0.0};
-                const int qi = (k + 40) % 4;
-                double e = e0 + 0.05 * det.gain * k, q = qs[qi];
-                uint8_t first = 255;
-                uint16_t out;
-                float zz = z;
-                wf_det_group_row(&det, &e, &q, &zz, 1, n, 3, &first, &out);
-                double adu = nearbyint((e + sigma * (double)z) / det.gain + det.bias_adu);
-                double last = q < det.full_well ? q : det.full_well;
-                if (det.on.nonlinearity) last += det.nl_beta * last * last;
-                const int want = adu >= det.adc_max || q >= det.full_well || last / det.gain + det.bias_adu >= det.adc_max;
+                const double qs[4] = {0.5 * det.full_well, ceiling_q * (1.0 + 1e-4 * k), det.full_well + 0.5 * k, 0.0};
+                const int got = skip_pixel(&det, e0 + 0.05 * det.gain * k, qs[(k + 40) % 4], z, &want);
                 clips += want;
                 clear += !want;
-                ck_assert_msg(first == (want ? 3 : 255), "switches %d, z %g, step %d: flag %u, adu %.3f", sw,
-                              (double)z, k, first, adu);
+                ck_assert_msg(got == want, "switches %d, z %g, step %d: flag %d", sw, (double)z, k, got);
             }
         }
-    }
-    /* a faint signal whose charge is at the well, or whose last read is at the ceiling */
-    int by_charge = 0;
-    for (int sw = 0; sw < 4; sw++) {
-        wf_detector det;
-        wf_detector_defaults(&det);
-        det.gain = sw & 1 ? 1.7 : 1.0;
-        det.adc_max = sw & 1 ? 50000.0 : 65535.0;
-        det.on.nonlinearity = sw >> 1;
+        /* a faint signal whose charge is at the well, or whose last read is at the ceiling */
         for (int k = -8; k <= 8; k++)
             for (int at = 0; at < 2; at++) {
-                double e = 100.0, q = at ? det.full_well + k : (det.adc_max - det.bias_adu) * det.gain * (1.0 + 1e-3 * k);
-                uint8_t first = 255;
-                uint16_t out;
-                float zz = 0.5f;
-                wf_det_group_row(&det, &e, &q, &zz, 1, 4, 3, &first, &out);
-                double last = q < det.full_well ? q : det.full_well;
-                if (det.on.nonlinearity) last += det.nl_beta * last * last;
-                const int want = q >= det.full_well || last / det.gain + det.bias_adu >= det.adc_max;
+                const double q = at ? det.full_well + k : ceiling_q * (1.0 + 1e-3 * k);
+                const int got = skip_pixel(&det, 100.0, q, 0.5f, &want);
                 by_charge += want;
-                ck_assert_msg(first == (want ? 3 : 255), "switches %d, charge %.17g: flag %u", sw, q, first);
+                ck_assert_msg(got == want, "switches %d, charge %.17g: flag %d", sw, q, got);
             }
     }
     ck_assert(clips > 0 && clear > 0 && by_charge > 0);
-    printf("group row skip: largest normal %.4f; %d clipped and %d clear pixels at the ceiling\n", (double)zmax,
-           clips, clear);
+    printf("group row skip: largest normal %.4f; %d clipped and %d clear pixels at the ceiling, %d by charge\n",
+           (double)zmax, clips, clear, by_charge);
 }
 END_TEST
 
