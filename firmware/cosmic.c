@@ -83,6 +83,8 @@ wf_status wf_cosmic_init(wf_cosmic *cr, const wf_detector *det, const wf_noise *
     cr->frame_time = frame_time;
     cr->total_reads = total_reads;
     cr->max_reach_rows = reach_rows(det);
+    cr->len_a = pow(det->cr_lmin_um, det->cr_slope + 1.0);
+    cr->len_b = pow(det->cr_lmax_um, det->cr_slope + 1.0);
     wf_status st = capacities(det, ncols, tile_rows, exptime, &cr->cap_deposits, &cr->cap_truth);
     if (st) return st;
     cr->ndeposits = cr->ntruth = 0;
@@ -97,11 +99,11 @@ wf_status wf_cosmic_init(wf_cosmic *cr, const wf_detector *det, const wf_noise *
     return st;
 }
 
-/* Inverse CDF of l^s on [a, b]. */
-static double sample_length(const wf_detector *det, double u)
+/* Inverse CDF of l^s on [lmin, lmax]; its ends' powers come from wf_cosmic_init (a hit is
+ * drawn again for every tile it may reach, so per hit they were 2 of 3 pow calls). */
+static double sample_length(const wf_cosmic *cr, double u)
 {
-    double s1 = det->cr_slope + 1.0;
-    double a = pow(det->cr_lmin_um, s1), b = pow(det->cr_lmax_um, s1);
+    const double s1 = cr->det->cr_slope + 1.0, a = cr->len_a, b = cr->len_b;
     return pow(a + u * (b - a), 1.0 / s1);
 }
 
@@ -200,7 +202,7 @@ wf_status wf_cosmic_tile(wf_cosmic *cr, int h0, int h1, int own0, int own1)
             double x0 = wf_rng_uniform53(&rng) * cr->ncols - 0.5;
             double ys = wf_rng_uniform53(&rng) * (r1 - r0) + r0 - 0.5;
             double phi = 2.0 * M_PI * wf_rng_uniform53(&rng);
-            double l = sample_length(det, wf_rng_uniform53(&rng)) / det->pixel_um;
+            double l = sample_length(cr, wf_rng_uniform53(&rng)) / det->pixel_um;
             double dedx = sample_dedx(det, &rng);
             double ta = wf_rng_uniform53(&rng) * cr->exptime;
             int read = (int)ceil(ta / cr->frame_time) - 1;

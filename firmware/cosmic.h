@@ -31,6 +31,7 @@ typedef struct wf_cosmic {
     double frame_time;
     int total_reads;
     int max_reach_rows;       /* the longest track in rows, to find bands that reach a tile */
+    double len_a, len_b;      /* lmin^(s+1), lmax^(s+1): the track-length law's ends */
     wf_cr_deposit *deposits;  /* sorted by read after wf_cosmic_tile */
     int ndeposits, cap_deposits;
     wf_cosmic_record *truth;  /* hits starting in the tile's own rows */
