@@ -963,8 +963,8 @@ static inline double draw_at(const uint32_t *words, size_t nc, int x, int *c, do
  * partial sums below its uniform, the smallest k with u <= F_k, as a scalar search gives.
  * A pixel whose uniform is no longer above its sum is done (the sums only grow); the passes
  * run over the whole chunk to its largest count (~mean + 3.5 sqrt(mean) over 256 pixels),
- * at most 200 terms. Packing the pixels still going, as this did until session 35, cost more
- * than the passes it saved: its scalar, mispredicted copy was half of this function. */
+ * at most 200 terms. (Packing the pixels still going cost more than the passes it saved: its
+ * scalar, mispredicted copy was half of the chunk's time.) */
 enum { MOMENTS_CHUNK = 256 };
 
 /* Passes over the pixels at [0, n), terms 1, 2, ..., until none still counts or term
@@ -1108,30 +1108,30 @@ WF_CLONES static void moments_powers(int nc, const double *restrict em, int lead
 }
 
 /* The group's draws into the charge q, the group mean a and the spread sp (moments_row);
- * grows: 0 for a one-read group, which has no increment within it. */
-/* ab and cv: each pixel's (a pixel whose rate changes in time has its own), or NULL for the
- * group's abar and cvar everywhere (then no row of them is written or read) */
+ * grows: 0 for a one-read group, which has no increment within it. ab and cv: each pixel's
+ * shape (a pixel whose rate changes in time has its own), or NULL for the group's abar and
+ * cvar everywhere (then no row of them is written or read). */
+static inline __attribute__((always_inline)) void moments_finish_body(
+    int nc, int grows, const double *restrict ld, const double *restrict t, const double *restrict ab,
+    const double *restrict cv, double abar, double cvar, const float *restrict z3, double vu, double bs,
+    double *restrict q, double *restrict a, double *restrict sp, int per_pixel)
+{
+    for (int x = 0; x < nc; x++) {
+        const double tc = grows ? t[x] : 0.0, abx = per_pixel ? ab[x] : abar, v = tc * (per_pixel ? cv[x] : cvar);
+        q[x] += ld[x];
+        a[x] = q[x] + tc * abx + (v > 0.0 ? sqrt(v) : 0.0) * (double)z3[x];
+        q[x] += tc;
+        sp[x] = tc * (tc * vu + bs);
+    }
+}
+
 WF_CLONES static void moments_finish(int nc, int grows, const double *restrict ld, const double *restrict t,
                                      const double *restrict ab, const double *restrict cv, double abar,
                                      double cvar, const float *restrict z3, double vu, double bs,
                                      double *restrict q, double *restrict a, double *restrict sp)
 {
-    if (ab)
-        for (int x = 0; x < nc; x++) {
-            const double tc = grows ? t[x] : 0.0, v = tc * cv[x];
-            q[x] += ld[x];
-            a[x] = q[x] + tc * ab[x] + (v > 0.0 ? sqrt(v) : 0.0) * (double)z3[x];
-            q[x] += tc;
-            sp[x] = tc * (tc * vu + bs);
-        }
-    else
-        for (int x = 0; x < nc; x++) {
-            const double tc = grows ? t[x] : 0.0, v = tc * cvar;
-            q[x] += ld[x];
-            a[x] = q[x] + tc * abar + (v > 0.0 ? sqrt(v) : 0.0) * (double)z3[x];
-            q[x] += tc;
-            sp[x] = tc * (tc * vu + bs);
-        }
+    if (ab) moments_finish_body(nc, grows, ld, t, ab, cv, abar, cvar, z3, vu, bs, q, a, sp, 1);
+    else moments_finish_body(nc, grows, ld, t, ab, cv, abar, cvar, z3, vu, bs, q, a, sp, 0);
 }
 
 /* Group r of row y by moments (photon noise on): the lead, then A and T as above, from the
@@ -1158,12 +1158,9 @@ static void moments_row(wf_readout *ro, int r, size_t row0, double lead, double 
     const double abar = g->abar, cvar = g->cvar; /* copies: g could alias the stores */
     moments_means(nc, m, lead, span, lm, mu);
     moments_powers(nc, em, (int)lead, span, le, me);
-    if (ro->slope_any) /* the group's shape, which the pixels whose rate changes replace */
-        for (int x = 0; x < nc; x++) {
-            ab[x] = abar;
-            cv[x] = cvar;
-        }
-    for (int x = 0; ro->slope_any && x < nc; x++) {
+    for (int x = 0; ro->slope_any && x < nc; x++) { /* the group's shape, but where the rate changes */
+        ab[x] = abar;
+        cv[x] = cvar;
         if (ro->dmean[row0 + (size_t)x] == 0.0) continue;
         const size_t i = row0 + (size_t)x;
         lm[x] = interval_mean(ro, i, lead, tau_lead);
