@@ -55,18 +55,17 @@ void wf_detector_defaults(wf_detector *det)
     det->channel_offset_adu = 20.0;
 }
 
-double wf_det_reciprocity(double q, double exptime, double alpha, double f0)
+/* x (x / x0)^a, x <= 0 (and NaN) as it is, by hal/vmath.h's log and exp (within a few ulp of
+ * pow's), so that a row of it vectorises: libm's pow and exp were 3% of an up-the-ramp
+ * product, once a pixel each. The charge form and the rate form are this one law. */
+static inline double recip_rate_lane(double x, double a, double x0)
 {
-    if (!(q > 0.0))
-        return q;
-    return q * pow(q / (exptime * f0), alpha / M_LN10);
+    return x > 0.0 ? x * wf_vexp(a * wf_vlog(x / x0)) : x;
 }
 
-/* r (r / f0)^a by hal/vmath.h's log and exp (within a few ulp of pow's), so that a row of it
- * vectorises: libm's pow and exp were 3% of an up-the-ramp product, once a pixel each */
-static inline double recip_rate_lane(double rate, double a, double f0)
+double wf_det_reciprocity(double q, double exptime, double alpha, double f0)
 {
-    return rate > 0.0 ? rate * wf_vexp(a * wf_vlog(rate / f0)) : rate;
+    return recip_rate_lane(q, alpha / M_LN10, exptime * f0);
 }
 
 double wf_det_reciprocity_rate(double rate, double alpha, double f0)
@@ -289,24 +288,20 @@ void wf_det_ramp_read_row(const wf_detector *det, const double *e, const double 
         ramp_read_body(det, e, q, z, n, r, sum, first_sat, 0);
 }
 
-/* ADU to the 16-bit word: rounded half to even into [0, 65535], NaN to 0 */
-static inline __attribute__((always_inline)) uint16_t u16_lane(double v)
-{
-    const double magic = 6755399441055744.0, big = 2251799813685248.0;
-    double rr = __builtin_copysign((v + magic) - magic, v); /* nearbyint, half to even */
-    v = (v > -big) & (v < big) ? rr : v;
-    v = v >= 0.0 ? v : 0.0; /* NaN too */
-    v = v > 65535.0 ? 65535.0 : v;
-    return (uint16_t)v;
-}
-
-/* u16_lane of a value already whole (or NaN, or beyond 2^51, which u16_lane keeps too): the
- * same word without the rounding */
+/* A whole ADU value (or NaN, or beyond 2^51) to the 16-bit word: into [0, 65535], NaN to 0 */
 static inline __attribute__((always_inline)) uint16_t u16_whole_lane(double v)
 {
     v = v >= 0.0 ? v : 0.0; /* NaN too */
     v = v > 65535.0 ? 65535.0 : v;
     return (uint16_t)v;
+}
+
+/* ADU to the 16-bit word: rounded half to even into [0, 65535], NaN to 0 */
+static inline __attribute__((always_inline)) uint16_t u16_lane(double v)
+{
+    const double magic = 6755399441055744.0, big = 2251799813685248.0;
+    double rr = __builtin_copysign((v + magic) - magic, v); /* nearbyint, half to even */
+    return u16_whole_lane((v > -big) & (v < big) ? rr : v);
 }
 
 WF_CLONES
@@ -316,6 +311,15 @@ void wf_det_resultant_row(double *sum, int n, int nreads, uint16_t *out)
         out[i] = u16_lane(sum[i] / nreads);
         sum[i] = 0.0;
     }
+}
+
+/* Whether a group's last read, its charge q clipped at the well and made nonlinear (beta 0
+ * without nonlinearity), reaches the ADC's ceiling. */
+static inline __attribute__((always_inline)) int last_at_ceiling(const adc_par *p, double beta, double q)
+{
+    double last = q < p->fw ? q : p->fw;
+    last = last + beta * last * last;
+    return last / p->gain + p->bias >= p->adc;
 }
 
 static inline __attribute__((always_inline)) void group_row_body(
@@ -336,19 +340,13 @@ static inline __attribute__((always_inline)) void group_row_body(
     int maybe = 0;
     if (p.satur) {
         const double ethr = (p.adc - p.bias - 1.0) * p.gain - (p.rn ? p.sigma * 6.5 : 0.0);
-        for (int i = 0; i < n; i++) {
-            double last = q[i] < p.fw ? q[i] : p.fw;
-            last = last + beta * last * last;
-            maybe |= (q[i] >= p.fw) | (last / p.gain + p.bias >= p.adc) | (e[i] >= ethr) | (z[i] > 6.5f);
-        }
+        for (int i = 0; i < n; i++)
+            maybe |= (q[i] >= p.fw) | last_at_ceiling(&p, beta, q[i]) | (e[i] >= ethr) | (z[i] > 6.5f);
     }
     if (maybe)
         for (int i = 0; i < n; i++) {
-            /* the last read's own signal, clipped at the well, against the ceiling: a charge
-             * that reaches it counts as the full well's */
-            double last = q[i] < p.fw ? q[i] : p.fw;
-            last = last + beta * last * last;
-            const double qs = last / p.gain + p.bias >= p.adc ? p.fw : q[i];
+            /* a charge whose last read reaches the ceiling counts as the full well's */
+            const double qs = last_at_ceiling(&p, beta, q[i]) ? p.fw : q[i];
             uint8_t clipped;
             (void)adc_lane(&p, e[i], qs, z[i], unit_gain, &clipped);
             uint8_t cand = (uint8_t)(r | (uint8_t)(clipped - 1u)); /* r, else 255 */

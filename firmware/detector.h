@@ -48,11 +48,11 @@ void wf_detector_ipc_default(double out[3][3]);
 static inline double wf_det_nonlinearity(double q, double beta) { return q + beta * q * q; }
 
 /* Charge after reciprocity failure, GalSim addReciprocityFailure:
- * q (q / (t f0))^(alpha / ln 10); q <= 0 is left unchanged (GalSim would give NaN). */
+ * q (q / (t f0))^(alpha / ln 10); q <= 0 is left unchanged (GalSim would give NaN). The same
+ * lane as the rate form below (within a few ulp of pow's: hal/vmath.h). */
 double wf_det_reciprocity(double q, double exptime, double alpha, double f0);
 
-/* The same law on a rate: r (r / f0)^(alpha / ln 10), so q = r t obeys it at every t
- * (within a few ulp of pow's: hal/vmath.h). */
+/* The same law on a rate: r (r / f0)^(alpha / ln 10), so q = r t obeys it at every t. */
 double wf_det_reciprocity_rate(double rate, double alpha, double f0);
 
 /* A row's expected electrons per frame time from the scene's rates (negative ones as 0):
