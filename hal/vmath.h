@@ -10,6 +10,10 @@
 
 #define WF_VMATH static inline __attribute__((always_inline))
 
+/* ln 2 in two parts (fdlibm's): ln2_hi's low bits are zero, so k ln2_hi is exact for |k| < 2^11 */
+#define WF_LN2_HI 6.93147180369123816490e-01
+#define WF_LN2_LO 1.90821492927058770002e-10
+
 WF_VMATH uint64_t wf_bits_of(double x)
 {
     uint64_t u;
@@ -30,7 +34,6 @@ WF_VMATH double wf_double_of(uint64_t u)
  * subnormal and non-finite x give values the callers mask out. */
 WF_VMATH double wf_vlog(double x)
 {
-    const double ln2_hi = 6.93147180369123816490e-01, ln2_lo = 1.90821492927058770002e-10;
     const double Lg1 = 6.666666666666735130e-01, Lg2 = 3.999999999940941908e-01,
                  Lg3 = 2.857142874366239149e-01, Lg4 = 2.222219843214978396e-01,
                  Lg5 = 1.818357216161805012e-01, Lg6 = 1.531383769920937332e-01,
@@ -43,7 +46,7 @@ WF_VMATH double wf_vlog(double x)
     double f = z - 1.0, hfsq = 0.5 * f * f, s = f / (2.0 + f), s2 = s * s, w = s2 * s2;
     double t1 = w * (Lg2 + w * (Lg4 + w * Lg6));
     double t2 = s2 * (Lg1 + w * (Lg3 + w * (Lg5 + w * Lg7)));
-    return s * (hfsq + (t1 + t2)) + dk * ln2_lo - hfsq + f + dk * ln2_hi;
+    return s * (hfsq + (t1 + t2)) + dk * WF_LN2_LO - hfsq + f + dk * WF_LN2_HI;
 }
 
 /* exp(x), within 2 ulp, for x in [-708, 709]; below -708 it gives 0 (libm's are subnormals
@@ -51,11 +54,10 @@ WF_VMATH double wf_vlog(double x)
  * to r^13 (the next term is below 1e-17 of the sum), 2^k put in the exponent's bits. */
 WF_VMATH double wf_vexp(double x)
 {
-    const double ln2_hi = 6.93147180369123816490e-01, ln2_lo = 1.90821492927058770002e-10;
     const double magic = 6755399441055744.0; /* 1.5 * 2^52: k lands in the low mantissa bits */
     const double xc = x < -708.0 ? -708.0 : x > 709.0 ? 709.0 : x;
     const double t = xc * 1.44269504088896338700 + magic, k = t - magic;
-    const double r = (xc - k * ln2_hi) - k * ln2_lo; /* k ln2_hi is exact: |k| < 2^11 */
+    const double r = (xc - k * WF_LN2_HI) - k * WF_LN2_LO;
     double p = 1.0 / 6227020800.0;
     p = p * r + 1.0 / 479001600.0;
     p = p * r + 1.0 / 39916800.0;
