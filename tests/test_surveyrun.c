@@ -20,6 +20,13 @@
 #define SMALL "--set readout.ncols=128 --set readout.nrows=96 --set detector.cr_rate=0"
 
 /* The plan row of an EXPID, read independently of the program's reader. */
+/* A one-visit plan at d/plan.fits (plan, cap bytes, its path). */
+static void one_visit_plan(const char *bin, const char *d, char *plan, size_t cap)
+{
+    snprintf(plan, cap, "%s/plan.fits", d);
+    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+}
+
 static void plan_row(const char *plan, int expid, double *ra, double *pa, double *mjd, double *exptime, char *filter)
 {
     fitsfile *f;
@@ -276,9 +283,8 @@ START_TEST(index_and_area)
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
     char plan[4200], a[4200], path[4300], keep[4300];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
     snprintf(a, sizeof a, "%s/a", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    one_visit_plan(bin, d, plan, sizeof plan);
     ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --out %s", bin, plan, a), 0);
     /* the index: one row per product in (exposure, SCA) order, with the plan's filter and time */
     snprintf(path, sizeof path, "%s/survey_index.csv", a);
@@ -381,9 +387,8 @@ START_TEST(mpi_matches_one_process)
     if (!mpi) WF_SKIP("Open MPI (mpirun) and bin/wfisim-mpi ($WFISIM_MPI_BIN, make MPI=1) not installed");
     const char *d = wf_test_tmpdir();
     char plan[4200], log[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
     snprintf(log, sizeof log, "%s/log", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    one_visit_plan(bin, d, plan, sizeof plan);
     ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --out %s/a", bin, plan, d), 0);
     ck_assert_int_eq(wf_test_run(MPIRUN " %s survey run --plan %s " SIX " --out %s/b 2>%s", mpi, plan, d, log), 0);
     ck_assert_msg(wf_test_file_contains(log, "6 products rendered"), "MPI run did not make six products");
@@ -512,9 +517,8 @@ START_TEST(isolate_crashed_item_lost_alone)
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
     char plan[4200], log[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
     snprintf(log, sizeof log, "%s/log", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    one_visit_plan(bin, d, plan, sizeof plan);
     ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --out %s/a", bin, plan, d), 0);
     ck_assert_int_eq(wf_test_run("WFISIM_TEST_CRASH_ITEM=15:3:segv %s survey run --isolate --plan %s " SIX
                                  " --out %s/b 2>%s", bin, plan, d, log), 1);
@@ -541,9 +545,8 @@ START_TEST(mpi_crashed_item_lost_alone)
     if (!mpi) WF_SKIP("Open MPI (mpirun) and bin/wfisim-mpi ($WFISIM_MPI_BIN, make MPI=1) not installed");
     const char *d = wf_test_tmpdir();
     char plan[4200], log[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
     snprintf(log, sizeof log, "%s/log", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    one_visit_plan(bin, d, plan, sizeof plan);
     ck_assert_int_eq(wf_test_run("%s survey run --quiet --plan %s " SIX " --out %s/a", bin, plan, d), 0);
     ck_assert_int_ne(wf_test_run("WFISIM_TEST_CRASH_ITEM=16:7 " MPIRUN " %s survey run --plan %s " SIX
                                  " --out %s/b >%s 2>&1", mpi, plan, d, log), 0);
@@ -636,7 +639,6 @@ START_TEST(resume_same_inputs_only)
     const char *d = wf_test_tmpdir();
     char plan[4200], log[4200], img0[4200], img1[4200], truth0[4200], man[4200], keep0[4200], keep1[4200],
         keepman[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
     snprintf(log, sizeof log, "%s/log", d);
     snprintf(img0, sizeof img0, "%s/run/wfisim_e000000_sca01.fits", d);
     snprintf(img1, sizeof img1, "%s/run/wfisim_e000001_sca01.fits", d);
@@ -645,7 +647,7 @@ START_TEST(resume_same_inputs_only)
     snprintf(keep0, sizeof keep0, "%s/keep0.fits", d);
     snprintf(keep1, sizeof keep1, "%s/keep1.fits", d);
     snprintf(keepman, sizeof keepman, "%s/keep_run.txt", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    one_visit_plan(bin, d, plan, sizeof plan);
 #define RUN(extra) \
     wf_test_run(NODATA "%s survey run --plan %s --exposures 0:1 --scas 1 " TINY " %s --out %s/run 2>%s", bin, plan, extra, d, log)
     ck_assert_int_eq(RUN(""), 0);
@@ -797,9 +799,8 @@ START_TEST(resume_data_folder)
     WF_SKIP_UNLESS(data, "the data folder");
     const char *d = wf_test_tmpdir();
     char plan[4200], log[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
     snprintf(log, sizeof log, "%s/log", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    one_visit_plan(bin, d, plan, sizeof plan);
     ck_assert_int_eq(wf_test_run(NODATA "%s survey run --quiet --plan %s --exposures 0 --scas 1 " TINY " --out %s/run",
                                  bin, plan, d), 0);
     ck_assert_int_eq(wf_test_run(NODATA "%s survey run --plan %s --exposures 0 --scas 1 " TINY " --data %s --out %s/run 2>%s",
@@ -853,11 +854,10 @@ START_TEST(resume_catalogs_and_sne)
     WF_SKIP_UNLESS(data, "the data folder (SALT model)");
     const char *d = wf_test_tmpdir();
     char plan[4200], log[4200], stars[4200], sne[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
     snprintf(log, sizeof log, "%s/log", d);
     snprintf(stars, sizeof stars, "%s/stars.csv", d);
     snprintf(sne, sizeof sne, "%s/sne.fits", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    one_visit_plan(bin, d, plan, sizeof plan);
     double ra, pa, mjd, exptime;
     char filter[16];
     plan_row(plan, 0, &ra, &pa, &mjd, &exptime, filter);
@@ -1260,9 +1260,8 @@ START_TEST(scene_cache_cannot_keep)
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
     char plan[4200], log[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
     snprintf(log, sizeof log, "%s/log", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    one_visit_plan(bin, d, plan, sizeof plan);
 #define LIMITED(cache, out)                                                                                       \
     wf_test_run("ulimit -f 150; trap '' XFSZ; %s survey run --plan %s --exposures 0:1 --scas 3 --mode single " SMALL \
                 " --set run.scene_cache=%s --out %s/" out " 2>%s", bin, plan, cache, d, log)
@@ -1318,8 +1317,7 @@ START_TEST(walks_cover_items)
     WF_SKIP_UNLESS(bin, "the wfisim program ($WFISIM_BIN)");
     const char *d = wf_test_tmpdir();
     char plan[4200];
-    snprintf(plan, sizeof plan, "%s/plan.fits", d);
-    ck_assert_int_eq(wf_test_run("%s survey plan --quiet --set survey.visits=1 --out %s", bin, plan), 0);
+    one_visit_plan(bin, d, plan, sizeof plan);
     wf_config cfg;
     wf_config_defaults(&cfg);
     wf_survey_run_options opt;
